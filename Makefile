@@ -1,0 +1,62 @@
+# The Makefile only calls the two CLIs (dtradar-data, dtradar-rl); every option lives in their --help.
+PY      ?= .venv/bin/python
+SCENE   ?= cubicle
+VARIANT ?= all
+NAME    ?= $(SCENE)/blueprint
+ARGS    ?=
+
+.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval bench bench-rt bench-rl clean-venv
+
+# One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
+setup:
+	python3 -m venv .venv
+	$(PY) -m pip install --upgrade pip
+	$(PY) -m pip install torch==2.13.0
+	$(PY) -m pip install -e '.[all]'
+	$(PY) -m dtradar_data.llvm --check
+
+test:
+	$(PY) -m pytest -q
+
+test-all:
+	$(PY) -m pytest -q -m ''
+
+# Ray-trace both variants (blueprint and dynamic) of a scene into the data root.
+dataset:
+	$(PY) -m dtradar_data build --scene $(SCENE) --variant $(VARIANT) $(ARGS)
+
+datasets:
+	$(MAKE) dataset SCENE=cubicle
+	$(MAKE) dataset SCENE=meeting
+
+list:
+	$(PY) -m dtradar_data list
+
+info:
+	$(PY) -m dtradar_data info $(NAME)
+
+verify:
+	$(PY) -m dtradar_data verify $(NAME)
+
+cards:
+	$(PY) -m dtradar_data cards $(ARGS)
+
+publish:
+	$(PY) -m dtradar_data publish $(NAME) $(ARGS)
+
+pull:
+	$(PY) -m dtradar_data pull $(NAME) $(ARGS)
+
+train:
+	$(PY) -m dtradar_rl train --scene $(SCENE) $(ARGS)
+
+eval:
+	$(PY) -m dtradar_rl eval --scene $(SCENE) $(ARGS)
+
+bench: bench-rt bench-rl
+
+bench-rt:
+	$(PY) bench/bench_rt.py $(ARGS)
+
+bench-rl:
+	$(PY) bench/bench_rl.py $(ARGS)
