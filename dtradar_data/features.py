@@ -1,0 +1,147 @@
+"""From traced paths to the per-cell features of the contract (DESIGN.md §3), in plain numpy.
+
+The antenna-port reduction (written into every dataset card):
+
+* **path power** ``g_p`` = ``|a_p|²`` averaged over all (RX port, TX port) pairs, i.e. ‖H_p‖²_F / (N_r·N_t). With the
+  paper's 8×2 dual-polarised TR 38.901 array and a vertical dipole this is the array-averaged gain; the cross-polar
+  ports make it ≈3 dB lower than the co-polar gain alone.
+* **strongest path** = the valid path with the largest ``g_p``. Its delay and four angles come from Sionna
+  (synthetic array: geometry of the array centre).
+* **a_re, a_im, phase_rad** = the baseband-equivalent complex coefficient ``a·exp(-j2π f_c τ)`` of the strongest
+  path at the reference port pair (RX port 0, TX port 0: first element, first polarisation), and its angle. Sionna's
+  ``Paths.a`` is the passband coefficient without the carrier phase; ``Paths.cir()`` applies the same factor, and it
+  is what a receiver at the cell would measure, so the phase carries the propagation delay as in the paper.
+* **path_gain_db** = ``10·log10(Σ_p g_p)`` over all valid paths (incoherent sum).
+* **delay_spread_s** = power-weighted RMS delay spread ``sqrt(Σ g τ² / Σ g − (Σ g τ / Σ g)²)``.
+* **los** = the strongest path has no interaction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+
+from .schema import CELL_SCHEMA, PATH_SCHEMA
+
+# Sionna InteractionType codes -> one letter each (the per-path table's `interactions` column).
+INTERACTION_LETTERS = {1: "S", 2: "D", 4: "R", 8: "F"}
+
+CELL_RADIO_KEYS = ("num_paths", "los", "path_gain_db", "a_re", "a_im", "phase_rad", "tau_s", "aod_zen_rad",
+                   "aod_az_rad", "aoa_zen_rad", "aoa_az_rad", "delay_spread_s")
+
+
+def reduce_cells(batch) -> dict[str, np.ndarray]:
+    """Per-receiver features of a :class:`~dtradar_data.raytrace.PathBatch` (NaN where a receiver has no path)."""
+    valid = batch.valid
+    n = valid.shape[0]
+    gain = np.where(valid, batch.gain, 0.0)
+    num_paths = valid.sum(axis=1)
+    has = num_paths > 0
+    best = np.argmax(np.where(valid, batch.gain, -1.0), axis=1)
+    rows = np.arange(n)
+
+    def pick(x):
+        return np.where(has, x[rows, best], np.nan)
+
+    total = gain.sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        path_gain_db = np.where(has, 10.0 * np.log10(total), np.nan)
+        tau = np.where(valid, batch.tau, 0.0)
+        mean_tau = (gain * tau).sum(axis=1) / total
+        var = (gain * tau**2).sum(axis=1) / total - mean_tau**2
+    delay_spread = np.where(has, np.sqrt(np.clip(var, 0.0, None)), np.nan)
+    a = batch.a[rows, best] * np.exp(-2j * np.pi * batch.frequency_hz * np.where(has, batch.tau[rows, best], 0.0))
+    depth = (batch.interactions != 0).sum(axis=0)  # [N, P]
+    return {
+        "num_paths": num_paths.astype(np.int16),
+        "los": has & (depth[rows, best] == 0),
+        "path_gain_db": path_gain_db,
+        "a_re": np.where(has, a.real, np.nan),
+        "a_im": np.where(has, a.imag, np.nan),
+        "phase_rad": np.where(has, np.angle(a), np.nan),
+        "tau_s": pick(batch.tau),
+        "aod_zen_rad": pick(batch.theta_t),
+        "aod_az_rad": pick(batch.phi_t),
+        "aoa_zen_rad": pick(batch.theta_r),
+        "aoa_az_rad": pick(batch.phi_r),
+        "delay_spread_s": delay_spread,
+    }
+
+
+def path_rows(batch, ix: np.ndarray, iy: np.ndarray) -> dict[str, np.ndarray]:
+    """Every valid path of every receiver, strongest first within a cell (columns of ``PATH_SCHEMA``)."""
+    valid = batch.valid
+    order = np.argsort(-np.where(valid, batch.gain, -1.0), axis=1, kind="stable")
+    r, k = np.nonzero(np.take_along_axis(valid, order, axis=1))
+    p = order[r, k]
+    inter = batch.interactions[:, r, p].T  # [M, D]
+    depth = (inter != 0).sum(axis=1)
+    letters = ["-".join(INTERACTION_LETTERS.get(int(c), "?") for c in row if c) for row in inter]
+    a = batch.a[r, p] * np.exp(-2j * np.pi * batch.frequency_hz * batch.tau[r, p])
+    with np.errstate(divide="ignore"):
+        power_db = 10.0 * np.log10(batch.gain[r, p])
+    return {  # a: baseband-equivalent, as in reduce_cells
+        "ix": np.asarray(ix)[r].astype(np.int32), "iy": np.asarray(iy)[r].astype(np.int32),
+        "path": k.astype(np.int16), "a_re": a.real, "a_im": a.imag, "power_db": power_db,
+        "tau_s": batch.tau[r, p], "aod_zen_rad": batch.theta_t[r, p], "aod_az_rad": batch.phi_t[r, p],
+        "aoa_zen_rad": batch.theta_r[r, p], "aoa_az_rad": batch.phi_r[r, p], "depth": depth.astype(np.int8),
+        "interactions": np.array(letters, dtype=object),
+    }
+
+
+def cells_table(xs: np.ndarray, ys: np.ndarray, blocked: np.ndarray, free_features: dict[str, np.ndarray]) -> pa.Table:
+    """Assemble the full per-cell table: ``blocked`` is ``bool[ny, nx]``; ``free_features`` holds one value per free
+    cell in row-major order (from :func:`reduce_cells`). Blocked cells get no paths and null radio columns."""
+    ny, nx = blocked.shape
+    iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+    x, y = np.meshgrid(xs, ys, indexing="xy")
+    free = ~blocked.ravel()
+    n = blocked.size
+    cols: dict[str, pa.Array] = {
+        "ix": pa.array(ix.ravel(), pa.int32()), "iy": pa.array(iy.ravel(), pa.int32()),
+        "x_m": pa.array(x.ravel(), pa.float64()), "y_m": pa.array(y.ravel(), pa.float64()),
+        "blocked": pa.array(blocked.ravel()),
+    }
+    for key in CELL_RADIO_KEYS:
+        src = np.asarray(free_features[key])
+        if src.shape[0] != free.sum():
+            raise ValueError(f"feature {key!r} has {src.shape[0]} values for {int(free.sum())} free cells")
+        field = CELL_SCHEMA.field(key)
+        if key == "num_paths":
+            full = np.zeros(n, np.int16)
+            full[free] = src
+            cols[key] = pa.array(full, pa.int16())
+        elif key == "los":
+            full = np.zeros(n, bool)
+            full[free] = src
+            cols[key] = pa.array(full)
+        else:
+            full = np.full(n, np.nan, np.float32)
+            full[free] = src
+            cols[key] = pa.array(full, field.type, mask=np.isnan(full))
+    return pa.Table.from_pydict(cols, schema=CELL_SCHEMA)
+
+
+def paths_table(rows: list[dict[str, np.ndarray]]) -> pa.Table:
+    """Concatenate :func:`path_rows` outputs into a ``PATH_SCHEMA`` table, sorted by (iy, ix, path)."""
+    cols = {}
+    for f in PATH_SCHEMA:
+        parts = [r[f.name] for r in rows]
+        values = np.concatenate(parts) if parts else np.array([], dtype=object if f.name == "interactions" else None)
+        cols[f.name] = pa.array(values.tolist() if f.name == "interactions" else values, f.type)
+    table = pa.Table.from_pydict(cols, schema=PATH_SCHEMA)
+    return table.sort_by([("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")])
+
+
+def column_stats(table: pa.Table) -> dict[str, dict[str, float]]:
+    """Min / max / null count of every numeric column (for the metadata and the card)."""
+    import pyarrow.compute as pc
+
+    out = {}
+    for name in table.column_names:
+        col = table.column(name)
+        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type):
+            mm = pc.min_max(col)
+            lo, hi = mm["min"].as_py(), mm["max"].as_py()
+            out[name] = {"min": lo, "max": hi, "nulls": col.null_count}
+    return out

@@ -1,0 +1,237 @@
+"""Scene → meshes → Sionna RT over the grid → per-cell table → versioned Parquet in the data root.
+
+``build(BuildConfig(scene="cubicle"))`` builds both variants. The version of a dataset is the hash of its inputs
+(scene description, RT settings, schema version, library versions), computed before any tracing: building the same
+thing twice reuses the stored version. Tracing runs in receiver batches; each finished batch is kept under
+``<data root>/work/`` so an interrupted build continues where it stopped, and the work folder is removed once the
+version is stored.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from .dataset import Dataset
+from .raytrace import RTSettings
+from .schema import SCHEMA_VERSION
+
+REDUCTION_DOC = (
+    "path power = |a|^2 averaged over all (RX port, TX port) pairs; strongest path = largest path power; "
+    "a_re/a_im/phase_rad = coefficient of the strongest path at RX port 0 / TX port 0 (first element, first "
+    "polarisation); path_gain_db = 10 log10 of the sum of path powers; delay_spread_s = power-weighted RMS delay spread"
+)
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """Ray-trace a scene into the data root (both variants unless one is named)."""
+
+    scene: str = "cubicle"
+    """Scene name (a file in dtradar_data/scenes/), e.g. cubicle or meeting."""
+    variant: Literal["blueprint", "dynamic", "all"] = "all"
+    """Which twin to build: blueprint (static objects), dynamic (blueprint + movable objects), or all."""
+    rt: RTSettings = field(default_factory=RTSettings)
+    """Ray-tracing settings."""
+    per_path: bool = True
+    """Also store the per-path table (every valid path of every cell with its interaction types)."""
+    coverage_map: bool = True
+    """Also render the RadioMapSolver coverage map (PNG with the obstacles drawn)."""
+    coverage_samples: int = 2_000_000
+    """Rays for the coverage map."""
+    progress: bool = True
+    """Show a progress bar."""
+
+
+def build_inputs(spec, settings: RTSettings, *, per_path: bool) -> dict:
+    """Everything that determines a dataset's content; its hash is the dataset version."""
+    from .raytrace import library_versions
+
+    return {
+        "scene_spec": spec.to_dict(),
+        "rt": settings.hashed(),
+        "schema_version": SCHEMA_VERSION,
+        "library_versions": library_versions(),
+        "per_path": per_path,
+    }
+
+
+def _save_npz_atomic(path: Path, **arrays) -> None:
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
+    tmp.write_bytes(buf.getvalue())
+    os.replace(tmp, path)
+
+
+def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_path: bool = True,
+               progress: bool = True, tracer=None):
+    """Trace every free cell of ``spec``'s grid. Returns ``(cells, paths, blocked)``.
+
+    With ``work_dir``, each finished batch is saved there and reused on the next call (resumable).
+    """
+    from . import features
+    from .geometry import occupancy
+
+    blocked = occupancy(spec)
+    xs, ys = spec.grid.centres()
+    iy, ix = np.nonzero(~blocked)  # row-major order of the free cells
+    points = np.stack([xs[ix], ys[iy], np.full(ix.shape, spec.rx_height_m)], axis=1)
+    n_batches = max(1, -(-len(points) // settings.batch_size))
+    if work_dir is not None:
+        work_dir.mkdir(parents=True, exist_ok=True)
+    cell_parts, path_parts = [], []
+    bar = tqdm(total=len(points), unit="cell", desc=f"ray tracing {spec.name}", disable=not progress)
+    for b in range(n_batches):
+        sl = slice(b * settings.batch_size, (b + 1) * settings.batch_size)
+        cache = work_dir / f"batch_{b:05d}.npz" if work_dir is not None else None
+        if cache is not None and cache.exists():
+            with np.load(cache, allow_pickle=True) as z:
+                cells = {k[2:]: z[k] for k in z.files if k.startswith("c_")}
+                paths = {k[2:]: z[k] for k in z.files if k.startswith("p_")}
+        else:
+            if tracer is None:
+                from .raytrace import RayTracer
+
+                tracer = RayTracer(spec, settings)
+                tracer.check_points(points)  # the cheap check, once, before the first expensive trace
+            batch = tracer.trace(points[sl])
+            cells = features.reduce_cells(batch)
+            paths = features.path_rows(batch, ix[sl], iy[sl]) if per_path else {}
+            if cache is not None:
+                _save_npz_atomic(cache, **{f"c_{k}": v for k, v in cells.items()},
+                                 **{f"p_{k}": v for k, v in paths.items()})
+        cell_parts.append(cells)
+        if per_path:
+            path_parts.append(paths)
+        bar.update(len(points[sl]))
+    bar.close()
+    merged = {k: np.concatenate([c[k] for c in cell_parts]) for k in features.CELL_RADIO_KEYS}
+    cells_tbl = features.cells_table(xs, ys, blocked, merged)
+    paths_tbl = features.paths_table(path_parts) if per_path else None
+    return cells_tbl, paths_tbl, blocked, tracer
+
+
+def render_coverage_png(spec, tracer, path: Path, *, samples: int) -> Path:
+    """RadioMapSolver path gain over the grid (4 sub-cells per cell side), obstacles drawn on top (paper Fig. 4)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .floorplan import draw_floorplan
+
+    g = spec.grid
+    width, height = g.nx * g.cell_m, g.ny * g.cell_m
+    x_lo, y_lo = g.x0_m - g.cell_m / 2, g.y0_m - g.cell_m / 2
+    centre = (x_lo + width / 2, y_lo + height / 2, spec.rx_height_m)
+    gain = tracer.radio_map(centre_m=centre, size_m=(width, height), cell_m=g.cell_m / 4, samples_per_tx=samples)
+    with np.errstate(divide="ignore"):
+        db = 10 * np.log10(gain)
+    db[~np.isfinite(db)] = np.nan
+    fig, ax = plt.subplots(figsize=(max(6.0, width / max(width, height) * 10), max(4.0, height / max(width, height) * 8)))
+    im = ax.imshow(db, origin="lower", extent=(x_lo, x_lo + width, y_lo, y_lo + height), cmap="viridis",
+                   vmin=np.nanpercentile(db, 2) if np.isfinite(db).any() else None)
+    draw_floorplan(ax, spec)
+    fig.colorbar(im, ax=ax, label=f"path gain [dB] at z = {spec.rx_height_m} m")
+    ax.set_title(f"{spec.name}: coverage map, {tracer.settings.frequency_hz / 1e9:g} GHz")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def build_one(spec, config: BuildConfig) -> Dataset:
+    """Build (or reuse) one variant of one scene."""
+    from . import store, versions
+    from .features import column_stats
+    from .ids import DatasetId, format_id
+    from .paths import data_root
+    from .raytrace import active_variant, library_versions
+
+    settings = config.rt
+    ds_id = DatasetId(spec.scene, spec.variant, None)
+    name = format_id(ds_id)
+    inputs = build_inputs(spec, settings, per_path=config.per_path)
+    version = versions.version_id(inputs)
+    if store.version_exists(ds_id, version):
+        print(f"{name}: version {version} already built, reusing it")
+        return store.load(name, revision=version)
+    work_dir = data_root() / "work" / spec.scene / spec.variant / version
+    t0 = time.perf_counter()
+    cells, paths, blocked, tracer = trace_grid(spec, settings, work_dir, per_path=config.per_path,
+                                               progress=config.progress)
+    trace_s = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory(prefix="dtradar-build-") as tmp:
+        extra = {}
+        if config.coverage_map:
+            if tracer is None:
+                from .raytrace import RayTracer
+
+                tracer = RayTracer(spec, settings)
+            extra["coverage.png"] = render_coverage_png(spec, tracer, Path(tmp) / "coverage.png",
+                                                        samples=config.coverage_samples)
+        num_free = int((~blocked).sum())
+        meta = {
+            "name": name,
+            "scene": spec.scene,
+            "variant": spec.variant,
+            "version": version,
+            "schema_version": SCHEMA_VERSION,
+            "title": spec.title,
+            "description": spec.description,
+            "scene_spec": spec.to_dict(),
+            "scene_hash": spec.digest(),
+            "rt": {**settings.hashed(), "reduction": REDUCTION_DOC, "solver": "sionna.rt.PathSolver",
+                   "mitsuba_variant": active_variant() or "(reused cached batches)"},
+            "transmitter": dataclasses.asdict(spec.tx),
+            "grid": spec.grid.to_dict(),
+            "rx_height_m": spec.rx_height_m,
+            "robot_height_m": spec.robot_height_m,
+            "library_versions": library_versions(),
+            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "licence": spec.licence,
+            "attribution": spec.attribution,
+            "source": spec.source,
+            "build_inputs_hash": version,
+            "stats": {
+                "num_cells": int(blocked.size),
+                "num_free": num_free,
+                "num_with_paths": int(np.count_nonzero(cells.column("num_paths").to_numpy() > 0)),
+                "num_paths_total": paths.num_rows if paths is not None else None,
+                "trace_seconds": round(trace_s, 2),
+                "columns": column_stats(cells),
+            },
+        }
+        out = store.write_version(ds_id, version, cells, meta, paths=paths, extra_files=extra)
+    if tracer is not None:
+        tracer.close()
+    shutil.rmtree(work_dir, ignore_errors=True)
+    print(f"{name}: stored version {version} in {out}")
+    return store.load(name, revision=version)
+
+
+def build(config: BuildConfig) -> list[Dataset]:
+    """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
+    from .scene import VARIANTS, load_scene_spec
+
+    variants = VARIANTS if config.variant == "all" else (config.variant,)
+    return [build_one(load_scene_spec(config.scene, v), config) for v in variants]
+
+
+def describe(config: BuildConfig) -> str:
+    return json.dumps(dataclasses.asdict(config), indent=2)

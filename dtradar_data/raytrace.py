@@ -1,0 +1,294 @@
+"""Sionna RT for dtradar: the only module that imports ``sionna.rt``, ``mitsuba`` or ``drjit``.
+
+A :class:`RayTracer` owns the one mutable object, the Sionna scene, built once from a :class:`SceneSpec` (through the
+Mitsuba XML that :mod:`dtradar_data.geometry` writes). Solvers are called with explicit keyword settings and a seed
+taken from :class:`RTSettings`, and a cheap precondition check (:meth:`RayTracer.check_points`) runs before any
+expensive trace. Results leave this module as plain numpy (:class:`PathBatch`), so everything downstream tests
+without the ray tracer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from .errors import InvalidCoordinatesError, RayTracerUnavailableError
+
+Device = Literal["auto", "cpu", "cuda"]
+
+
+@dataclass(frozen=True)
+class RTSettings:
+    """Ray-tracing settings. Every field except ``device`` and ``batch_size`` feeds the dataset version hash."""
+
+    frequency_hz: float = 2.4e9
+    """Carrier frequency (the paper: 2.4 GHz)."""
+    max_depth: int = 5
+    """Maximum number of interactions per path (the paper: 5)."""
+    samples_per_src: int = 100_000
+    """Rays shot from the transmitter per trace; chosen from `make bench-rt` (see README)."""
+    max_num_paths_per_src: int = 1_000_000
+    """Upper bound on paths kept per source (Sionna's buffer size)."""
+    seed: int = 42
+    """Seed of the ray sampler; the same scene, settings and seed give identical tables."""
+    los: bool = True
+    specular_reflection: bool = True
+    diffuse_reflection: bool = False
+    refraction: bool = True
+    diffraction: bool = False
+    synthetic_array: bool = True
+    """Trace from the array centre and apply element phase shifts (Sionna's default, and much cheaper)."""
+    tx_rows: int = 8
+    tx_cols: int = 2
+    tx_pattern: str = "tr38901"
+    tx_polarization: str = "VH"
+    """Transmitter array: 8x2 3GPP TR 38.901 elements, dual polarised (the paper)."""
+    rx_pattern: str = "dipole"
+    rx_polarization: str = "V"
+    """Receiver: one vertical short dipole (the paper's 1x1 dipole)."""
+    batch_size: int = 1024
+    """Receivers per PathSolver call (memory vs. per-call overhead); results do not depend on it."""
+    device: Device = "auto"
+    """"auto" uses CUDA when Dr.Jit finds a GPU, else the CPU (LLVM)."""
+
+    def __post_init__(self) -> None:
+        problems = []
+        if not 1e8 <= self.frequency_hz <= 1e11:
+            problems.append(f"frequency_hz={self.frequency_hz:g} is outside 100 MHz .. 100 GHz")
+        if not 0 <= self.max_depth <= 10:
+            problems.append(f"max_depth={self.max_depth} must be in 0..10")
+        if self.samples_per_src < 1 or self.batch_size < 1 or self.max_num_paths_per_src < 1:
+            problems.append("samples_per_src, batch_size and max_num_paths_per_src must be positive")
+        if self.device not in ("auto", "cpu", "cuda"):
+            problems.append(f"device={self.device!r} must be 'auto', 'cpu' or 'cuda'")
+        if problems:
+            raise ValueError("invalid RTSettings: " + "; ".join(problems))
+
+    def hashed(self) -> dict[str, Any]:
+        """The settings that determine the result (and so the dataset version)."""
+        d = dataclasses.asdict(self)
+        d.pop("device")
+        d.pop("batch_size")
+        return d
+
+    def solver_kwargs(self) -> dict[str, Any]:
+        return dict(
+            max_depth=self.max_depth, max_num_paths_per_src=self.max_num_paths_per_src,
+            samples_per_src=self.samples_per_src, synthetic_array=self.synthetic_array, los=self.los,
+            specular_reflection=self.specular_reflection, diffuse_reflection=self.diffuse_reflection,
+            refraction=self.refraction, diffraction=self.diffraction, seed=self.seed,
+        )
+
+
+@dataclass
+class PathBatch:
+    """All paths from the transmitter to ``N`` receivers, padded to ``P`` paths, as numpy arrays.
+
+    ``a`` is Sionna's passband coefficient (``Paths.a``, no carrier phase) at the reference port pair (RX port 0,
+    TX port 0); :mod:`.features` turns it into the baseband one. ``gain`` is ``|a|²`` averaged over
+    all port pairs (‖H‖²_F / (N_r N_t)); angles are radians (zenith θ from +z, azimuth φ from +x); ``interactions``
+    is ``[D, N, P]`` of Sionna ``InteractionType`` codes (0 = none).
+    """
+
+    valid: np.ndarray  # bool [N, P]
+    a: np.ndarray  # complex64 [N, P]
+    gain: np.ndarray  # float64 [N, P]
+    tau: np.ndarray  # float64 [N, P]
+    theta_t: np.ndarray
+    phi_t: np.ndarray
+    theta_r: np.ndarray
+    phi_r: np.ndarray
+    interactions: np.ndarray  # uint32 [D, N, P]
+    frequency_hz: float
+
+    @property
+    def num_receivers(self) -> int:
+        return self.valid.shape[0]
+
+
+_MI = None  # the mitsuba module once a variant is set
+
+
+def _import_sionna(device: Device):
+    """Configure LLVM, pick the Mitsuba variant, then import ``sionna.rt`` (order matters)."""
+    global _MI
+    from .llvm import configure
+
+    if device != "cuda":
+        configure()
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError as e:  # pragma: no cover - depends on the install
+        raise RayTracerUnavailableError(f"Mitsuba/Dr.Jit is not importable: {e}",
+                                        hint="run `make setup` (or `pip install sionna-rt==2.2.0`)") from e
+    use_cuda = device == "cuda" or (device == "auto" and dr.has_backend(dr.JitBackend.CUDA))
+    if device == "cuda" and not dr.has_backend(dr.JitBackend.CUDA):
+        raise RayTracerUnavailableError("device='cuda' requested but Dr.Jit finds no CUDA GPU",
+                                        hint="use device='cpu' (or 'auto')")
+    variant = "cuda_ad_mono_polarized" if use_cuda else "llvm_ad_mono_polarized"
+    if mi.variant() != variant:
+        mi.set_variant(variant)
+    try:
+        import sionna.rt as rt
+    except Exception as e:  # pragma: no cover
+        raise RayTracerUnavailableError(f"sionna.rt failed to import: {e}", hint="run `make setup`") from e
+    _MI = mi
+    return mi, rt
+
+
+def active_variant() -> str | None:
+    return _MI.variant() if _MI is not None else None
+
+
+def library_versions() -> dict[str, str]:
+    """Versions of the ray-tracing stack (part of the dataset version)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in ("sionna-rt", "mitsuba", "drjit", "trimesh", "numpy"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "missing"
+    return out
+
+
+class RayTracer:
+    """A Sionna scene built from a :class:`SceneSpec`, with the paper's transmitter and receiver arrays."""
+
+    def __init__(self, spec, settings: RTSettings = RTSettings(), *, scene_dir: Path | None = None):
+        from .geometry import write_mitsuba_scene
+
+        self.spec = spec
+        self.settings = settings
+        self.mi, self.rt = _import_sionna(settings.device)
+        self._tmp = None
+        if scene_dir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="dtradar-scene-")
+            scene_dir = Path(self._tmp.name)
+        xml = write_mitsuba_scene(spec, Path(scene_dir))
+        rt = self.rt
+        self.scene = rt.load_scene(str(xml), merge_shapes=True)
+        self.scene.frequency = settings.frequency_hz
+        self.scene.tx_array = rt.PlanarArray(num_rows=settings.tx_rows, num_cols=settings.tx_cols,
+                                             pattern=settings.tx_pattern, polarization=settings.tx_polarization)
+        self.scene.rx_array = rt.PlanarArray(num_rows=1, num_cols=1, pattern=settings.rx_pattern,
+                                             polarization=settings.rx_polarization)
+        tx = spec.tx
+        kwargs = {"look_at": list(tx.look_at_m)} if tx.look_at_m is not None else {}
+        self.scene.add(rt.Transmitter("tx", position=list(tx.position_m), power_dbm=tx.power_dbm, **kwargs))
+        self._solver = rt.PathSolver()
+        self._rx_names: list[str] = []
+
+    @property
+    def variant(self) -> str:
+        return self.mi.variant()
+
+    # -- the cheap precondition check ----------------------------------------------------------------------------
+    def check_points(self, points: np.ndarray) -> None:
+        """Reject receiver positions that are not finite or lie outside the scene's bounding box."""
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InvalidCoordinatesError(f"receiver positions must have shape [N, 3], got {points.shape}",
+                                          hint="pass one (x, y, z) row per receiver")
+        if not np.isfinite(points).all():
+            raise InvalidCoordinatesError("receiver positions contain NaN or infinity",
+                                          hint="check the grid origin and cell size")
+        bbox = self.scene.mi_scene.bbox()
+        lo, hi = np.array(bbox.min, dtype=float).ravel(), np.array(bbox.max, dtype=float).ravel()
+        outside = np.any((points < lo - 1e-6) | (points > hi + 1e-6), axis=1)
+        if outside.any():
+            first = points[np.argmax(outside)]
+            raise InvalidCoordinatesError(
+                f"{int(outside.sum())} receiver(s) lie outside the scene bounds {lo.round(2)}..{hi.round(2)}, "
+                f"e.g. {first.round(3)}", hint="fix the grid (x0_m, y0_m, cell_m, nx, ny) or rx_height_m in the scene file")
+
+    # -- tracing -------------------------------------------------------------------------------------------------
+    def _set_receivers(self, points: np.ndarray) -> None:
+        for name in self._rx_names:
+            self.scene.remove(name)
+        self._rx_names = [f"rx{i}" for i in range(len(points))]
+        for name, p in zip(self._rx_names, points):
+            self.scene.add(self.rt.Receiver(name, position=[float(v) for v in p]))
+
+    def trace(self, points: np.ndarray) -> PathBatch:
+        """Trace paths from the transmitter to every point (one PathSolver call; batch in the caller)."""
+        points = np.asarray(points, dtype=np.float64)
+        self.check_points(points)
+        self._set_receivers(points)
+        paths = self._solver(self.scene, **self.settings.solver_kwargs())
+        return self._to_numpy(paths, len(points))
+
+    def _to_numpy(self, paths, n: int) -> PathBatch:
+        a_re, a_im = (np.asarray(x, dtype=np.float32) for x in paths.a)
+        a = a_re + 1j * a_im
+        if self.settings.synthetic_array:
+            # a: [rx, rx_ant, tx, tx_ant, P]; geometry: [rx, tx, P]; interactions: [D, rx, tx, P]
+            a = a[:, :, 0, :, :]  # one transmitter
+            ref = a[:, 0, 0, :]
+            gain = np.mean(np.abs(a) ** 2, axis=(1, 2))
+
+            def geo(x):
+                return np.asarray(x)[:, 0, :]
+
+            inter = np.asarray(paths.interactions)[:, :, 0, :]
+        else:
+            # a: [rx, rx_ant, tx, tx_ant, P]; geometry: [rx, rx_ant, tx, tx_ant, P]: use the reference ports
+            a = a[:, :, 0, :, :]
+            ref = a[:, 0, 0, :]
+            gain = np.mean(np.abs(a) ** 2, axis=(1, 2))
+
+            def geo(x):
+                return np.asarray(x)[:, 0, 0, 0, :]
+
+            inter = np.asarray(paths.interactions)[:, :, 0, 0, 0, :]
+        valid = geo(paths.valid).astype(bool)
+        batch = PathBatch(
+            valid=valid, a=ref.astype(np.complex64), gain=gain.astype(np.float64),
+            tau=geo(paths.tau).astype(np.float64),
+            theta_t=geo(paths.theta_t).astype(np.float64), phi_t=geo(paths.phi_t).astype(np.float64),
+            theta_r=geo(paths.theta_r).astype(np.float64), phi_r=geo(paths.phi_r).astype(np.float64),
+            interactions=inter.astype(np.uint32), frequency_hz=float(self.settings.frequency_hz),
+        )
+        if batch.valid.shape[0] != n:  # pragma: no cover - guards against a Sionna layout change
+            raise RuntimeError(f"Sionna returned {batch.valid.shape[0]} receivers for {n} requested")
+        return batch
+
+    def radio_map(self, *, centre_m: tuple[float, float, float], size_m: tuple[float, float], cell_m: float,
+                  samples_per_tx: int = 2_000_000) -> np.ndarray:
+        """Path gain (linear) on a horizontal plane with RadioMapSolver: ``float64[ny, nx]`` (row 0 = lowest y)."""
+        rt, mi = self.rt, self.mi
+        rm = rt.RadioMapSolver()(
+            self.scene, center=mi.Point3f(*centre_m), orientation=mi.Point3f(0, 0, 0),
+            size=mi.Point2f(*size_m), cell_size=mi.Point2f(cell_m, cell_m), samples_per_tx=samples_per_tx,
+            max_depth=self.settings.max_depth, los=self.settings.los,
+            specular_reflection=self.settings.specular_reflection,
+            diffuse_reflection=self.settings.diffuse_reflection, refraction=self.settings.refraction,
+            diffraction=self.settings.diffraction, seed=self.settings.seed,
+        )
+        return np.asarray(rm.path_gain, dtype=np.float64)[0]
+
+    def close(self) -> None:
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+
+def smoke_test() -> str:
+    """Start the ray-tracing backend and run one tiny JIT kernel; returns a one-line report."""
+    mi, _ = _import_sionna("auto")
+    import drjit as dr
+
+    x = dr.arange(mi.Float, 8)
+    total = float(dr.sum(x * x)[0] if hasattr(dr.sum(x * x), "__getitem__") else dr.sum(x * x))
+    if abs(total - 140.0) > 1e-6:  # pragma: no cover
+        raise RayTracerUnavailableError(f"Dr.Jit smoke test computed {total}, expected 140",
+                                        hint="the LLVM backend is broken: reinstall with `make setup`")
+    return f"Sionna RT ready: variant {mi.variant()}, DRJIT_LIBLLVM_PATH={os.environ.get('DRJIT_LIBLLVM_PATH')}"
