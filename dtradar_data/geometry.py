@@ -180,26 +180,41 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
     return blocked
 
 
-def largest_free_component_fraction(blocked: np.ndarray) -> float:
-    """Share of free cells in the largest 4-connected free region (the robot moves X-/X+/Y-/Y+)."""
-    free = ~blocked
-    total = int(free.sum())
-    if total == 0:
-        return 0.0
-    seen = np.zeros_like(free)
-    best = 0
+def free_components(blocked: np.ndarray) -> np.ndarray:
+    """int32[ny, nx] labels of the 4-connected free regions (the robot moves X-/X+/Y-/Y+): 0 on blocked cells,
+    1 for the largest region, 2 for the next largest, ... (ties by first cell in row-major order)."""
+    free = ~np.asarray(blocked, dtype=bool)
     ny, nx = free.shape
+    labels = np.zeros(free.shape, dtype=np.int32)
+    sizes: list[int] = []
     for start in zip(*np.nonzero(free)):
-        if seen[start]:
+        if labels[start]:
             continue
-        seen[start] = True
+        label = len(sizes) + 1
+        labels[start] = label
         stack, size = [start], 0
         while stack:
             y, x = stack.pop()
             size += 1
             for yy, xx in ((y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1)):
-                if 0 <= yy < ny and 0 <= xx < nx and free[yy, xx] and not seen[yy, xx]:
-                    seen[yy, xx] = True
+                if 0 <= yy < ny and 0 <= xx < nx and free[yy, xx] and not labels[yy, xx]:
+                    labels[yy, xx] = label
                     stack.append((yy, xx))
-        best = max(best, size)
-    return best / total
+        sizes.append(size)
+    # Relabel by decreasing size (stable), so label 1 is always the largest region.
+    order = sorted(range(len(sizes)), key=lambda k: -sizes[k])
+    remap = np.zeros(len(sizes) + 1, dtype=np.int32)
+    remap[[k + 1 for k in order]] = np.arange(1, len(sizes) + 1, dtype=np.int32)
+    return remap[labels]
+
+
+def largest_free_component(blocked: np.ndarray) -> np.ndarray:
+    """bool[ny, nx]: the free cells of the largest 4-connected region; draw start/target pairs from it so that
+    every pair is reachable."""
+    return free_components(blocked) == 1
+
+
+def largest_free_component_fraction(blocked: np.ndarray) -> float:
+    """Share of the free cells that lie in the largest 4-connected free region (1.0 when all free cells connect)."""
+    total = int((~np.asarray(blocked, dtype=bool)).sum())
+    return float(largest_free_component(blocked).sum()) / total if total else 0.0

@@ -420,6 +420,15 @@ class _Parser:
                 raise self.fail(w, f"invalid kind name {kind!r}",
                                 "use lower-case letters, digits and '_'; floor/ceiling come from [room]")
             self.keys(t, set(_BOX_FIELDS), set(), w)
+            # Check the defaults here, so a bad default is reported against [kinds.x] even if no object uses it.
+            if "material" in t:
+                self.material(t, "material", w)
+            for key in ("width_m", "length_m", "height_m"):
+                if key in t:
+                    self.number(t, key, w, positive=True)
+            for key in ("z_m", "yaw_deg"):
+                if key in t:
+                    self.number(t, key, w)
             out[kind] = dict(t)
         return out
 

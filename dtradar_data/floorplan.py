@@ -1,0 +1,104 @@
+"""Top-down floor plans of a scene (matplotlib, no pyplot): obstacles as polygons coloured by material, the TX as a star.
+
+Used for quick looks (:func:`save_floorplan_png`), under coverage maps and under dtradar_rl's path plots
+(:func:`draw_floorplan` draws into any ``Axes`` and returns it). Every material and the TX get one legend entry.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .geometry import footprints, occupancy
+from .scene import SceneSpec
+
+# Colours loosely follow the material's look (Sionna's own palette is for 3-D renders and too dark for a plan view).
+MATERIAL_COLOURS: dict[str, str] = {
+    "brick": "#a0522d",
+    "concrete": "#9e9e9e",
+    "wood": "#d2a86e",
+    "metal": "#4f6d8f",
+    "glass": "#9fd8e8",
+    "marble": "#e8e2d0",
+    "chipboard": "#9aa05a",  # cardboard boxes; kept apart from wood,
+    "plywood": "#c49a5a",
+    "plasterboard": "#ecebe4",
+    "wet_ground": "#d17b88",  # people
+}
+FALLBACK_COLOUR = "#888888"
+
+
+def material_colour(material: str) -> str:
+    return MATERIAL_COLOURS.get(material, FALLBACK_COLOUR)
+
+
+def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool = False):
+    """Draw ``spec`` into ``ax`` in scene metres (equal aspect) and return ``ax``.
+
+    Obstacles (walls included) are filled polygons, lower objects first so that laptops show on their table; objects
+    above the robot (a wall-mounted TV) are hatched. ``with_grid`` shades the cells :func:`occupancy` marks blocked
+    and draws the cell lines; ``label`` writes object names. Legend entries: one per material, plus "TX".
+    """
+    from matplotlib.patches import Polygon
+
+    seen: set[str] = set()
+    for box, corners in footprints(spec):
+        above = box.z_m >= spec.robot_height_m
+        entry = box.material if box.material not in seen else "_nolegend_"
+        seen.add(box.material)
+        ax.add_patch(Polygon(corners, closed=True, facecolor=material_colour(box.material), edgecolor="black",
+                             linewidth=0.5, alpha=0.55 if above else 0.9, hatch="//" if above else None,
+                             label=entry, zorder=2 + box.z_m))
+        if label and box.kind != "wall":
+            ax.annotate(box.name, (box.x_m, box.y_m), ha="center", va="center", fontsize=5, zorder=10)
+
+    xmin, ymin, xmax, ymax = _extent(spec)
+    if with_grid:
+        g = spec.grid
+        gx0, gy0, gx1, gy1 = g.bounds()
+        blocked = occupancy(spec)
+        ax.imshow(np.where(blocked, 1.0, np.nan), origin="lower", extent=(gx0, gx1, gy0, gy1), cmap="Reds",
+                  vmin=0, vmax=2, alpha=0.5, interpolation="nearest", zorder=1.5)
+        for x in np.linspace(gx0, gx1, g.nx + 1):
+            ax.plot([x, x], [gy0, gy1], color="0.8", linewidth=0.3, zorder=1)
+        for y in np.linspace(gy0, gy1, g.ny + 1):
+            ax.plot([gx0, gx1], [y, y], color="0.8", linewidth=0.3, zorder=1)
+
+    tx = spec.tx.position_m
+    ax.plot([tx[0]], [tx[1]], marker="*", markersize=14, color="gold", markeredgecolor="black", linestyle="none",
+            label="TX", zorder=20)
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    return ax
+
+
+def _extent(spec: SceneSpec) -> tuple[float, float, float, float]:
+    """Outer bounds of everything drawn (walls included), with a small margin."""
+    pts = np.vstack([c for _, c in footprints(spec)] + [np.array([spec.tx.position_m[:2]])])
+    pad = 0.02 * float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 1])))
+    return pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad
+
+
+def save_floorplan_png(spec: SceneSpec, path: str | Path, *, with_grid: bool = True, label: bool = True,
+                       dpi: int = 150) -> Path:
+    """Write a labelled floor plan (blocked cells shaded) to ``path`` and return it."""
+    # A bare Figure (no pyplot): no global backend switch, nothing left open in interactive sessions.
+    from matplotlib.figure import Figure
+
+    xmin, ymin, xmax, ymax = _extent(spec)
+    width = 9.0
+    fig = Figure(figsize=(width, max(3.0, width * (ymax - ymin) / (xmax - xmin)) + 0.8))
+    ax = fig.add_subplot()
+    draw_floorplan(ax, spec, with_grid=with_grid, label=label)
+    blocked = occupancy(spec)
+    ax.set_title(f"{spec.name}: {spec.title}  |  grid {spec.grid.nx} x {spec.grid.ny} @ {spec.grid.cell_m} m, "
+                 f"{int(blocked.sum())} blocked cells", fontsize=9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=dpi)
+    return path
