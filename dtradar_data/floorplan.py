@@ -1,4 +1,5 @@
-"""Top-down floor plans of a scene (matplotlib, no pyplot): obstacles as polygons coloured by material, the TX as a star.
+"""Top-down floor plans of a scene (matplotlib, no pyplot): obstacles as polygons coloured by material, the TX as a
+star.
 
 Used for quick looks (:func:`save_floorplan_png`), under coverage maps and under dtradar_rl's path plots
 (:func:`draw_floorplan` draws into any ``Axes`` and returns it). Every material and the TX get one legend entry.

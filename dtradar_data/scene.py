@@ -155,7 +155,8 @@ class TxSpec:
 
 @dataclass(frozen=True)
 class Room:
-    """Interior dimensions: the floor spans ``[0, width_m] x [0, length_m]``, the ceiling (if any) is at ``height_m``."""
+    """Interior dimensions: the floor spans ``[0, width_m] x [0, length_m]``; the ceiling (if any) is at
+    ``height_m``."""
 
     width_m: float
     length_m: float
@@ -318,7 +319,7 @@ class _Parser:
         value = self.string(table, key, where, default=default)
         if value not in choices:
             close = did_you_mean(value, choices)
-            raise self.fail(where, f"{key} {value!r} is not one of the allowed values" + (f"; {close}" if close else ""),
+            raise self.fail(where, f"{key} {value!r} is not an allowed value" + (f"; {close}" if close else ""),
                             "use one of: " + ", ".join(choices))
         return value
 
@@ -547,7 +548,8 @@ class _Parser:
                 or c[:, 1].max() > room.length_m + _EPS):
             raise self.fail(f"object {b.name!r}",
                             f"footprint x {c[:, 0].min():.3f}..{c[:, 0].max():.3f}, y {c[:, 1].min():.3f}.."
-                            f"{c[:, 1].max():.3f} m is outside the room [0, {room.width_m:g}] x [0, {room.length_m:g}] m",
+                            f"{c[:, 1].max():.3f} m is outside the room "
+                            f"[0, {room.width_m:g}] x [0, {room.length_m:g}] m",
                             "move it (x_m, y_m), shrink it, or change yaw_deg so it fits inside the walls")
         if b.z_m < -_EPS or b.top_m > room.height_m + _EPS:
             raise self.fail(f"object {b.name!r}", f"spans z {b.z_m:g}..{b.top_m:g} m, outside the room's "

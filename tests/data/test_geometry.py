@@ -208,3 +208,21 @@ def test_free_components_are_labelled_largest_first():
     assert largest_free_component(blocked).sum() == 4
     assert largest_free_component_fraction(blocked) == pytest.approx(4 / 6)
     assert largest_free_component_fraction(np.ones((2, 2), dtype=bool)) == 0.0
+
+
+@pytest.mark.sionna
+def test_sionna_loads_the_written_scene_with_one_object_per_itu_material():
+    from dtradar_data.errors import RayTracerUnavailableError
+
+    try:
+        from dtradar_data.raytrace import RayTracer
+    except (ImportError, RayTracerUnavailableError) as e:  # pragma: no cover - machines without Sionna
+        pytest.skip(f"Sionna RT unavailable: {e}")
+    spec = load_scene_spec("meeting", "dynamic")
+    try:
+        tracer = RayTracer(spec)
+    except RayTracerUnavailableError as e:  # pragma: no cover
+        pytest.skip(f"Sionna RT unavailable: {e}")
+    objects = tracer.scene.objects
+    assert sorted(objects) == sorted(material_meshes(spec))
+    assert {n: o.radio_material.itu_type for n, o in objects.items()} == {m: m for m in objects}

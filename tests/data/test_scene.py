@@ -60,7 +60,8 @@ def test_dynamic_twin_is_the_blueprint_plus_the_listed_changes(scene):
     dyn = {b.name: b for b in load_scene_spec(scene, "dynamic").objects}
     assert set(blue) <= set(dyn)
     added = {n: dyn[n].kind for n in set(dyn) - set(blue)}
-    expected_added = {k: v - PAPER_COUNTS[scene, "blueprint"].get(k, 0) for k, v in PAPER_COUNTS[scene, "dynamic"].items()}
+    before, after = PAPER_COUNTS[scene, "blueprint"], PAPER_COUNTS[scene, "dynamic"]
+    expected_added = {k: v - before.get(k, 0) for k, v in after.items()}
     assert sorted(added.values()) == sorted(k for k, v in expected_added.items() for _ in range(v))
     changed = [n for n in blue if dyn[n] != blue[n]]
     assert len(changed) == REORIENTED[scene]
