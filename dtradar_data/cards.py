@@ -1,0 +1,301 @@
+"""Dataset cards: a Hugging Face ``README.md`` (YAML front matter + prose) rendered from a version's ``meta.json``.
+
+Rendering uses ``huggingface_hub.DatasetCard.from_template`` with ``dtradar_data/templates/dataset_card.md``; the
+front matter (``DatasetCardData``) carries licence, tags, size category and ``configs`` whose ``data_files`` point at
+``cells.parquet`` / ``paths.parquet`` in the same directory, so the Hub viewer and ``datasets.load_dataset`` read
+the Parquet directly. A card is a pure function of ``(meta, tag, history, hub_repo)``: no clock, no environment.
+
+Committed cards of the built-in datasets live in ``cards/<scene>/<variant>/``: ``card.json`` (the newest stored
+version's ``meta.json``, its tag and the version history: the card's only input), ``README.md`` (rendered from
+``card.json``) and ``coverage.png``. ``python -m dtradar_data cards`` refreshes them from the local store;
+``--check`` (and the test suite) re-renders every committed ``card.json`` and fails when ``README.md`` differs, so
+a template or metadata change without ``make cards`` is caught without needing the datasets themselves.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections import Counter
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from huggingface_hub import DatasetCard, DatasetCardData
+
+from . import paths as P
+from .errors import DatasetNotFoundError, DtradarError
+from .schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_COLUMN_DESCRIPTIONS, PATH_SCHEMA
+
+CARD_INPUTS = "card.json"
+DEFAULT_HUB_NAMESPACE = "dtradar"
+TAGS = ("robotics", "reinforcement-learning", "wireless", "radio", "ray-tracing", "sionna", "digital-twin",
+        "parquet")
+VARIANT_TEXT = {
+    "blueprint": "the static twin: walls, floor and the fixed furniture or buildings (agents are trained here).",
+    "dynamic": "the blueprint plus movable objects added or re-oriented (people, chairs, vehicles); agents trained "
+               "on the blueprint are evaluated here.",
+}
+_UNITS = (("_rad", "rad"), ("_db", "dB"), ("_hz", "Hz"), ("_m", "m"), ("_s", "s"))
+# Hub licence identifiers (https://huggingface.co/docs/hub/repositories-licenses) for the licences scenes use.
+_LICENCES = {"odbl": "odbl", "odbl-1.0": "odbl", "cc-by-4.0": "cc-by-4.0", "cc-by-sa-4.0": "cc-by-sa-4.0",
+             "cc0-1.0": "cc0-1.0", "cc0": "cc0-1.0", "apache-2.0": "apache-2.0", "mit": "mit",
+             "cc-by-nc-4.0": "cc-by-nc-4.0", "pddl": "pddl", "odc-by": "odc-by"}
+
+
+class StaleCardError(DtradarError, RuntimeError):
+    """A committed card that no longer matches what its inputs render to."""
+
+
+def default_hub_repo(name: str) -> str:
+    """``dtradar/dtradar-<scene>-<variant>``: the repo the cards advertise (``publish --repo`` overrides it)."""
+    scene, variant = name.split("/")
+    return f"{DEFAULT_HUB_NAMESPACE}/dtradar-{scene}-{variant}"
+
+
+def license_id(licence: str | None) -> str:
+    text = (licence or "").strip().lower()
+    if text in _LICENCES:
+        return _LICENCES[text]
+    if "odbl" in text or "open database" in text:
+        return "odbl"
+    return "other"
+
+
+def size_category(n: int) -> str:
+    for limit, label in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"),
+                         (1_000_000, "100K<n<1M"), (10_000_000, "1M<n<10M")):
+        if n < limit:
+            return label
+    return "10M<n<100M"
+
+
+def _unit(column: str) -> str:
+    if column.endswith("_rad"):
+        return "rad"
+    return next((u for suffix, u in _UNITS if column.endswith(suffix)), "—")
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)):
+        return "(" + ", ".join(_fmt(v) for v in value) + ")"
+    if isinstance(value, dict):
+        return ", ".join(f"{k}={_fmt(v)}" for k, v in sorted(value.items()))
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n} B" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return str(n)
+
+
+def _flatten(d: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    out = []
+    for k, v in sorted(d.items()):
+        if isinstance(v, dict) and v:
+            out += _flatten(v, f"{prefix}{k}.")
+        else:
+            out.append((f"{prefix}{k}", v))
+    return out
+
+
+def history_entry(tag: str, meta: dict[str, Any]) -> dict[str, Any]:
+    """The part of a version's meta the history table needs (kept small in ``card.json``)."""
+    keys = ("version", "created_utc", "schema_version", "scene_hash", "rt", "library_versions")
+    return {"tag": tag, **{k: meta.get(k) for k in keys}}
+
+
+def _changes(prev: dict[str, Any] | None, cur: dict[str, Any]) -> str:
+    if prev is None:
+        return "first version"
+    out = []
+    if prev.get("schema_version") != cur.get("schema_version"):
+        out.append(f"schema v{prev.get('schema_version')} → v{cur.get('schema_version')}")
+    if prev.get("scene_hash") != cur.get("scene_hash"):
+        out.append("scene description changed")
+    a, b = dict(_flatten(prev.get("rt") or {})), dict(_flatten(cur.get("rt") or {}))
+    out += [f"`{k}` {_fmt(a.get(k))} → {_fmt(b.get(k))}" for k in sorted(a.keys() | b.keys()) if a.get(k) != b.get(k)]
+    la, lb = prev.get("library_versions") or {}, cur.get("library_versions") or {}
+    out += [f"{k} {la.get(k, '—')} → {lb.get(k, '—')}" for k in sorted(la.keys() | lb.keys()) if la.get(k) != lb.get(k)]
+    return "; ".join(out) or "rebuilt with the same inputs"
+
+
+def _columns(schema, descriptions) -> list[dict[str, Any]]:
+    return [{"name": f.name, "type": str(f.type), "nullable": f.nullable, "unit": _unit(f.name),
+             "description": descriptions.get(f.name, "").replace("|", "\\|")} for f in schema]
+
+
+def card_data(meta: dict[str, Any], *, tag: str | None, hub_repo: str) -> DatasetCardData:
+    files = meta.get("files") or {}
+    configs = [{"config_name": "cells", "data_files": [{"split": "train", "path": P.CELLS_FILE}], "default": True}]
+    if P.PATHS_FILE in files:
+        configs.append({"config_name": "paths", "data_files": [{"split": "train", "path": P.PATHS_FILE}]})
+    spec = meta.get("scene_spec") or {}
+    setting = "outdoor" if "outdoor" in str(spec.get("kind", "")) or _is_odbl(meta) else "indoor"
+    lic = license_id(meta.get("licence") or spec.get("licence"))
+    extra: dict[str, Any] = {}
+    if lic == "other":
+        extra["license_name"] = str(meta.get("licence") or spec.get("licence") or "unspecified")
+    return DatasetCardData(
+        license=lic, pretty_name=_pretty_name(meta), tags=[*TAGS, setting, meta.get("variant", "")],
+        size_categories=[size_category(_num_rows(meta))], task_categories=["robotics", "reinforcement-learning"],
+        configs=configs, dtradar={"name": meta.get("name"), "version": meta.get("version"), "tag": tag,
+                                  "schema_version": meta.get("schema_version"), "hub_repo": hub_repo},
+        **extra)
+
+
+def _is_odbl(meta: dict[str, Any]) -> bool:
+    spec = meta.get("scene_spec") or {}
+    return license_id(meta.get("licence") or spec.get("licence")) == "odbl"
+
+
+def _pretty_name(meta: dict[str, Any]) -> str:
+    title = meta.get("title") or (meta.get("scene_spec") or {}).get("title") or meta.get("scene", "dataset")
+    return f"DT-RaDaR {title} ({meta.get('variant', '?')})"
+
+
+def _num_rows(meta: dict[str, Any]) -> int:
+    stats = meta.get("stats") or {}
+    if "num_cells" in stats:
+        return int(stats["num_cells"])
+    g = meta.get("grid") or {}
+    return int(g.get("nx", 0)) * int(g.get("ny", 0))
+
+
+def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str, Any]],
+                hub_repo: str | None = None) -> str:
+    """The card text for one version. ``history`` holds :func:`history_entry` dicts, oldest first."""
+    name = meta.get("name", f"{meta.get('scene')}/{meta.get('variant')}")
+    hub_repo = hub_repo or default_hub_repo(name)
+    spec = meta.get("scene_spec") or {}
+    grid = meta.get("grid") or spec.get("grid") or {}
+    rt = meta.get("rt") or {}
+    stats = meta.get("stats") or {}
+    files = meta.get("files") or {}
+    libs = meta.get("library_versions") or {}
+    n = _num_rows(meta)
+    freq = rt.get("frequency_hz")
+    title = meta.get("title") or spec.get("title") or meta.get("scene", "")
+    summary = (f"Radio features of every cell of a {grid.get('nx')} × {grid.get('ny')} grid over the **{title}** "
+               f"digital twin ({meta.get('variant')}), ray-traced with Sionna RT"
+               + (f" at {freq / 1e9:g} GHz" if isinstance(freq, (int, float)) else "")
+               + ": complex coefficient, phase, delay and angles of departure and arrival of the strongest path, "
+                 "total path gain and delay spread. Built for radio-only robot navigation with reinforcement "
+                 "learning, after DT-RaDaR (arXiv 2411.12284).")
+    objects = spec.get("objects") or []
+    counts = Counter((o.get("kind", "?"), o.get("material", "?")) for o in objects)
+    ranges = stats.get("columns") or {}
+    hist = []
+    for i, h in enumerate(history):
+        hist.append({**h, "created_utc": h.get("created_utc") or "—",
+                     "changes": _changes(history[i - 1] if i else None, h)})
+    card = DatasetCard.from_template(
+        card_data(meta, tag=tag, hub_repo=hub_repo),
+        template_path=str(resources.files("dtradar_data") / "templates" / "dataset_card.md"),
+        pretty_name=_pretty_name(meta), summary=summary, name=name, version=meta.get("version"), tag=tag,
+        schema_version=meta.get("schema_version"), created_utc=meta.get("created_utc", "—"), num_rows=n,
+        nx=grid.get("nx"), ny=grid.get("ny"), cell_m=grid.get("cell_m"), x0_m=grid.get("x0_m"),
+        y0_m=grid.get("y0_m"), rx_height_m=_fmt(meta.get("rx_height_m", spec.get("rx_height_m"))),
+        robot_height_m=meta.get("robot_height_m", spec.get("robot_height_m")),
+        description=meta.get("description") or spec.get("description") or "(no scene description recorded)",
+        variant=meta.get("variant"), variant_text=VARIANT_TEXT.get(meta.get("variant", ""), ""),
+        transmitter_rows=[(k, _fmt(v)) for k, v in _flatten(meta.get("transmitter") or spec.get("tx") or {})],
+        object_rows=[(k, m, c) for (k, m), c in sorted(counts.items())], num_objects=len(objects),
+        source=meta.get("source") or spec.get("source") or "not recorded",
+        licence=meta.get("licence") or spec.get("licence") or "not recorded",
+        attribution=meta.get("attribution") or spec.get("attribution") or "not recorded", odbl=_is_odbl(meta),
+        sionna_version=f"sionna-rt {libs['sionna-rt']}" if "sionna-rt" in libs else "version not recorded",
+        rt_rows=[(k, _fmt(v)) for k, v in _flatten(rt)] or [("(none recorded)", "—")],
+        library_text=", ".join(f"{k} {v}" for k, v in sorted(libs.items())) or "not recorded",
+        columns=_columns(CELL_SCHEMA, COLUMN_DESCRIPTIONS),
+        path_columns=_columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS) if P.PATHS_FILE in files else [],
+        num_free=stats.get("num_free", "—"), num_with_paths=stats.get("num_with_paths", "—"),
+        num_blocked=(n - stats["num_free"]) if "num_free" in stats else "—",
+        files=[{"name": k, "size": _size(int(v.get("bytes", 0))), "sha256": str(v.get("sha256", ""))[:16]}
+               for k, v in sorted(files.items())],
+        range_rows=[{"name": c, "min": _fmt(r.get("min")), "max": _fmt(r.get("max")), "nulls": r.get("nulls", "—")}
+                    for c, r in ranges.items() if isinstance(r, dict)],
+        coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in files else None, hub_repo=hub_repo, history=hist,
+    )
+    return str(card).rstrip("\n") + "\n"
+
+
+def render_version_card(meta: dict[str, Any], *, tag: str | None, history: list[tuple[str, dict[str, Any]]],
+                        hub_repo: str | None = None) -> str:
+    """The card of a stored version; ``history`` holds ``(tag, meta)`` pairs, oldest first (store's format)."""
+    return render_card(meta, tag=tag, history=[history_entry(t, m) for t, m in history], hub_repo=hub_repo)
+
+
+# ------------------------------------------------------------------------------------------------ committed cards
+
+def render_inputs(inputs: dict[str, Any]) -> str:
+    return render_card(inputs["meta"], tag=inputs.get("tag"), history=inputs.get("history") or [])
+
+
+def snapshot(name: str, out_dir: Path) -> Path:
+    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png}`` from the newest stored version."""
+    from . import store
+
+    _, version, vdir = store.resolve(name)
+    entries = store.history(name)
+    meta = store.read_meta(vdir)
+    tag = next((t for t, m in entries if m.get("version") == version), None)
+    # History up to the snapshotted version: later untagged/pulled versions are not part of its story.
+    upto = [history_entry(t, m) for t, m in entries]
+    upto = upto[: next((i + 1 for i, h in enumerate(upto) if h["version"] == version), len(upto))]
+    inputs = {"tag": tag, "meta": meta, "history": upto}
+    target = out_dir / meta["scene"] / meta["variant"]
+    target.mkdir(parents=True, exist_ok=True)
+    (target / CARD_INPUTS).write_text(json.dumps(inputs, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
+    (target / P.CARD_FILE).write_text(render_inputs(inputs))
+    if (vdir / P.COVERAGE_FILE).is_file():
+        shutil.copyfile(vdir / P.COVERAGE_FILE, target / P.COVERAGE_FILE)
+    return target
+
+
+def write_builtin_cards(out_dir: Path, names: list[str] | None = None) -> tuple[list[Path], list[str]]:
+    """Refresh the committed cards of ``names`` (default: every built-in dataset); returns (written, skipped)."""
+    from . import store
+
+    entries = store.list_datasets()
+    wanted = names or [e.name for e in entries if e.builtin]
+    written, skipped = [], []
+    for name in wanted:
+        try:
+            written.append(snapshot(name, out_dir))
+        except DatasetNotFoundError:
+            skipped.append(name)  # not built here: its committed card (if any) is left as it is
+    return written, skipped
+
+
+def committed_cards(cards_dir: Path) -> list[Path]:
+    return sorted(p.parent for p in cards_dir.glob(f"*/*/{CARD_INPUTS}"))
+
+
+def stale_cards(cards_dir: Path) -> list[Path]:
+    """Card directories whose ``README.md`` differs from what their ``card.json`` renders to now."""
+    stale = []
+    for d in committed_cards(cards_dir):
+        inputs = json.loads((d / CARD_INPUTS).read_text())
+        readme = d / P.CARD_FILE
+        if not readme.is_file() or readme.read_text() != render_inputs(inputs):
+            stale.append(d)
+    return stale
+
+
+def rerender(cards_dir: Path) -> list[Path]:
+    """Re-render every committed card from its ``card.json`` (after a template change, no datasets needed)."""
+    out = []
+    for d in committed_cards(cards_dir):
+        (d / P.CARD_FILE).write_text(render_inputs(json.loads((d / CARD_INPUTS).read_text())))
+        out.append(d)
+    return out

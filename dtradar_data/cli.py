@@ -1,0 +1,250 @@
+"""``python -m dtradar_data`` / ``dtradar-data``: build, list, inspect, verify, card, publish and pull datasets.
+
+Generated with tyro from frozen dataclasses (the field docstrings are the ``--help`` text), one subcommand each.
+Typed errors (:class:`~dtradar_data.errors.DtradarError`) print as one ``error: ...`` line plus how to fix it and
+exit with status 2; a failed ``verify`` or ``cards --check`` exits with status 1.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import tyro
+
+from .errors import DtradarError
+
+#: A positional dataset id argument, shown as NAME in --help (the Makefile passes it positionally).
+Name = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="NAME")]
+Revision = Annotated["str | None", tyro.conf.arg(metavar="TAG|HASH")]
+
+EXIT_ERROR = 2
+EXIT_FAILED_CHECK = 1
+
+
+def _human(n: int | None) -> str:
+    if n is None:
+        return "-"
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return str(n)
+
+
+@dataclass(frozen=True)
+class ListCmd:
+    """List the built-in datasets and every version stored in the data root."""
+
+    json: bool = False
+    """Print JSON instead of a table."""
+
+    def run(self) -> int:
+        from . import store
+        from .paths import data_root
+
+        rows = store.list_datasets()
+        if self.json:
+            print(json.dumps([{"name": r.name, "builtin": r.builtin, "latest": r.latest,
+                               "versions": [{"tag": v.tag, "version": v.version, "created_utc": v.created_utc,
+                                             "rows": v.num_rows, "bytes": v.size_bytes} for v in r.versions]}
+                              for r in rows], indent=2))
+            return 0
+        print(f"data root: {data_root()}")
+        print(f"{'dataset':<24} {'versions':<20} {'latest':<22} {'rows':>8} {'size':>10}")
+        for r in rows:
+            latest = next((v for v in r.versions if v.version == r.latest), None)
+            tags = ",".join(v.tag or v.version[:7] for v in r.versions) or "(not built)"
+            shown = f"{latest.tag} {latest.version[:12]}" if latest else "-"
+            print(f"{r.name:<24} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
+                  f"{_human(latest.size_bytes) if latest else '-':>10}")
+        return 0
+
+
+@dataclass(frozen=True)
+class InfoCmd:
+    """Summarise one dataset: its card's key facts, every version, file sizes."""
+
+    name: Name
+    """Dataset id, e.g. cubicle/blueprint or cubicle/blueprint@v0."""
+    revision: Revision = None
+    """Tag (v0, v1, ...) or version hash; default: the newest version."""
+
+    def run(self) -> int:
+        from . import store
+
+        did, version, vdir = store.resolve(self.name, self.revision)
+        meta = store.read_meta(vdir)
+        grid, rt, stats = meta.get("grid", {}), meta.get("rt", {}), meta.get("stats", {})
+        tag = next((v.tag for v in store.version_infos(did) if v.version == version), None)
+        print(f"{did.name}@{tag or version}  (version {version}, schema v{meta.get('schema_version')})")
+        print(f"  title:       {meta.get('title') or (meta.get('scene_spec') or {}).get('title', '-')}")
+        print(f"  created:     {meta.get('created_utc', '-')}")
+        print(f"  grid:        {grid.get('nx')} x {grid.get('ny')} cells of {grid.get('cell_m')} m, "
+              f"origin ({grid.get('x0_m')}, {grid.get('y0_m')})")
+        print(f"  cells:       {stats.get('num_cells', '-')} ({stats.get('num_free', '-')} free, "
+              f"{stats.get('num_with_paths', '-')} with paths)")
+        keys = ("frequency_hz", "max_depth", "samples_per_src", "seed")
+        print("  rt:          " + ", ".join(f"{k}={rt[k]}" for k in keys if k in rt))
+        print(f"  licence:     {meta.get('licence') or (meta.get('scene_spec') or {}).get('licence', '-')}")
+        print(f"  path:        {vdir}")
+        for fname, rec in sorted((meta.get("files") or {}).items()):
+            print(f"    {fname:<16} {_human(int(rec.get('bytes', 0))):>10}  sha256 {rec.get('sha256', '')[:16]}")
+        print("  versions:")
+        for v in store.version_infos(did):
+            mark = "*" if v.version == version else " "
+            print(f"   {mark} {v.tag or '-':<4} {v.version}  {v.created_utc or '-':<26} {_human(v.size_bytes):>10}")
+        return 0
+
+
+@dataclass(frozen=True)
+class VerifyCmd:
+    """Re-hash every file of a dataset's versions against meta.json and check the Parquet schemas."""
+
+    name: Name
+    """Dataset id, e.g. cubicle/blueprint (all versions) or cubicle/blueprint@v0 (one)."""
+    revision: Revision = None
+    """Only this tag or version hash."""
+
+    def run(self) -> int:
+        from . import store
+
+        results = store.verify(self.name, self.revision)
+        bad = 0
+        for version, problems in results.items():
+            print(f"{version}: {'ok' if not problems else 'FAILED'}")
+            for p in problems:
+                print(f"  - {p}")
+            bad += bool(problems)
+        if bad:
+            print(f"{bad} of {len(results)} versions failed; rebuild them (`make dataset`) or re-pull them",
+                  file=sys.stderr)
+        return EXIT_FAILED_CHECK if bad else 0
+
+
+@dataclass(frozen=True)
+class CardsCmd:
+    """Refresh the committed dataset cards (cards/<scene>/<variant>/) from the local store, then check them all."""
+
+    names: tuple[str, ...] = ()
+    """Datasets to refresh (default: every built-in dataset that is built here; others are left as committed)."""
+    out: Path = Path("cards")
+    """Directory holding the committed cards."""
+    check: bool = False
+    """Only check: exit 1 if a committed README.md differs from what its card.json renders to."""
+    rerender: bool = False
+    """Re-render every committed card from its card.json (after a template change; no datasets needed)."""
+
+    def run(self) -> int:
+        from . import cards
+
+        if not self.check:
+            if self.rerender:
+                for d in cards.rerender(self.out):
+                    print(f"re-rendered {d / 'README.md'}")
+            else:
+                written, skipped = cards.write_builtin_cards(self.out, list(self.names) or None)
+                for d in written:
+                    print(f"wrote {d / 'README.md'}")
+                for name in skipped:
+                    print(f"skipped {name}: not built here (`make dataset SCENE={name.split('/')[0]}`)")
+        stale = cards.stale_cards(self.out)
+        for d in stale:
+            print(f"stale: {d / 'README.md'} (run `make cards`)", file=sys.stderr)
+        if not stale:
+            print(f"{len(cards.committed_cards(self.out))} committed cards are up to date")
+        return EXIT_FAILED_CHECK if stale else 0
+
+
+@dataclass(frozen=True)
+class PublishCmd:
+    """Upload one dataset version to a Hugging Face Hub dataset repo (one commit, tagged)."""
+
+    name: Name
+    """Dataset id, e.g. cubicle/blueprint (newest version) or cubicle/blueprint@v0."""
+    revision: Revision = None
+    """Tag or version hash to publish; default: the newest."""
+    repo: Annotated["str | None", tyro.conf.arg(metavar="OWNER/NAME")] = None
+    """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>. Needs a token (HF_TOKEN or `hf auth login`)."""
+    private: bool = False
+    """Create the repo as private if it does not exist."""
+
+    def run(self) -> int:
+        from . import hub
+
+        result = hub.publish(self.name, self.revision, repo_id=self.repo, private=self.private)
+        print(result.describe())
+        return 0
+
+
+@dataclass(frozen=True)
+class PullCmd:
+    """Download a published dataset version from the Hub into the local store (verified, then moved into place)."""
+
+    name: Name
+    """Dataset id, e.g. cubicle/blueprint@v0; without a revision, the Hub's newest (main)."""
+    revision: Revision = None
+    """Tag or version hash to pull."""
+    repo: Annotated["str | None", tyro.conf.arg(metavar="OWNER/NAME")] = None
+    """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>."""
+
+    def run(self) -> int:
+        from . import hub
+
+        path = hub.pull(self.name, self.revision, repo_id=self.repo)
+        print(f"pulled into {path}")
+        return 0
+
+
+@dataclass(frozen=True)
+class _BuildUnavailable:
+    """Ray-trace a scene into the data root (unavailable: dtradar_data.pipeline could not be imported)."""
+
+    scene: str = "cubicle"
+    variant: str = "all"
+
+    def run(self) -> int:
+        try:
+            from . import pipeline  # noqa: F401  re-raise the original import problem, typed
+        except ImportError as exc:
+            raise DtradarError(f"the build pipeline cannot be imported: {exc}",
+                               hint="reinstall with `make setup` (pip install -e '.[all]')") from exc
+        return 0
+
+
+def _build_entry() -> tuple[Any, Any]:
+    """``(config type, runner)`` of ``build``; imported here so every other command works without the pipeline."""
+    try:
+        from .pipeline import BuildConfig, build
+    except ImportError:
+        return _BuildUnavailable, lambda cfg: cfg.run()
+
+    def run(cfg) -> int:
+        for ds in build(cfg):
+            tag = ds.meta.get("tag")
+            print(f"{ds.name}@{tag or ds.version}: version {ds.version}, {ds.table.num_rows} cells, {ds.path}")
+        return 0
+
+    return BuildConfig, run
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit status (console scripts and ``__main__`` pass it to ``sys.exit``)."""
+    build_type, build_run = _build_entry()
+    commands = {"build": build_type, "list": ListCmd, "info": InfoCmd, "verify": VerifyCmd, "cards": CardsCmd,
+                "publish": PublishCmd, "pull": PullCmd}
+    cfg = tyro.extras.subcommand_cli_from_dict(
+        commands, prog="python -m dtradar_data", args=argv,
+        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull.")
+    try:
+        return build_run(cfg) if isinstance(cfg, build_type) else cfg.run()
+    except DtradarError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+

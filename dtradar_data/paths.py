@@ -1,0 +1,54 @@
+"""Where datasets live on disk. Every path the store touches is built here, so the layout has one definition.
+
+Layout (DESIGN.md §2, interfaces file)::
+
+    <root>/datasets/<scene>/<variant>/<version>/{cells.parquet, paths.parquet?, coverage.png?, meta.json, README.md}
+    <root>/datasets/<scene>/<variant>/refs.json      {"tags": {"v0": "<version>", ...}, "latest": "<version>"}
+    <root>/work/                                      staging (temp dirs renamed into place), pipeline scratch
+
+``<root>`` is ``$DTRADAR_DATA_ROOT``, default ``~/.cache/dtradar``. Staging lives under the same root so the final
+``os.rename`` never crosses a filesystem boundary (a cross-device rename would not be atomic).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+ENV_DATA_ROOT = "DTRADAR_DATA_ROOT"
+DEFAULT_DATA_ROOT = Path("~/.cache/dtradar")
+
+CELLS_FILE = "cells.parquet"
+PATHS_FILE = "paths.parquet"
+COVERAGE_FILE = "coverage.png"
+META_FILE = "meta.json"
+CARD_FILE = "README.md"
+REFS_FILE = "refs.json"
+
+
+def data_root() -> Path:
+    """The data root: ``$DTRADAR_DATA_ROOT`` if set (read on every call, so tests can monkeypatch it)."""
+    value = os.environ.get(ENV_DATA_ROOT, "").strip()
+    return Path(value).expanduser() if value else DEFAULT_DATA_ROOT.expanduser()
+
+
+def datasets_root() -> Path:
+    return data_root() / "datasets"
+
+
+def work_root() -> Path:
+    """Scratch space for builds and staging; anything here may be deleted when no build is running."""
+    return data_root() / "work"
+
+
+def dataset_dir(scene: str, variant: str) -> Path:
+    """``<root>/datasets/<scene>/<variant>``: all versions of one dataset plus its ``refs.json``."""
+    return datasets_root() / scene / variant
+
+
+def version_dir(scene: str, variant: str, version: str) -> Path:
+    return dataset_dir(scene, variant) / version
+
+
+def refs_path(scene: str, variant: str) -> Path:
+    return dataset_dir(scene, variant) / REFS_FILE
