@@ -7,8 +7,16 @@
 
 from __future__ import annotations
 
+from . import llvm as _llvm
 from .dataset import Dataset, GridInfo
-from .errors import DtradarError
+from .errors import DtradarError, RayTracerUnavailableError
+
+# Point Dr.Jit at a libLLVM >= 16 now, before anything imports mitsuba/drjit (they read it once, at import).
+# An explicit DRJIT_LIBLLVM_PATH wins; with none found, the ray tracer raises a typed error when first used.
+try:
+    _llvm.configure()
+except RayTracerUnavailableError:
+    pass
 
 __all__ = ["Dataset", "GridInfo", "DtradarError", "load", "list_datasets"]
 
