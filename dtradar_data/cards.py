@@ -160,7 +160,8 @@ def _is_odbl(meta: dict[str, Any]) -> bool:
 
 def _pretty_name(meta: dict[str, Any]) -> str:
     title = meta.get("title") or (meta.get("scene_spec") or {}).get("title") or meta.get("scene", "dataset")
-    return f"DT-RaDaR {title} ({meta.get('variant', '?')})"
+    variant = meta.get("variant", "?")
+    return f"DT-RaDaR {title}" if variant in title.lower() else f"DT-RaDaR {title} ({variant})"
 
 
 def _num_rows(meta: dict[str, Any]) -> int:

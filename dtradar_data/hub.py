@@ -1,0 +1,250 @@
+"""Publish dataset versions to, and pull them from, Hugging Face Hub dataset repos.
+
+One Hub repo per ``scene/variant`` (default ``dtradar/dtradar-<scene>-<variant>``; ``--repo`` overrides). A repo's
+files are exactly a stored version directory (``cells.parquet``, ``paths.parquet``, ``coverage.png``, ``meta.json``)
+plus a freshly rendered ``README.md`` card whose ``configs`` point at those files. Each publish is one commit
+(``HfApi.create_commit``) tagged twice: with the local tag (``v0``) and with the content version hash, so both
+spellings of a revision resolve on the Hub as they do locally.
+
+The network calls are kept to a few lines; everything around them (what is uploaded, verification, installing into
+the store) runs offline. A pull downloads into a temp dir under ``<root>/work/``, checks every sha256 recorded in
+``meta.json`` and the Parquet schemas, and only then renames the version into the store: without network, without
+a token or with ``HF_HUB_OFFLINE=1`` a :class:`HubError` says so and the local store is untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from . import paths as P
+from .errors import DtradarError, HubError
+from .ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag, parse_id
+
+#: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
+DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, P.COVERAGE_FILE, P.META_FILE)
+
+
+def default_repo(did: DatasetId) -> str:
+    from .cards import default_hub_repo
+
+    return default_hub_repo(did.name)
+
+
+def offline() -> bool:
+    """``HF_HUB_OFFLINE`` read now (huggingface_hub reads it once at import, which tests and users can't undo)."""
+    from huggingface_hub import constants
+
+    return os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in {"1", "true", "yes", "on"} or \
+        bool(constants.HF_HUB_OFFLINE)
+
+
+def endpoint() -> str | None:
+    """``HF_ENDPOINT`` read now, for the same reason; None means huggingface_hub's default."""
+    return os.environ.get("HF_ENDPOINT") or None
+
+
+@contextlib.contextmanager
+def hub_errors(action: str, repo_id: str) -> Iterator[None]:
+    """Turn huggingface_hub / network exceptions into one :class:`HubError` that says what to do."""
+    from huggingface_hub import errors as hf
+
+    where = endpoint() or "https://huggingface.co"
+    try:
+        yield
+    except DtradarError:
+        raise
+    except hf.RepositoryNotFoundError as exc:
+        raise HubError(f"cannot {action}: the Hub repo {repo_id!r} does not exist or your token cannot see it",
+                       hint="check --repo, and log in with `hf auth login` (or set HF_TOKEN)") from exc
+    except hf.RevisionNotFoundError as exc:
+        raise HubError(f"cannot {action}: {repo_id!r} has no such revision on the Hub",
+                       hint="list its tags on the Hub page, or publish that version first") from exc
+    except hf.LocalEntryNotFoundError as exc:
+        if offline():
+            raise HubError(f"cannot {action} {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1) and the version "
+                           "is not in the local store",
+                           hint="unset HF_HUB_OFFLINE with network access, or build it locally "
+                                "(`make dataset SCENE=<scene>`)") from exc
+        raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc.__cause__ or exc})",
+                       hint="check the network and HF_ENDPOINT, or build the dataset locally "
+                            "(`make dataset SCENE=<scene>`)") from exc
+    except hf.HfHubHTTPError as exc:
+        status = getattr(getattr(exc, "response", None), "status_code", None)
+        if status in (401, 403):
+            raise HubError(f"cannot {action} {repo_id!r}: the Hub refused the token (HTTP {status})",
+                           hint="use a token with write access: `hf auth login` or HF_TOKEN") from exc
+        raise HubError(f"cannot {action} {repo_id!r}: the Hub answered HTTP {status} ({exc})",
+                       hint="retry later; check the repo on the Hub") from exc
+    except (OSError, ConnectionError, TimeoutError) as exc:
+        raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
+                       hint="check the network and HF_ENDPOINT, or build the dataset locally") from exc
+    except Exception as exc:  # httpx errors and others that do not derive from OSError
+        if type(exc).__module__.split(".")[0] in {"httpx", "httpcore", "requests", "urllib3"}:
+            raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
+                           hint="check the network and HF_ENDPOINT, or build the dataset locally") from exc
+        raise
+
+
+def _token() -> str:
+    from huggingface_hub import get_token
+
+    token = get_token()
+    if not token:
+        raise HubError("no Hugging Face token found, so nothing can be published",
+                       hint="run `hf auth login` or set HF_TOKEN to a token with write access")
+    return token
+
+
+# --------------------------------------------------------------------------------------------------------- publish
+
+@dataclass(frozen=True)
+class PublishResult:
+    repo_id: str
+    tag: str | None
+    version: str
+    commit: str | None
+    already_published: bool = False
+
+    def describe(self) -> str:
+        if self.already_published:
+            return f"{self.repo_id}: version {self.version} is already published ({self.tag}); nothing to do"
+        return f"published {self.version} as {self.tag} to {self.repo_id} (commit {self.commit})"
+
+
+def publish_operations(vdir: Path, card_text: str) -> list[Any]:
+    """The files of one commit: every data file of the version plus the card as ``README.md``."""
+    from huggingface_hub import CommitOperationAdd
+
+    ops = [CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in DATA_FILES
+           if (vdir / f).is_file()]
+    ops.append(CommitOperationAdd(path_in_repo=P.CARD_FILE, path_or_fileobj=card_text.encode()))
+    return ops
+
+
+def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None,
+            private: bool = False, api: Any = None) -> PublishResult:
+    """Upload one stored version (verified first) as one tagged commit; ``api`` replaces ``HfApi`` in tests."""
+    from . import store
+    from .cards import render_version_card
+    from .errors import CorruptDatasetError
+
+    did, version, vdir = store.resolve(name, revision)
+    repo_id = repo_id or default_repo(did)
+    problems = store.verify_dir(vdir)
+    if problems:
+        raise CorruptDatasetError(f"refusing to publish damaged {did.name}@{version}: " + "; ".join(problems),
+                                  hint="rebuild it first (`make dataset`)")
+    meta = store.read_meta(vdir)
+    history = store.history(did)
+    upto = history[: next((i + 1 for i, (_, m) in enumerate(history) if m.get("version") == version), len(history))]
+    tag = next((t for t, m in history if m.get("version") == version), None)
+    card = render_version_card(meta, tag=tag, history=upto, hub_repo=repo_id)
+    ops = publish_operations(vdir, card)
+    if offline():
+        raise HubError(f"cannot publish to {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1)",
+                       hint="unset HF_HUB_OFFLINE on a machine with network access")
+    if api is None:
+        from huggingface_hub import HfApi
+
+        api = HfApi(endpoint=endpoint(), token=_token())
+    with hub_errors("publish to", repo_id):
+        api.create_repo(repo_id, repo_type="dataset", private=private, exist_ok=True)
+        remote_tags = {t.name for t in api.list_repo_refs(repo_id, repo_type="dataset").tags}
+        if version in remote_tags:
+            return PublishResult(repo_id, tag, version, None, already_published=True)
+        if tag in remote_tags:
+            raise HubError(f"{repo_id!r} already has a tag {tag!r} for another version than {version}",
+                           hint="tags are never moved: publish to another --repo, or pull the Hub's versions "
+                                "first so local tags follow the Hub's")
+        from huggingface_hub import CommitOperationDelete
+
+        stale = [f for f in api.list_repo_files(repo_id, repo_type="dataset")
+                 if f in DATA_FILES and not (vdir / f).is_file()]  # e.g. paths.parquet of an older version
+        ops += [CommitOperationDelete(path_in_repo=f) for f in stale]
+        info = api.create_commit(repo_id, ops, commit_message=f"{did.name} {tag}: version {version}",
+                                 commit_description=f"dtradar dataset {did.name}, content version {version}",
+                                 repo_type="dataset")
+        for name_ in (tag, version):
+            if name_:
+                api.create_tag(repo_id, tag=name_, revision=info.oid, repo_type="dataset",
+                               tag_message=f"{did.name} version {version}")
+    return PublishResult(repo_id, tag, version, info.oid)
+
+
+# ------------------------------------------------------------------------------------------------------------ pull
+
+def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
+    """The only download call; a separate function so tests can replace the network with a local folder."""
+    from huggingface_hub import snapshot_download
+
+    return Path(snapshot_download(repo_id, repo_type="dataset", revision=revision, local_dir=dest, cache_dir=cache,
+                                  endpoint=endpoint(), local_files_only=offline(),
+                                  allow_patterns=[*DATA_FILES, P.CARD_FILE]))
+
+
+def _remote_revision(repo_id: str, revision: str | None) -> str:
+    """A Hub revision for ``revision``: tags and full hashes are Hub tags; a short hash prefix is expanded."""
+    if revision is None:
+        return "main"
+    if is_tag(revision) or not is_hash(revision) or len(revision) >= 16:
+        return revision
+    from huggingface_hub import HfApi
+
+    with hub_errors("look up revisions of", repo_id):
+        tags = [t.name for t in HfApi(endpoint=endpoint()).list_repo_refs(repo_id, repo_type="dataset").tags]
+    matches = [t for t in tags if is_hash(t) and t.startswith(revision)]
+    if len(matches) != 1:
+        raise HubError(f"{repo_id!r} has {len(matches)} versions starting with {revision!r}",
+                       hint=f"give a tag or at least {MIN_HASH_PREFIX}+ distinct characters of the hash")
+    return matches[0]
+
+
+def _card_tag(readme: Path) -> str | None:
+    """The tag the publisher gave this version (``dtradar.tag`` in the card's YAML), to keep it locally."""
+    if not readme.is_file():
+        return None
+    from huggingface_hub import DatasetCard
+
+    try:
+        tag = (DatasetCard.load(readme).data.to_dict().get("dtradar") or {}).get("tag")
+    except Exception:  # a hand-edited card must not block a verified download; fall back to the next free tag
+        return None
+    return tag if isinstance(tag, str) and is_tag(tag) else None
+
+
+def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
+    """Make ``name@revision`` available locally: return it if present, else download, verify and install it."""
+    from . import store
+    from .errors import DatasetNotFoundError, RevisionNotFoundError
+
+    # With an explicit repo any well-formed name may be pulled (e.g. a scene this checkout has no file for).
+    did = name if isinstance(name, DatasetId) else parse_id(name, check_known=repo_id is None)
+    revision = revision or did.revision
+    if revision is not None:
+        with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
+            return store.resolve(did.with_revision(None), revision)[2]
+    repo_id = repo_id or default_repo(did)
+    P.work_root().mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f"pull-{did.scene}-{did.variant}-", dir=P.work_root()))
+    try:
+        with hub_errors("pull from", repo_id):
+            # Offline, the real (local-files-only) download call still runs: the library's own check answers.
+            remote = _remote_revision(repo_id, revision) if not offline() else (revision or "main")
+            got = _download(repo_id, remote, stage / "download", stage / "cache")
+        version_dir = stage / "version"
+        version_dir.mkdir()
+        meta = store.read_meta(got)
+        for fname in [*(meta.get("files") or {}), P.META_FILE, P.CARD_FILE]:
+            if (got / fname).is_file():
+                shutil.move(str(got / fname), version_dir / fname)
+        preferred = revision if revision and is_tag(revision) else _card_tag(version_dir / P.CARD_FILE)
+        return store.install_staged(did.with_revision(None), version_dir, preferred_tag=preferred)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
