@@ -38,17 +38,17 @@ class RTSettings:
     seed: int = 42
     """Seed of the ray sampler; the same scene, settings and seed give identical tables."""
     los: bool = True
+    """Trace the line-of-sight path."""
     specular_reflection: bool = True
+    """Trace specular reflections (walls, floor, ceiling, objects)."""
     diffuse_reflection: bool = False
+    """Trace diffuse reflections (off by default, like Sionna; costly)."""
     refraction: bool = True
+    """Trace transmission through objects (ITU slab model)."""
     diffraction: bool = False
+    """Trace first-order edge diffraction (off by default, like Sionna)."""
     synthetic_array: bool = True
     """Trace from the array centre and apply element phase shifts (Sionna's default, and much cheaper)."""
-    tx_rows: int = 8
-    tx_cols: int = 2
-    tx_pattern: str = "tr38901"
-    tx_polarization: str = "VH"
-    """Transmitter array: 8x2 3GPP TR 38.901 elements, dual polarised (the paper)."""
     rx_pattern: str = "dipole"
     rx_polarization: str = "V"
     """Receiver: one vertical short dipole (the paper's 1x1 dipole)."""
@@ -181,11 +181,11 @@ class RayTracer:
         rt = self.rt
         self.scene = rt.load_scene(str(xml), merge_shapes=True)
         self.scene.frequency = settings.frequency_hz
-        self.scene.tx_array = rt.PlanarArray(num_rows=settings.tx_rows, num_cols=settings.tx_cols,
-                                             pattern=settings.tx_pattern, polarization=settings.tx_polarization)
+        tx = spec.tx  # the transmitter array is part of the scene (paper: 8x2 tr38901 VH, on the ceiling)
+        self.scene.tx_array = rt.PlanarArray(num_rows=tx.num_rows, num_cols=tx.num_cols, pattern=tx.pattern,
+                                             polarization=tx.polarization)
         self.scene.rx_array = rt.PlanarArray(num_rows=1, num_cols=1, pattern=settings.rx_pattern,
                                              polarization=settings.rx_polarization)
-        tx = spec.tx
         kwargs = {"look_at": list(tx.look_at_m)} if tx.look_at_m is not None else {}
         self.scene.add(rt.Transmitter("tx", position=list(tx.position_m), power_dbm=tx.power_dbm, **kwargs))
         self._solver = rt.PathSolver()

@@ -29,8 +29,7 @@ def tiny_spec() -> SceneSpec:
 def iso_settings():
     from dtradar_data.raytrace import RTSettings
 
-    return RTSettings(tx_rows=1, tx_cols=1, tx_pattern="iso", tx_polarization="V", rx_pattern="iso",
-                      rx_polarization="V", max_depth=2, samples_per_src=200_000, device="cpu", batch_size=4)
+    return RTSettings(rx_pattern="iso", rx_polarization="V", max_depth=2, samples_per_src=200_000, device="cpu", batch_size=4)
 
 
 @pytest.fixture(scope="module")
@@ -112,8 +111,9 @@ def test_per_cell_features_follow_the_contract_on_the_paper_arrays():
     from dtradar_data.raytrace import RTSettings
     from dtradar_data.schema import CELL_SCHEMA
 
-    settings = RTSettings(max_depth=2, samples_per_src=5_000, device="cpu")  # 8x2 tr38901 VH -> dipole
-    cells, paths, _, tracer = trace_grid(tiny_spec(), settings, progress=False)
+    settings = RTSettings(max_depth=2, samples_per_src=5_000, device="cpu")  # -> vertical dipole
+    paper_tx = TxSpec(position_m=TX, look_at_m=(1.0, 1.0, 0.0))  # 8x2 tr38901 VH, the paper's array
+    cells, paths, _, tracer = trace_grid(replace(tiny_spec(), tx=paper_tx), settings, progress=False)
     tracer.close()
     assert cells.schema.equals(CELL_SCHEMA)
     a = np.array(cells.column("a_re").to_pylist()) + 1j * np.array(cells.column("a_im").to_pylist())
