@@ -1,0 +1,92 @@
+"""End to end: a tiny scene is traced, stored as a versioned dataset, loaded by name, and reused (needs Sionna)."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from dtradar_data.schema import CELL_COLUMNS
+
+pytestmark = pytest.mark.sionna
+
+
+@pytest.fixture
+def root(tmp_path, monkeypatch):
+    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
+    return tmp_path / "root"
+
+
+@pytest.fixture
+def config():
+    from dtradar_data.pipeline import BuildConfig
+    from dtradar_data.raytrace import RTSettings
+
+    return BuildConfig(scene="cubicle", rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),
+                       coverage_samples=20_000, progress=False)
+
+
+@pytest.fixture
+def small_cubicle():
+    """The real cubicle blueprint, cut down to a 6 x 4 cell corner of the grid so it traces in a second."""
+    from dtradar_data.scene import load_scene_spec
+
+    spec = load_scene_spec("cubicle", "blueprint")
+    return replace(spec, grid=replace(spec.grid, nx=6, ny=4))
+
+
+def test_a_built_dataset_loads_by_name_with_every_column_and_a_coverage_map(root, config, small_cubicle):
+    import dtradar_data
+    from dtradar_data.pipeline import build_one
+
+    ds = build_one(small_cubicle, config)
+    loaded = dtradar_data.load("cubicle/blueprint")
+    assert loaded.version == ds.version and loaded.table.equals(ds.table)
+    assert tuple(loaded.table.column_names) == CELL_COLUMNS
+    assert loaded.grid().shape == (4, 6, 10) and loaded.blocked.shape == (4, 6)
+    free = ~loaded.blocked
+    assert (loaded.frame["num_paths"].to_numpy().reshape(4, 6)[free] > 0).all(), "every free cell has a path"
+    assert (loaded.path / "coverage.png").stat().st_size > 1000
+    assert (loaded.path / "paths.parquet").exists()
+    meta = json.loads((loaded.path / "meta.json").read_text())
+    assert meta["rt"]["max_depth"] == 1 and meta["grid"]["nx"] == 6
+    assert meta["scene_hash"] == small_cubicle.digest()
+    assert not (root / "work" / "cubicle" / "blueprint" / ds.version).exists(), "work files are cleaned up"
+
+
+def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_new_one(root, config, small_cubicle,
+                                                                                       capsys):
+    import dtradar_data
+    from dtradar_data.pipeline import build_one
+
+    first = build_one(small_cubicle, config)
+    again = build_one(small_cubicle, config)
+    assert again.version == first.version
+    assert "already built" in capsys.readouterr().out
+    other = build_one(small_cubicle, replace(config, rt=replace(config.rt, seed=7)))
+    assert other.version != first.version
+    assert dtradar_data.load("cubicle/blueprint", revision=first.version).table.equals(first.table)
+    assert dtradar_data.load("cubicle/blueprint").version == other.version
+
+
+def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, monkeypatch):
+    from dtradar_data import pipeline, store
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(pipeline, "render_coverage_png", boom)
+    with pytest.raises(RuntimeError, match="disk full"):
+        pipeline.build_one(small_cubicle, config)
+    assert not (root / "datasets" / "cubicle" / "blueprint").exists() or not any(
+        p.is_dir() for p in (root / "datasets" / "cubicle" / "blueprint").iterdir())
+    # the traced batches survive, so the next attempt does not trace again
+    work = list((root / "work" / "cubicle" / "blueprint").glob("*/batch_*.npz"))
+    assert work, "finished batches are kept for the retry"
+    monkeypatch.undo()
+    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root))
+    ds = pipeline.build_one(small_cubicle, config)
+    from dtradar_data.geometry import occupancy
+
+    assert ds.table.num_rows == 24
+    np.testing.assert_array_equal(ds.blocked, occupancy(small_cubicle))
