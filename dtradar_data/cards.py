@@ -24,7 +24,7 @@ from typing import Any
 from huggingface_hub import DatasetCard, DatasetCardData
 
 from . import paths as P
-from .errors import DatasetNotFoundError, DtradarError
+from .errors import DatasetNotFoundError
 from .schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_COLUMN_DESCRIPTIONS, PATH_SCHEMA
 
 CARD_INPUTS = "card.json"
@@ -41,10 +41,6 @@ _UNITS = (("_rad", "rad"), ("_db", "dB"), ("_hz", "Hz"), ("_m", "m"), ("_s", "s"
 _LICENCES = {"odbl": "odbl", "odbl-1.0": "odbl", "cc-by-4.0": "cc-by-4.0", "cc-by-sa-4.0": "cc-by-sa-4.0",
              "cc0-1.0": "cc0-1.0", "cc0": "cc0-1.0", "apache-2.0": "apache-2.0", "mit": "mit",
              "cc-by-nc-4.0": "cc-by-nc-4.0", "pddl": "pddl", "odc-by": "odc-by"}
-
-
-class StaleCardError(DtradarError, RuntimeError):
-    """A committed card that no longer matches what its inputs render to."""
 
 
 def default_hub_repo(name: str) -> str:

@@ -40,7 +40,7 @@ from .errors import (CorruptDatasetError, DatasetNotFoundError, DtradarError, Re
                      SchemaMismatchError)
 from .ids import HASH_RE, DatasetId, as_id, builtin_scenes, known_names, VARIANTS
 from .schema import CELL_SCHEMA, PATH_SCHEMA, SCHEMA_VERSION
-from .versions import Refs, read_refs, resolve_revision, write_atomic, write_refs
+from .versions import Refs, read_refs, resolve_revision, write_refs
 
 log = logging.getLogger(__name__)
 

@@ -12,6 +12,7 @@ versions depending on the last command run. Pin with a tag or a hash to get a sp
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -49,8 +50,6 @@ def canonical_json(obj: Any) -> str:
 
 def version_id(inputs: dict[str, Any]) -> str:
     """The version of a dataset built from ``inputs`` (scene spec, RT settings, schema version, library versions)."""
-    import hashlib
-
     return hashlib.sha256(canonical_json(inputs).encode()).hexdigest()[:VERSION_CHARS]
 
 
