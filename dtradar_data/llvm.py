@@ -7,7 +7,7 @@ Sionna RT on the CPU runs through Dr.Jit's LLVM backend. Debian 12's default LLV
 2. the ``karellen-llvm-core`` wheel installed by ``make setup`` (``<venv>/lib/libLLVM.so.*``);
 3. a system LLVM 16+ (Debian ``libllvm16``..``libllvm23``: ``/usr/lib/llvm-N/lib/libLLVM*.so*``).
 
-``python -m dtradar_data.llvm --check`` prints what was found, or the install command when nothing was.
+``make setup`` ends with ``dtradar_data.llvm.main(["--check"])``, which prints what was found, or the install command when nothing was.
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ class RTSettings:
     """Carrier frequency (the paper: 2.4 GHz)."""
     max_depth: int = 5
     """Maximum number of interactions per path (the paper: 5)."""
-    samples_per_src: int = 100_000
+    samples_per_src: int = 10_000
     """Rays shot from the transmitter per trace; chosen from `make bench-rt` (see README)."""
     max_num_paths_per_src: int = 1_000_000
     """Upper bound on paths kept per source (Sionna's buffer size)."""
