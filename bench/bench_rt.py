@@ -21,7 +21,8 @@ import numpy as np
 
 from dtradar_data import features
 from dtradar_data.geometry import occupancy
-from dtradar_data.raytrace import RayTracer, RTSettings, library_versions
+from dtradar_data.raytrace import RayTracer, RTSettings
+from dtradar_data.versions import library_versions
 from dtradar_data.scene import load_scene_spec
 
 TAU_TOL_S = 1e-10

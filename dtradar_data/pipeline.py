@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import json
 import os
 import shutil
 import tempfile
@@ -57,15 +56,9 @@ class BuildConfig:
 
 def build_inputs(spec, settings: RTSettings, *, per_path: bool) -> dict:
     """Everything that determines a dataset's content; its hash is the dataset version."""
-    from .raytrace import library_versions
+    from .versions import build_inputs as base_inputs
 
-    return {
-        "scene_spec": spec.to_dict(),
-        "rt": settings.hashed(),
-        "schema_version": SCHEMA_VERSION,
-        "library_versions": library_versions(),
-        "per_path": per_path,
-    }
+    return {**base_inputs(spec.to_dict(), settings.hashed(), SCHEMA_VERSION), "per_path": per_path}
 
 
 def _save_npz_atomic(path: Path, **arrays) -> None:
@@ -161,7 +154,7 @@ def build_one(spec, config: BuildConfig) -> Dataset:
     from .features import column_stats
     from .ids import DatasetId, format_id
     from .paths import data_root
-    from .raytrace import active_variant, library_versions
+    from .raytrace import active_variant
 
     settings = config.rt
     ds_id = DatasetId(spec.scene, spec.variant, None)
@@ -202,7 +195,7 @@ def build_one(spec, config: BuildConfig) -> Dataset:
             "grid": spec.grid.to_dict(),
             "rx_height_m": spec.rx_height_m,
             "robot_height_m": spec.robot_height_m,
-            "library_versions": library_versions(),
+            "library_versions": inputs["library_versions"],
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "licence": spec.licence,
             "attribution": spec.attribution,
@@ -231,7 +224,3 @@ def build(config: BuildConfig) -> list[Dataset]:
 
     variants = VARIANTS if config.variant == "all" else (config.variant,)
     return [build_one(load_scene_spec(config.scene, v), config) for v in variants]
-
-
-def describe(config: BuildConfig) -> str:
-    return json.dumps(dataclasses.asdict(config), indent=2)

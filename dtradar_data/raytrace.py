@@ -151,19 +151,6 @@ def active_variant() -> str | None:
     return _MI.variant() if _MI is not None else None
 
 
-def library_versions() -> dict[str, str]:
-    """Versions of the ray-tracing stack (part of the dataset version)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {}
-    for pkg in ("sionna-rt", "mitsuba", "drjit", "trimesh", "numpy"):
-        try:
-            out[pkg] = version(pkg)
-        except PackageNotFoundError:
-            out[pkg] = "missing"
-    return out
-
-
 class RayTracer:
     """A Sionna scene built from a :class:`SceneSpec`, with the paper's transmitter and receiver arrays."""
 

@@ -27,7 +27,7 @@ from .ids import MIN_HASH_PREFIX, TAG_RE, is_hash, is_tag
 
 VERSION_CHARS = 16
 #: Distributions whose versions change the numbers in a dataset (the ray tracer stack) or its files (pyarrow).
-CONTENT_LIBRARIES: tuple[str, ...] = ("dtradar", "sionna-rt", "mitsuba", "drjit", "numpy", "pyarrow")
+CONTENT_LIBRARIES: tuple[str, ...] = ("dtradar", "sionna-rt", "mitsuba", "drjit", "trimesh", "numpy", "pyarrow")
 
 
 def _check_finite(obj: Any, where: str = "inputs") -> None:

@@ -70,7 +70,7 @@ def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_n
 
 
 def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, monkeypatch):
-    from dtradar_data import pipeline, store
+    from dtradar_data import pipeline
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")

@@ -5,7 +5,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dtradar_data import features
 from dtradar_data.errors import InvalidCoordinatesError
 from dtradar_data.scene import Box, Grid, SceneSpec, TxSpec
 
