@@ -33,8 +33,10 @@ class RTSettings:
     """Maximum number of interactions per path (the paper: 5)."""
     samples_per_src: int = 10_000
     """Rays shot from the transmitter per trace; chosen from `make bench-rt` (see README)."""
-    max_num_paths_per_src: int = 1_000_000
-    """Upper bound on paths kept per source (Sionna's buffer size)."""
+    max_num_paths_per_src: int | None = None
+    """Sionna's buffer of candidate paths per source; None = samples_per_src × max_depth, enough for every
+    candidate. A smaller buffer silently drops paths (measured: at 1e6 samples Sionna's default 1e6 kept 52 580 of
+    126 822 paths in the cubicle)."""
     seed: int = 42
     """Seed of the ray sampler; the same scene, settings and seed give identical tables."""
     los: bool = True
@@ -67,7 +69,7 @@ class RTSettings:
             problems.append(f"frequency_hz={self.frequency_hz:g} is outside 100 MHz .. 100 GHz")
         if not 0 <= self.max_depth <= 10:
             problems.append(f"max_depth={self.max_depth} must be in 0..10")
-        if self.samples_per_src < 1 or self.batch_size < 1 or self.max_num_paths_per_src < 1:
+        if self.samples_per_src < 1 or self.batch_size < 1 or (self.max_num_paths_per_src or 1) < 1:
             problems.append("samples_per_src, batch_size and max_num_paths_per_src must be positive")
         if self.device not in ("auto", "cpu", "cuda"):
             problems.append(f"device={self.device!r} must be 'auto', 'cpu' or 'cuda'")
@@ -79,11 +81,17 @@ class RTSettings:
         d = dataclasses.asdict(self)
         d.pop("device")
         d.pop("deterministic")  # changes only run-to-run noise, not what the table means
+        d["max_num_paths_per_src"] = self.path_buffer
         return d
+
+    @property
+    def path_buffer(self) -> int:
+        """The resolved ``max_num_paths_per_src``."""
+        return self.max_num_paths_per_src or self.samples_per_src * max(1, self.max_depth)
 
     def solver_kwargs(self) -> dict[str, Any]:
         return dict(
-            max_depth=self.max_depth, max_num_paths_per_src=self.max_num_paths_per_src,
+            max_depth=self.max_depth, max_num_paths_per_src=self.path_buffer,
             samples_per_src=self.samples_per_src, synthetic_array=self.synthetic_array, los=self.los,
             specular_reflection=self.specular_reflection, diffuse_reflection=self.diffuse_reflection,
             refraction=self.refraction, diffraction=self.diffraction, seed=self.seed,
