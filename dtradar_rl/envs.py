@@ -1,0 +1,200 @@
+"""The gymnasium environment of a dataset, and its registration under ``dtradar/<scene>-<variant>-v0`` ids."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from dtradar_data.dataset import Dataset
+from dtradar_data.errors import InvalidCoordinatesError
+
+from .data import load_dataset
+from .mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
+from .observations import Normalizer, build_observations, check_preset
+
+SYNTHETIC_ENV_ID = "dtradar/synthetic-blueprint-v0"
+
+
+class DtradarNavEnv(gym.Env):
+    """
+    ## Description
+    A robot navigates a grid of cells of a digital twin from a start cell to a target cell, observing only the
+    radio features that the ray tracer computed for its cell (DT-RaDaR, arXiv 2411.12284). Each free cell of the
+    per-cell table is a state; blocked cells (obstacles, buildings) cannot be entered.
+
+    ## Actions
+    ``Discrete(4)``: ``0: X-`` (one cell towards -x), ``1: X+``, ``2: Y-``, ``3: Y+``. A move into a blocked cell
+    or off the grid is a collision: the robot stays where it was.
+
+    ## Observations
+    ``Box(low, high, (D,), float32)`` (bounds: the range of the lookup tables), z-scored features of the
+    chosen preset (:mod:`dtradar_rl.observations`):
+    ``paper`` (D = 10: x, y, AoA az/zen, AoD az/zen, coefficient real/imag, delay, phase; no target),
+    ``goal`` (D = 12: paper + target x, y), ``neighbors`` (D = 48: paper + radio features and a has-radio flag of
+    the four neighbouring cells + target x, y).
+
+    ## Rewards
+    Chosen by name (:mod:`dtradar_rl.mdp`). ``paper``: ``-(dx² + dy²)`` (cell units, distance to the target after
+    the move) ``+ 5000`` on reaching the target ``- 5000`` on a collision. ``scaled``: the same terms divided to
+    order one. ``euclidean`` / ``geodesic``: potential-based shaping with the straight-line / breadth-first
+    distance, ``+1`` on reaching the target, ``-1`` on a collision.
+
+    ## Starting State
+    Start and target are drawn uniformly at random among connected free cells (distinct), or given with
+    ``reset(options={"start": (ix, iy), "target": (ix, iy)})``.
+
+    ## Episode End
+    Termination: the robot reaches the target. Truncation: ``max_steps`` steps taken (default ``4 · (nx + ny)``).
+
+    ## Arguments
+    ``dataset``: a :class:`dtradar_data.Dataset` or a dataset name (``"cubicle/blueprint"``,
+    ``"synthetic/blueprint"``); ``obs``: observation preset (default ``"goal"``); ``reward``: reward name (default
+    ``"paper"``); ``max_steps``: step limit; ``normalizer``: feature statistics (default: fitted on ``dataset``;
+    pass the training twin's when evaluating on another twin); ``render_mode``: ``None``, ``"ansi"`` or
+    ``"rgb_array"``.
+
+    ## Info
+    ``cell`` and ``target`` (ix, iy), ``collision``, ``is_success``, ``distance`` (breadth-first steps from the
+    current cell to the target).
+
+    ## Version History
+    * v0: initial version.
+    """
+
+    metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
+
+    def __init__(self, dataset: Dataset | str = "synthetic/blueprint", obs: str = "goal", reward: str = "paper",
+                 max_steps: int | None = None, normalizer: Normalizer | dict | None = None,
+                 render_mode: str | None = None):
+        ds = load_dataset(dataset) if isinstance(dataset, str) else dataset
+        self.dataset_name = ds.name
+        self.obs_preset, self.reward_name = check_preset(obs), check_reward(reward)
+        if isinstance(normalizer, dict):
+            normalizer = Normalizer.from_dict(normalizer)
+        self.normalizer = normalizer or Normalizer.fit(ds)
+        self.mdp = GridMDP.from_dataset(ds)
+        self.table = build_observations(ds, obs, self.normalizer)
+        self.max_steps = int(max_steps or self.mdp.max_steps)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise InvalidCoordinatesError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        self.action_space = spaces.Discrete(len(ACTIONS))
+        # Observations come from the lookup tables, so their exact range is known: bound the space by it.
+        lows = np.concatenate([self.table.cell_part.min(0), self.table.target_part.min(0)]).astype(np.float32)
+        highs = np.concatenate([self.table.cell_part.max(0), self.table.target_part.max(0)]).astype(np.float32)
+        self.observation_space = spaces.Box(lows, highs, (self.table.dim,), np.float32)
+        self._cell = self._target = 0
+        self._steps = 0
+        self._dist: np.ndarray | None = None
+
+    # ---------------------------------------------------------------------------------------------------------
+    def _cell_of(self, xy) -> int:
+        c = self.mdp.cell(int(xy[0]), int(xy[1]))
+        if self.mdp.blocked.ravel()[c]:
+            raise InvalidCoordinatesError(f"cell {tuple(xy)} is blocked in {self.dataset_name}")
+        return c
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = options or {}
+        if "start" in options or "target" in options:
+            start, target = self._cell_of(options["start"]), self._cell_of(options["target"])
+            if not self.mdp.connected(start, target):
+                raise InvalidCoordinatesError(f"start {options['start']} and target {options['target']} are not "
+                                              f"connected in {self.dataset_name}")
+        else:
+            start, target = self.mdp.sample_pairs(1, self.np_random)[0]
+        self._cell, self._target, self._steps = int(start), int(target), 0
+        self._dist = self.mdp.bfs_distances(self._target)
+        return self.table.observe(self._cell, self._target), self._info(False)
+
+    def _potential(self, cell: int) -> float:
+        if potential_kind(self.reward_name) == "geodesic":
+            return float(self._dist[cell])
+        return float(np.sqrt(self.mdp.d2(cell, self._target)))
+
+    def step(self, action):
+        action = int(action)
+        if not self.action_space.contains(action):
+            raise InvalidCoordinatesError(f"action {action} is not one of 0..3 ({', '.join(ACTIONS)})")
+        before = self._cell
+        self._cell, collision = self.mdp.step(before, action)
+        self._steps += 1
+        reached = self._cell == self._target
+        shaped = potential_kind(self.reward_name) is not None
+        reward = reward_fn(self.reward_name, d2_after=float(self.mdp.d2(self._cell, self._target)),
+                           pot_before=self._potential(before) if shaped else 0.0,
+                           pot_after=self._potential(self._cell) if shaped else 0.0,
+                           collision=collision, reached=reached, diag2=self.mdp.diag2)
+        truncated = self._steps >= self.max_steps and not reached
+        obs = self.table.observe(self._cell, self._target)
+        return obs, float(np.float32(reward)), bool(reached), bool(truncated), self._info(collision)
+
+    def _info(self, collision: bool) -> dict:
+        return {"cell": tuple(int(v) for v in self.mdp.xy(self._cell)),
+                "target": tuple(int(v) for v in self.mdp.xy(self._target)),
+                "collision": bool(collision), "is_success": self._cell == self._target,
+                "distance": int(self._dist[self._cell]) if self._dist is not None else -1}
+
+    def render(self):
+        if self.render_mode is None:
+            return None
+        grid = np.where(self.mdp.blocked, "#", ".").astype("<U1")
+        (x, y), (tx, ty) = self.mdp.xy(self._cell), self.mdp.xy(self._target)
+        grid[ty, tx], grid[y, x] = "T", "R"
+        if self.render_mode == "ansi":
+            return "\n".join("".join(row) for row in grid[::-1]) + "\n"  # +y up
+        img = np.full((*self.mdp.blocked.shape, 3), 255, np.uint8)
+        img[self.mdp.blocked] = (60, 60, 60)
+        img[ty, tx], img[y, x] = (0, 170, 0), (220, 0, 0)
+        return np.repeat(np.repeat(img[::-1], 8, 0), 8, 1)
+
+
+# -- registration ------------------------------------------------------------------------------------------------
+def _data_root() -> Path:
+    try:
+        from dtradar_data.paths import data_root
+
+        return Path(data_root())
+    except Exception:  # noqa: BLE001 - store not available yet: same default as the interface
+        return Path(os.environ.get("DTRADAR_DATA_ROOT", Path.home() / ".cache" / "dtradar"))
+
+
+def built_datasets() -> list[str]:
+    """Names ``scene/variant`` of the datasets built in the data root (those with a ``refs.json``)."""
+    root = _data_root() / "datasets"
+    names = []
+    for refs in sorted(root.glob("*/*/refs.json")):
+        try:
+            if json.loads(refs.read_text()).get("latest"):
+                names.append(f"{refs.parent.parent.name}/{refs.parent.name}")
+        except (OSError, ValueError):
+            continue
+    return names
+
+
+def env_id(name: str) -> str:
+    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-v0"``."""
+    scene, _, variant = name.partition("/")
+    return f"dtradar/{scene}-{variant or 'blueprint'}-v0"
+
+
+def register_dataset_envs(**kwargs) -> list[str]:
+    """Register one env id per built dataset, plus ``dtradar/synthetic-{blueprint,dynamic}-v0``; returns the ids.
+
+    ``kwargs`` (``obs``, ``reward``, ...) become the default arguments of every id; ``gym.make`` can override them.
+    Datasets are loaded when an env is made, not here. Registering again replaces the ids.
+    """
+    ids = []
+    for name in ["synthetic/blueprint", "synthetic/dynamic", *built_datasets()]:
+        eid = env_id(name)
+        gym.registry.pop(eid, None)
+        gym.register(id=eid, entry_point="dtradar_rl.envs:DtradarNavEnv",
+                     kwargs={"dataset": name, **kwargs}, disable_env_checker=True)
+        ids.append(eid)
+    return ids

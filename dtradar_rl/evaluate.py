@@ -1,0 +1,184 @@
+"""Evaluation of a trained policy on a twin: success, SPL, collisions, steps, decision latency; paths and tables.
+
+Metrics over a set of seeded (start, target) pairs, drawn among connected free cells *of the twin evaluated*:
+
+* ``success_rate``: fraction of episodes that reach the target within the step limit;
+* ``spl``: Success weighted by Path Length (Anderson et al. 2018), ``mean_i S_i · l_i / max(p_i, l_i)``, with
+  ``l_i`` the breadth-first shortest path on the evaluated twin and ``p_i`` the length of the path travelled
+  (moves between cells; a collision does not move the robot, so it is counted in ``collisions`` instead);
+* ``collisions``: mean collisions per episode; ``steps``: mean decisions per episode (collisions included);
+* ``latency_ms``: median wall time of one greedy decision for one robot (table lookup + network), batch size 1.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from dtradar_data.dataset import Dataset
+
+from .dqn import Policy
+from .mdp import GridMDP
+
+
+@dataclass
+class Rollouts:
+    """Greedy episodes: per pair the visited cells, success, decisions, collisions, and the shortest length."""
+
+    pairs: np.ndarray          # int64[N, 2] (start, target) cells
+    paths: list[list[int]]     # visited cells, start first (repeated cells where a collision happened)
+    success: np.ndarray        # bool[N]
+    steps: np.ndarray          # int64[N] decisions taken
+    collisions: np.ndarray     # int64[N]
+    shortest: np.ndarray       # int64[N] BFS shortest path length on the evaluated twin
+
+
+@dataclass
+class Metrics:
+    pairs: int
+    success_rate: float
+    spl: float
+    collisions: float
+    steps: float
+    path_length: float
+    shortest: float
+    latency_ms: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def path_length(path: Sequence[int]) -> int:
+    """Moves between distinct consecutive cells (collisions, which repeat a cell, travel nothing)."""
+    p = np.asarray(path)
+    return int((p[1:] != p[:-1]).sum()) if p.size > 1 else 0
+
+
+def spl(success: Sequence[bool], shortest: Sequence[int], travelled: Sequence[int]) -> float:
+    """Success weighted by (normalised inverse) Path Length; 1.0 means every episode took a shortest path."""
+    s = np.asarray(success, np.float64)
+    lo = np.asarray(shortest, np.float64)
+    p = np.asarray(travelled, np.float64)
+    if s.size == 0:
+        return float("nan")
+    ratio = np.where(np.maximum(p, lo) > 0, lo / np.maximum(np.maximum(p, lo), 1e-12), 1.0)
+    return float((s * ratio).mean())
+
+
+def metrics_from_rollouts(r: Rollouts, latency_ms: float | None = None) -> Metrics:
+    travelled = np.array([path_length(p) for p in r.paths])
+    return Metrics(pairs=len(r.paths), success_rate=float(r.success.mean()), spl=spl(r.success, r.shortest, travelled),
+                   collisions=float(r.collisions.mean()), steps=float(r.steps.mean()),
+                   path_length=float(travelled.mean()), shortest=float(r.shortest.mean()), latency_ms=latency_ms)
+
+
+def sample_eval_pairs(ds: Dataset, n: int, seed: int) -> np.ndarray:
+    """``n`` seeded connected (start, target) pairs on ``ds`` (the same pairs for the same twin and seed)."""
+    return GridMDP.from_dataset(ds).sample_pairs(n, np.random.default_rng(seed))
+
+
+def rollout(policy: Policy, ds: Dataset, pairs: np.ndarray, *, max_steps: int | None = None,
+            device: str = "cpu") -> Rollouts:
+    """Run the greedy policy from every (start, target) pair at once in the batched environment."""
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    n = len(pairs)
+    env = policy.env_for(ds, n, reward="paper", max_steps=max_steps or None, device=device)
+    env.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
+    cells = [env.cell.clone()]
+    done = torch.zeros(n, dtype=torch.bool, device=env.device)
+    success = torch.zeros_like(done)
+    steps = torch.zeros(n, dtype=torch.long, device=env.device)
+    collisions = torch.zeros_like(steps)
+    while not bool(done.all()):
+        actions = policy.act(env.observe())
+        _, _, terminated, truncated, info = env.step(actions)
+        active = ~done
+        steps += active.long()
+        collisions += (info["collision"] & active).long()
+        success |= terminated & active
+        done |= terminated | truncated
+        cells.append(env.cell.clone())
+    trace = torch.stack(cells, 1).cpu().numpy()  # [N, T+1]
+    steps_np = steps.cpu().numpy()
+    paths = [trace[i, : steps_np[i] + 1].tolist() for i in range(n)]
+    mdp = env.mdp
+    targets, inverse = np.unique(pairs[:, 1], return_inverse=True)
+    dist = mdp.bfs_distances_many(targets)
+    shortest = dist[inverse, pairs[:, 0]]
+    return Rollouts(pairs, paths, success.cpu().numpy(), steps_np, collisions.cpu().numpy(), shortest)
+
+
+def decision_latency_ms(policy: Policy, ds: Dataset, repeats: int = 300) -> float:
+    """Median time of one greedy decision for one robot: observation lookup + forward pass + argmax."""
+    table = policy.observations(ds)
+    cell_part, target_part = torch.from_numpy(table.cell_part), torch.from_numpy(table.target_part)
+    free = np.flatnonzero(~np.asarray(ds.blocked).ravel())
+    rng = np.random.default_rng(0)
+    times = []
+    for _ in range(repeats):
+        c, t = (int(v) for v in rng.choice(free, 2))
+        t0 = time.perf_counter()
+        obs = torch.cat([cell_part[c], target_part[t]])[None]
+        policy.act(obs)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1e3)
+
+
+def evaluate(policy: Policy, ds: Dataset, *, pairs: int = 500, seed: int = 2024, max_steps: int | None = None,
+             latency: bool = True, device: str = "cpu") -> tuple[Metrics, Rollouts]:
+    """Metrics of ``policy`` on ``ds`` over ``pairs`` seeded (start, target) pairs."""
+    r = rollout(policy, ds, sample_eval_pairs(ds, pairs, seed), max_steps=max_steps, device=device)
+    return metrics_from_rollouts(r, decision_latency_ms(policy, ds) if latency else None), r
+
+
+# -- reports ------------------------------------------------------------------------------------------------------
+COLUMNS = (("pairs", "pairs", "{:d}"), ("success_rate", "success", "{:.3f}"), ("spl", "SPL", "{:.3f}"),
+           ("collisions", "collisions/ep", "{:.2f}"), ("steps", "mean steps", "{:.1f}"),
+           ("shortest", "mean shortest", "{:.1f}"), ("latency_ms", "decision (ms)", "{:.3f}"))
+
+
+def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Rows ``{"case": ..., **Metrics.to_dict()}`` as a Markdown table."""
+    head = ["case"] + [c[1] for c in COLUMNS]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for row in rows:
+        cells = [str(row["case"])]
+        for key, _, fmt in COLUMNS:
+            v = row.get(key)
+            cells.append("-" if v is None else fmt.format(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_results(rows: list[dict[str, Any]], out: Path, config: dict[str, Any], name: str = "results") -> str:
+    """``<name>.json`` (rows + config), ``<name>.md`` and ``config.json`` in ``out``; returns the Markdown table."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{name}.json").write_text(json.dumps({"config": config, "results": rows}, indent=2) + "\n")
+    md = markdown_table(rows)
+    (out / f"{name}.md").write_text(md)
+    (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    return md
+
+
+def cross_matrix(policies: dict[str, Policy], datasets: dict[str, Dataset], *, pairs: int = 500, seed: int = 2024,
+                 max_steps: int | None = None) -> dict[str, Any]:
+    """Evaluate every policy on every dataset (e.g. train on quadrant Qi, evaluate on Qj).
+
+    Returns ``{"rows": [train names], "cols": [dataset names], "success": [[...]], "spl": [[...]]}``.
+    """
+    rows, cols = list(policies), list(datasets)
+    succ = np.zeros((len(rows), len(cols)))
+    spl_m = np.zeros_like(succ)
+    for i, r in enumerate(rows):
+        for j, c in enumerate(cols):
+            m, _ = evaluate(policies[r], datasets[c], pairs=pairs, seed=seed, max_steps=max_steps, latency=False)
+            succ[i, j], spl_m[i, j] = m.success_rate, m.spl
+    return {"rows": rows, "cols": cols, "success": succ.tolist(), "spl": spl_m.tolist()}

@@ -1,0 +1,133 @@
+"""What an agent observes: observation presets built by table lookup, and the normaliser stored with a model.
+
+An observation is the concatenation of a part that depends only on the robot's cell and a part that depends only
+on the target cell, ``obs = [cell_part[cell], target_part[target]]``, so both environments build it with two
+lookups. All features are z-scored with a :class:`Normalizer` (per table column: mean and standard deviation over
+the free cells of the *training* dataset with a path); the normaliser is saved in every checkpoint and reused
+unchanged on other twins. A missing value (a free cell without any propagation path, or a neighbour that is blocked
+or off the grid) becomes 0 after normalisation, i.e. the training mean.
+
+Presets (:data:`OBS_PRESETS`)
+-----------------------------
+``paper`` (10)      exactly the paper's state: ``x, y`` (cell centre, m), AoA azimuth and zenith, AoD azimuth and
+                    zenith (rad), real and imaginary part of the strongest path's coefficient, its delay (s), and
+                    its phase φ (rad). The paper names nine quantities but counts ten inputs; the tenth is taken to
+                    be the phase φ, which the paper's Module 2 lists among the per-cell outputs. The paper state has
+                    **no target**: a policy cannot know where a randomly drawn target is, so with random targets
+                    this preset cannot succeed beyond chance. It is kept for the exact reproduction.
+``goal`` (12)       ``paper`` + the target's ``x, y`` (m): the goal-conditioned correction.
+``neighbors`` (48)  ``paper`` + for each neighbouring cell in action order (X-, X+, Y-, Y+) its 8 radio features
+                    (as in ``paper`` without ``x, y``) and a flag that is 1 where the neighbour has radio features
+                    (0 = blocked, off the grid or no path) + the target's ``x, y``. An agent can sense an obstacle
+                    it has never seen (the dynamic twin) from the missing radio features next to it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from dtradar_data.dataset import Dataset
+from dtradar_data.errors import unknown_name
+
+from .mdp import ACTION_DELTAS
+
+#: The paper's ten inputs, in order (see the module docstring for the tenth).
+PAPER_COLUMNS: tuple[str, ...] = ("x_m", "y_m", "aoa_az_rad", "aoa_zen_rad", "aod_az_rad", "aod_zen_rad",
+                                  "a_re", "a_im", "tau_s", "phase_rad")
+RADIO_FEATURES: tuple[str, ...] = PAPER_COLUMNS[2:]
+OBS_PRESETS: tuple[str, ...] = ("paper", "goal", "neighbors")
+OBS_DIMS: dict[str, int] = {"paper": 10, "goal": 12, "neighbors": 10 + 4 * (len(RADIO_FEATURES) + 1) + 2}
+
+
+def check_preset(name: str) -> str:
+    if name not in OBS_PRESETS:
+        raise unknown_name("observation preset", name, OBS_PRESETS)
+    return name
+
+
+@dataclass(frozen=True)
+class Normalizer:
+    """Per-column z-scoring: ``(value - mean) / std``. Fitted on a training dataset, stored with the model."""
+
+    columns: tuple[str, ...]
+    mean: tuple[float, ...]
+    std: tuple[float, ...]
+
+    @classmethod
+    def fit(cls, ds: Dataset, columns: tuple[str, ...] = PAPER_COLUMNS) -> Normalizer:
+        values = ds.grid(list(columns))  # [H, W, F], NaN where null
+        free = ~np.asarray(ds.blocked, bool)
+        means, stds = [], []
+        for k in range(len(columns)):
+            v = values[..., k][free]
+            v = v[np.isfinite(v)].astype(np.float64)
+            m = float(v.mean()) if v.size else 0.0
+            s = float(v.std()) if v.size else 1.0
+            means.append(m)
+            stds.append(s if s > 1e-12 * max(1.0, abs(m)) and s > 0 else 1.0)
+        return cls(tuple(columns), tuple(means), tuple(stds))
+
+    def apply(self, values: np.ndarray) -> np.ndarray:
+        """Normalise ``[..., F]`` values in ``self.columns`` order; NaN becomes 0."""
+        out = (values - np.asarray(self.mean, np.float64)) / np.asarray(self.std, np.float64)
+        return np.nan_to_num(out, nan=0.0).astype(np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"columns": list(self.columns), "mean": list(self.mean), "std": list(self.std)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Normalizer:
+        return cls(tuple(d["columns"]), tuple(float(x) for x in d["mean"]), tuple(float(x) for x in d["std"]))
+
+
+@dataclass(frozen=True)
+class ObservationTable:
+    """Lookup tables of one preset on one dataset: ``obs(cell, target) = [cell_part[cell], target_part[target]]``."""
+
+    preset: str
+    cell_part: np.ndarray    # float32[H*W, Dc]
+    target_part: np.ndarray  # float32[H*W, Dt]
+    names: tuple[str, ...]
+
+    @property
+    def dim(self) -> int:
+        return self.cell_part.shape[1] + self.target_part.shape[1]
+
+    def observe(self, cell, target) -> np.ndarray:
+        return np.concatenate([self.cell_part[cell], self.target_part[target]], axis=-1)
+
+
+def build_observations(ds: Dataset, preset: str, normalizer: Normalizer) -> ObservationTable:
+    """The lookup tables of ``preset`` on ``ds``, normalised with ``normalizer`` (fitted on the training twin)."""
+    check_preset(preset)
+    h, w = ds.shape
+    n = h * w
+    raw = ds.grid(list(normalizer.columns)).reshape(n, -1).astype(np.float64)
+    blocked = np.asarray(ds.blocked, bool).ravel()
+    raw[blocked] = np.nan
+    z = normalizer.apply(raw)  # [n, 10], 0 where missing
+    col = {c: k for k, c in enumerate(normalizer.columns)}
+    paper = z[:, [col[c] for c in PAPER_COLUMNS]]
+    names = list(PAPER_COLUMNS)
+    target = np.zeros((n, 0), np.float32)
+    tnames: list[str] = []
+    if preset in ("goal", "neighbors"):
+        target = paper[:, :2].copy()
+        tnames = ["target_x_m", "target_y_m"]
+    parts = [paper]
+    if preset == "neighbors":
+        radio = paper[:, 2:]
+        has_radio = (~blocked & np.isfinite(raw[:, [col[c] for c in RADIO_FEATURES]]).all(1)).astype(np.float32)
+        iy, ix = np.divmod(np.arange(n), w)
+        for (dx, dy), act in zip(ACTION_DELTAS, ("X-", "X+", "Y-", "Y+")):
+            jx, jy = ix + dx, iy + dy
+            inside = (jx >= 0) & (jx < w) & (jy >= 0) & (jy < h)
+            j = np.where(inside, jy * w + jx, 0)
+            flag = np.where(inside, has_radio[j], 0.0).astype(np.float32)
+            parts += [radio[j] * flag[:, None], flag[:, None]]
+            names += [f"{act}:{c}" for c in RADIO_FEATURES] + [f"{act}:has_radio"]
+    cell_part = np.ascontiguousarray(np.concatenate(parts, 1), np.float32)
+    return ObservationTable(preset, cell_part, np.ascontiguousarray(target), tuple(names + tnames))

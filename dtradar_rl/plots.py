@@ -1,0 +1,109 @@
+"""Figures: training curves, navigation paths over the coverage map (paper Figs. 6 and 11), cross-twin heatmaps."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from dtradar_data.dataset import Dataset  # noqa: E402
+
+
+def moving_average(x: np.ndarray, k: int) -> np.ndarray:
+    x = np.asarray(x, np.float64)
+    if x.size == 0:
+        return x
+    k = max(1, min(k, x.size))
+    c = np.cumsum(np.insert(x, 0, 0.0))
+    return (c[k:] - c[:-k]) / k
+
+
+def plot_curves(episodes: Sequence[tuple], path: Path) -> Path:
+    """Reward, steps and collisions per episode (moving averages) against environment steps."""
+    fig, axes = plt.subplots(1, 4, figsize=(16, 3.4))
+    if episodes:
+        e = np.asarray(episodes, dtype=np.float64)
+        k = max(1, len(e) // 50)
+        x = e[k - 1:, 1] if len(e) >= k else e[:, 1]
+        for ax, col, label in zip(axes, (2, 3, 4, 5), ("reward", "steps", "collisions", "success rate")):
+            ax.plot(e[:, 1], e[:, col], ".", ms=1, alpha=0.15, color="gray")
+            ax.plot(x, moving_average(e[:, col], k), color="C0")
+            ax.set_xlabel("environment steps")
+            ax.set_title(f"{label} per episode (mean of {k})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def _draw_obstacles(ax, ds: Dataset, extent) -> str:
+    """Floor plan from the scene spec when dtradar_data.floorplan is importable, else the blocked mask."""
+    scene, _, variant = ds.name.partition("/")
+    try:
+        from dtradar_data.floorplan import draw_floorplan
+        from dtradar_data.scene import load_scene_spec
+
+        draw_floorplan(ax, load_scene_spec(scene, variant.partition("@")[0]))
+        return "floorplan"
+    except Exception:  # noqa: BLE001 - synthetic scenes or the scene module not available: blocked mask
+        mask = np.ma.masked_where(~ds.blocked, np.ones(ds.shape))
+        ax.imshow(mask, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1.4, alpha=0.9,
+                  interpolation="nearest")
+        return "blocked mask"
+
+
+def plot_paths(ds: Dataset, paths: Sequence[Sequence[int]], path: Path, *, title: str = "",
+               successes: Sequence[bool] | None = None) -> Path:
+    """Navigation paths (cell-index sequences) over the path-gain coverage map of ``ds``."""
+    g = ds.grid_info
+    extent = (g.x0_m - g.cell_m / 2, g.x0_m + (g.nx - 0.5) * g.cell_m,
+              g.y0_m - g.cell_m / 2, g.y0_m + (g.ny - 0.5) * g.cell_m)
+    aspect = (extent[3] - extent[2]) / max(1e-9, extent[1] - extent[0])
+    fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * aspect + 1.2)))
+    gain = ds.grid(["path_gain_db"])[..., 0]
+    im = ax.imshow(gain, origin="lower", extent=extent, cmap="viridis", interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="path gain (dB)", fraction=0.03)
+    how = _draw_obstacles(ax, ds, extent)
+    for k, p in enumerate(paths):
+        iy, ix = np.divmod(np.asarray(p), g.nx)
+        x, y = g.x0_m + ix * g.cell_m, g.y0_m + iy * g.cell_m
+        ok = successes is None or successes[k]
+        color = f"C{k % 10}"
+        ax.plot(x, y, "-", color=color, lw=2, ls="-" if ok else "--")
+        ax.plot(x[0], y[0], "o", color=color, ms=7, mec="white")
+        ax.plot(x[-1] if ok else x[-1], y[-1], "*" if ok else "x", color=color, ms=12, mec="white")
+    ax.set_xlim(extent[:2])
+    ax.set_ylim(extent[2:])
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title or f"{ds.name}: navigation paths (o start, * reached, x failed; obstacles: {how})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_matrix(matrix: np.ndarray, rows: Sequence[str], cols: Sequence[str], path: Path, *,
+                title: str = "success rate", fmt: str = "{:.2f}") -> Path:
+    """A train x evaluation heatmap (e.g. the cities' cross-quadrant matrix)."""
+    m = np.asarray(matrix, np.float64)
+    fig, ax = plt.subplots(figsize=(1.4 * len(cols) + 2.5, 1.1 * len(rows) + 1.8))
+    im = ax.imshow(m, cmap="magma", vmin=0, vmax=1)
+    ax.set_xticks(range(len(cols)), cols, rotation=30, ha="right")
+    ax.set_yticks(range(len(rows)), rows)
+    ax.set_xlabel("evaluated on")
+    ax.set_ylabel("trained on")
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            ax.text(j, i, fmt.format(m[i, j]), ha="center", va="center", color="white" if m[i, j] < 0.6 else "black")
+    fig.colorbar(im, ax=ax, fraction=0.05)
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
