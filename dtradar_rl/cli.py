@@ -41,6 +41,9 @@ class EvalConfig:
     """seed of the pairs"""
     max_steps: int = 0
     """episode step limit (0 = 4 * (nx + ny))"""
+    shield: bool = True
+    """also report the policy with the obstacle shield (moves into neighbours sensed as occupied are masked;
+    neighbors preset only)"""
     plot_paths: int = 6
     """navigation paths drawn over the coverage map per twin"""
     out: str = ""
@@ -87,14 +90,18 @@ def run_eval(cfg: EvalConfig) -> str:
         except DatasetNotFoundError as e:
             print(f"skipping {name}: {e.message}")
             continue
-        metrics, roll = evaluate(policy, ds, pairs=cfg.pairs, seed=cfg.seed, max_steps=cfg.max_steps or None,
-                                 device=cfg.device)
-        case = f"{trained} -> {ds.name}"
-        rows.append({"case": case, "dataset": ds.name, "version": ds.version, **metrics.to_dict()})
-        k = min(cfg.plot_paths, len(roll.paths))
-        out.mkdir(parents=True, exist_ok=True)
-        plot_paths(ds, roll.paths[:k], out / f"paths_{variant}.png", successes=list(roll.success[:k]),
-                   title=f"{case}: success {metrics.success_rate:.2f}, SPL {metrics.spl:.2f}")
+        shields = [False] + ([True] if cfg.shield and policy.obs_preset == "neighbors" else [])
+        for shield in shields:
+            metrics, roll = evaluate(policy, ds, pairs=cfg.pairs, seed=cfg.seed, max_steps=cfg.max_steps or None,
+                                     device=cfg.device, shield=shield)
+            case = f"{trained} -> {ds.name}" + (" (shielded)" if shield else "")
+            rows.append({"case": case, "dataset": ds.name, "version": ds.version, "shield": shield,
+                         **metrics.to_dict()})
+            k = min(cfg.plot_paths, len(roll.paths))
+            out.mkdir(parents=True, exist_ok=True)
+            plot_paths(ds, roll.paths[:k], out / f"paths_{variant}{'_shielded' if shield else ''}.png",
+                       successes=list(roll.success[:k]),
+                       title=f"{case}: success {metrics.success_rate:.2f}, SPL {metrics.spl:.2f}")
     config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
     md = write_results(rows, out, config)
     print(md, end="")

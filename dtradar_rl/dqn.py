@@ -122,7 +122,7 @@ class DQNConfig:
     save_replay: bool = True
     """include the replay buffer in last.pt, so a resumed run is exact"""
     resume: bool = False
-    """continue from <out>/last.pt up to the (possibly raised) budget"""
+    """continue from <out>/last.pt up to the (possibly raised) budget (exploration follows the new budget)"""
     verbose: bool = True
     """print progress"""
 
@@ -433,9 +433,25 @@ class Policy:
     obs_preset: str
     meta: dict[str, Any]
 
-    def act(self, obs: torch.Tensor) -> torch.Tensor:
+    def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
+        """Greedy actions. ``shield=True`` (``neighbors`` preset only) never picks a move into a neighbour that
+        the twin shows without radio features (blocked or off the grid), unless every move is such."""
         with torch.no_grad():
-            return self.q(obs).argmax(-1)
+            q = self.q(obs)
+            if shield:
+                flags = obs[..., self.shield_columns()] > 0.5
+                q = torch.where(flags | ~flags.any(-1, keepdim=True), q, torch.full_like(q, -torch.inf))
+            return q.argmax(-1)
+
+    def shield_columns(self) -> list[int]:
+        """Observation columns of the four has-radio flags (``neighbors`` preset), in action order."""
+        if self.obs_preset != "neighbors":
+            raise ConfigError(f"the obstacle shield needs the 'neighbors' observation preset, "
+                              f"this policy observes {self.obs_preset!r}")
+        from .observations import PAPER_COLUMNS, RADIO_FEATURES
+
+        k = len(RADIO_FEATURES) + 1
+        return [len(PAPER_COLUMNS) + a * k + k - 1 for a in range(4)]
 
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
         """A batched env over ``ds`` that observes with this policy's preset and training normaliser."""

@@ -86,8 +86,10 @@ def sample_eval_pairs(ds: Dataset, n: int, seed: int) -> np.ndarray:
 
 
 def rollout(policy: Policy, ds: Dataset, pairs: np.ndarray, *, max_steps: int | None = None,
-            device: str = "cpu") -> Rollouts:
-    """Run the greedy policy from every (start, target) pair at once in the batched environment."""
+            device: str = "cpu", shield: bool = False) -> Rollouts:
+    """Run the greedy policy from every (start, target) pair at once in the batched environment.
+
+    ``shield``: mask moves into neighbours sensed as occupied (see :meth:`Policy.act`)."""
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     n = len(pairs)
     env = policy.env_for(ds, n, reward="paper", max_steps=max_steps or None, device=device)
@@ -98,7 +100,7 @@ def rollout(policy: Policy, ds: Dataset, pairs: np.ndarray, *, max_steps: int | 
     steps = torch.zeros(n, dtype=torch.long, device=env.device)
     collisions = torch.zeros_like(steps)
     while not bool(done.all()):
-        actions = policy.act(env.observe())
+        actions = policy.act(env.observe(), shield=shield)
         _, _, terminated, truncated, info = env.step(actions)
         active = ~done
         steps += active.long()
@@ -133,9 +135,9 @@ def decision_latency_ms(policy: Policy, ds: Dataset, repeats: int = 300) -> floa
 
 
 def evaluate(policy: Policy, ds: Dataset, *, pairs: int = 500, seed: int = 2024, max_steps: int | None = None,
-             latency: bool = True, device: str = "cpu") -> tuple[Metrics, Rollouts]:
+             latency: bool = True, device: str = "cpu", shield: bool = False) -> tuple[Metrics, Rollouts]:
     """Metrics of ``policy`` on ``ds`` over ``pairs`` seeded (start, target) pairs."""
-    r = rollout(policy, ds, sample_eval_pairs(ds, pairs, seed), max_steps=max_steps, device=device)
+    r = rollout(policy, ds, sample_eval_pairs(ds, pairs, seed), max_steps=max_steps, device=device, shield=shield)
     return metrics_from_rollouts(r, decision_latency_ms(policy, ds) if latency else None), r
 
 

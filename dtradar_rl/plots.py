@@ -74,7 +74,7 @@ def plot_paths(ds: Dataset, paths: Sequence[Sequence[int]], path: Path, *, title
         x, y = g.x0_m + ix * g.cell_m, g.y0_m + iy * g.cell_m
         ok = successes is None or successes[k]
         color = f"C{k % 10}"
-        ax.plot(x, y, "-", color=color, lw=2, ls="-" if ok else "--")
+        ax.plot(x, y, color=color, lw=2, ls="-" if ok else "--")
         ax.plot(x[0], y[0], "o", color=color, ms=7, mec="white")
         ax.plot(x[-1] if ok else x[-1], y[-1], "*" if ok else "x", color=color, ms=12, mec="white")
     ax.set_xlim(extent[:2])

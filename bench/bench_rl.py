@@ -1,0 +1,226 @@
+"""RL benchmark, side by side in one run: batched env throughput, decision latency, and the paper's training budget.
+
+    python bench/bench_rl.py                 # `make bench-rl`; writes results/bench_rl.json and results/bench_rl.md
+    python bench/bench_rl.py --help
+
+Measures (paper figures in brackets): env steps/s of the batched torch env vs the gymnasium env; one greedy
+decision (vs the paper's 17 ms); wall time of the paper's budget of 600K env steps with the tuned DQN (vs the paper's
+46 min) and the success rate / SPL it reaches on blueprint -> blueprint and blueprint -> dynamic; and the same budget
+with Stable-Baselines3 DQN on our gymnasium env (what a user would otherwise run), capped in wall time and
+extrapolated when the cap is hit. Uses the real ``<scene>/blueprint`` twin when it is built, otherwise the synthetic
+42x18 cubicle-sized stand-in, and says which.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import tyro
+
+from dtradar_rl.batched import BatchedNavEnv
+from dtradar_rl.data import load_dataset
+from dtradar_rl.dqn import Policy, auto_threads, config_for, load_policy, train
+from dtradar_rl.envs import DtradarNavEnv
+from dtradar_rl.evaluate import evaluate, markdown_table
+from dtradar_rl.observations import Normalizer
+
+PAPER_TRAIN_S = 46 * 60.0
+PAPER_DECISION_MS = 17.0
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """Benchmark of dtradar_rl (see the module docstring)."""
+
+    scene: str = "cubicle"
+    """scene to benchmark on; falls back to the synthetic 42x18 stand-in when <scene>/blueprint is not built"""
+    budget: int = 600_000
+    """training budget in environment steps (the paper's: 600K)"""
+    env_counts: tuple[int, ...] = (1, 256, 4096)
+    """batched env sizes whose throughput is measured"""
+    env_seconds: float = 2.0
+    """seconds per throughput measurement"""
+    pairs: int = 500
+    """seeded (start, target) evaluation pairs per twin"""
+    sb3: bool = True
+    """also train Stable-Baselines3 DQN with the same budget on the gymnasium env"""
+    sb3_max_seconds: float = 600.0
+    """wall-time cap of the SB3 run (its time for the full budget is extrapolated when hit)"""
+    threads: int = 0
+    """torch threads (0 = auto)"""
+    out: str = "results"
+    """where bench_rl.json and bench_rl.md go"""
+    runs: str = "runs/bench_rl"
+    """where the benchmark's checkpoints go"""
+
+
+def _datasets(scene: str):
+    try:
+        bp = load_dataset(f"{scene}/blueprint")
+        try:
+            dyn = load_dataset(f"{scene}/dynamic")
+        except Exception:  # noqa: BLE001
+            dyn = None
+        return bp, dyn, False
+    except Exception as e:  # noqa: BLE001 - not built (or the store is not there): synthetic stand-in
+        print(f"{scene}/blueprint not available ({type(e).__name__}); using the synthetic 42x18 stand-in")
+        return load_dataset("synthetic/blueprint"), load_dataset("synthetic/dynamic"), True
+
+
+def env_throughput(ds, counts, seconds, obs="neighbors", reward="geodesic") -> dict:
+    out = {}
+    env = DtradarNavEnv(ds, obs=obs, reward=reward)
+    env.reset(seed=0)
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        for _ in range(500):
+            _, _, te, tr, _ = env.step(int(env.action_space.sample()))
+            if te or tr:
+                env.reset()
+        n += 500
+    out["gymnasium"] = n / (time.perf_counter() - t0)
+    for k in counts:
+        benv = BatchedNavEnv.from_dataset(ds, k, obs=obs, reward=reward, seed=0)
+        benv.reset()
+        gen = torch.Generator().manual_seed(0)
+        steps, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            a = torch.randint(4, (k,), generator=gen)
+            _, _, te, tr, _ = benv.step(a)
+            benv.reset_where(te | tr)
+            benv.observe()
+            steps += k
+        out[f"batched_{k}"] = steps / (time.perf_counter() - t0)
+    return out
+
+
+def run_sb3(ds, dyn, cfg, ours_cfg, threads) -> dict:
+    try:
+        from stable_baselines3 import DQN
+        from stable_baselines3.common.callbacks import BaseCallback
+    except ImportError as e:
+        return {"skipped": f"stable-baselines3 not installed ({e}); pip install 'dtradar[bench]'"}
+    norm = Normalizer.fit(ds)
+    env = DtradarNavEnv(ds, obs=ours_cfg.obs, reward=ours_cfg.reward, normalizer=norm)
+
+    class Cap(BaseCallback):
+        def __init__(self, seconds):
+            super().__init__()
+            self.seconds, self.t0 = seconds, time.perf_counter()
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() - self.t0 < self.seconds
+
+    torch.set_num_threads(threads)
+    model = DQN("MlpPolicy", env, gamma=ours_cfg.gamma, learning_starts=ours_cfg.learning_starts,
+                policy_kwargs={"net_arch": list(ours_cfg.hidden)}, seed=0, device="cpu", verbose=0)
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=cfg.budget, callback=Cap(cfg.sb3_max_seconds))
+    wall = time.perf_counter() - t0
+    steps = int(model.num_timesteps)
+    policy = Policy(model.q_net.eval(), ours_cfg, norm, ours_cfg.obs, {"dataset": {"name": ds.name}})
+    res = {"env_steps": steps, "wall_s": wall, "capped": steps < cfg.budget,
+           "wall_s_for_budget": wall * cfg.budget / max(steps, 1),
+           "settings": "SB3 DQN defaults (train_freq 4, batch 32, buffer 1M, eps 1 -> 0.05 over 10%), "
+                       f"net_arch {list(ours_cfg.hidden)}, gamma {ours_cfg.gamma}, "
+                       f"learning_starts {ours_cfg.learning_starts}, same observations and reward"}
+    m, _ = evaluate(policy, ds, pairs=cfg.pairs, latency=False)
+    res["blueprint"] = m.to_dict()
+    if dyn is not None:
+        m, _ = evaluate(policy, dyn, pairs=cfg.pairs, latency=False)
+        res["dynamic"] = m.to_dict()
+    return res
+
+
+def main(cfg: BenchConfig) -> dict:
+    threads = cfg.threads or auto_threads()
+    torch.set_num_threads(threads)
+    torch.set_flush_denormal(True)
+    load_before = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+    ds, dyn, synthetic = _datasets(cfg.scene)
+    print(f"dataset: {ds.name} ({'synthetic stand-in' if synthetic else 'real'}), grid {ds.shape[1]}x{ds.shape[0]}, "
+          f"torch threads {threads}, 1-min load before start {load_before}")
+
+    thr = env_throughput(ds, cfg.env_counts, cfg.env_seconds)
+    print("env steps/s:", {k: f"{v:,.0f}" for k, v in thr.items()})
+
+    scene = ds.name.split("/")[0]
+    ours_cfg = config_for("tuned", scene=scene, total_env_steps=cfg.budget, out=f"{cfg.runs}/{scene}/dqn",
+                          threads=threads, checkpoint_every=0)
+    result = train(ours_cfg, dataset=ds)
+    policy = load_policy(result.checkpoint)
+    m_bp, _ = evaluate(policy, ds, pairs=cfg.pairs)
+    rows = [{"case": f"ours: {ds.name} -> {ds.name}", **m_bp.to_dict()}]
+    m_dyn = None
+    if dyn is not None:
+        m_dyn, _ = evaluate(policy, dyn, pairs=cfg.pairs)
+        rows.append({"case": f"ours: {ds.name} -> {dyn.name}", **m_dyn.to_dict()})
+    print(f"tuned DQN: {result.env_steps} env steps, {result.updates} updates in {result.wall_s:.1f} s")
+
+    sb3 = run_sb3(ds, dyn, cfg, ours_cfg, threads) if cfg.sb3 else {"skipped": "--no-sb3"}
+    for twin in ("blueprint", "dynamic"):
+        if twin in sb3:
+            rows.append({"case": f"SB3 DQN: {ds.name} -> {scene}/{twin}", **sb3[twin], "latency_ms": None})
+
+    report = {
+        "dataset": {"name": ds.name, "version": ds.version, "synthetic": synthetic, "grid": list(ds.shape)[::-1]},
+        "machine": {"cpus": os.cpu_count(), "torch_threads": threads, "load_1min_before": load_before,
+                    "torch": torch.__version__, "python": platform.python_version()},
+        "env_steps_per_s": thr,
+        "batched_vs_gymnasium": {k: v / thr["gymnasium"] for k, v in thr.items() if k != "gymnasium"},
+        "decision_latency_ms": m_bp.latency_ms, "paper_decision_ms": PAPER_DECISION_MS,
+        "decision_speedup_vs_paper": PAPER_DECISION_MS / m_bp.latency_ms,
+        "train": {"config": ours_cfg.to_dict(), "env_steps": result.env_steps, "updates": result.updates,
+                  "wall_s": result.wall_s, "paper_wall_s": PAPER_TRAIN_S,
+                  "speedup_vs_paper": PAPER_TRAIN_S / result.wall_s,
+                  "goal": "budget in <= 60 s with >= 95% success and SPL >= 0.9 on blueprint -> blueprint",
+                  "goal_met": bool(result.wall_s <= 60 and m_bp.success_rate >= 0.95 and m_bp.spl >= 0.9)},
+        "eval": rows,
+        "sb3": sb3,
+    }
+    if "wall_s_for_budget" in sb3:
+        report["train"]["speedup_vs_sb3"] = sb3["wall_s_for_budget"] / result.wall_s
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench_rl.json").write_text(json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n")
+    md = render_markdown(report)
+    (out / "bench_rl.md").write_text(md)
+    print(md)
+    return report
+
+
+def render_markdown(r: dict) -> str:
+    d, t, sb3 = r["dataset"], r["train"], r["sb3"]
+    src = "synthetic 42x18 stand-in (no ray-traced table built yet)" if d["synthetic"] else f"real twin {d['name']}"
+    lines = [f"## RL benchmark ({src}; {r['machine']['cpus']} CPUs, torch {r['machine']['torch_threads']} threads, "
+             f"1-min load before start {r['machine']['load_1min_before']})", "",
+             "| measure | ours | reference | ratio |", "|---|---|---|---|"]
+    thr = r["env_steps_per_s"]
+    for k, v in thr.items():
+        if k != "gymnasium":
+            lines.append(f"| env steps/s, {k.replace('_', ' ')} robots | {v:,.0f} | "
+                         f"gymnasium env {thr['gymnasium']:,.0f} | {v / thr['gymnasium']:.0f}x |")
+    lines.append(f"| greedy decision latency | {r['decision_latency_ms']:.3f} ms | paper 17 ms | "
+                 f"{r['decision_speedup_vs_paper']:.0f}x faster |")
+    lines.append(f"| wall time, {t['env_steps']:,} env steps | {t['wall_s']:.1f} s | paper 46 min | "
+                 f"{t['speedup_vs_paper']:.0f}x faster |")
+    if "wall_s_for_budget" in sb3:
+        cap = f" (capped at {sb3['env_steps']:,} steps; extrapolated)" if sb3["capped"] else ""
+        lines.append(f"| wall time, same budget | {t['wall_s']:.1f} s | "
+                     f"SB3 DQN {sb3['wall_s_for_budget']:.0f} s{cap} | {t['speedup_vs_sb3']:.1f}x faster |")
+    lines += ["", f"Goal (budget in <= 60 s, >= 95 % success, SPL >= 0.9 on blueprint -> blueprint): "
+              f"**{'met' if t['goal_met'] else 'not met'}**.", "", markdown_table(r["eval"])]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main(tyro.cli(BenchConfig, args=sys.argv[1:]))
