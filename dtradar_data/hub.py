@@ -86,7 +86,8 @@ def hub_errors(action: str, repo_id: str) -> Iterator[None]:
         raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
                        hint="check the network and HF_ENDPOINT, or build the dataset locally") from exc
     except Exception as exc:  # httpx errors and others that do not derive from OSError
-        if type(exc).__module__.split(".")[0] in {"httpx", "httpcore", "requests", "urllib3"}:
+        # huggingface_hub 2.x talks through httpx2/httpcore2, 1.x through httpx, older ones through requests
+        if type(exc).__module__.split(".")[0].rstrip("0123456789") in {"httpx", "httpcore", "requests", "urllib"}:
             raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
                            hint="check the network and HF_ENDPOINT, or build the dataset locally") from exc
         raise

@@ -134,6 +134,17 @@ def test_an_unreachable_hub_gives_a_clear_error_and_leaves_the_store_unchanged(r
     assert tree(root) == before and list((root / "work").iterdir()) == []
 
 
+def test_publishing_to_an_unreachable_hub_with_a_token_gives_a_clear_error(root, monkeypatch):
+    put()
+    before = tree(root)
+    monkeypatch.setenv("HF_TOKEN", "hf_not_a_real_token")
+    monkeypatch.setenv("HF_ENDPOINT", "http://127.0.0.1:9")
+    with pytest.raises(HubError, match=r"could not be reached") as err:
+        hub.publish("cubicle/blueprint")
+    assert "127.0.0.1:9" in str(err.value)
+    assert tree(root) == before
+
+
 def test_the_cli_pull_fails_offline_with_one_line_and_status_2(root):
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
     proc = subprocess.run([sys.executable, "-m", "dtradar_data", "pull", "meeting/dynamic@v0"], env=env,
