@@ -52,7 +52,7 @@ class BenchConfig:
     """seeded (start, target) evaluation pairs per twin"""
     sb3: bool = True
     """also train Stable-Baselines3 DQN with the same budget on the gymnasium env"""
-    sb3_max_seconds: float = 600.0
+    sb3_max_seconds: float = 300.0
     """wall-time cap of the SB3 run (its time for the full budget is extrapolated when hit)"""
     threads: int = 0
     """torch threads (0 = auto)"""

@@ -44,7 +44,7 @@ def test_training_is_seeded(tmp_path):
 
 
 def test_resumed_training_equals_an_uninterrupted_run(tmp_path):
-    cfg = dict(TINY, buffer_size=1_000, eps_start=0.3, eps_end=0.3)  # a budget-independent schedule
+    cfg = dict(TINY, buffer_size=1_000, eps_start=0.3, eps_end=0.3, lr_end=-1.0)  # budget-independent
     full = train(config_for("tuned", out=str(tmp_path / "full"), **dict(cfg, total_env_steps=4_000)))
     train(config_for("tuned", out=str(tmp_path / "res"), **dict(cfg, total_env_steps=2_000)))
     resumed = train(config_for("tuned", out=str(tmp_path / "res"), resume=True, **dict(cfg, total_env_steps=4_000)))
@@ -70,6 +70,13 @@ def test_paper_preset_matches_the_paper():
     assert cfg.hidden == (256,) * 5 and cfg.gamma == 0.9 and cfg.eps_start == cfg.eps_end == 0.1
     assert cfg.episodes == 500 and cfg.obs == "paper" and cfg.reward == "paper" and cfg.num_envs == 1
     assert config_for("paper", scene="dallas-q1").episodes == 80
+
+
+def test_paper_preset_trains_for_its_episode_budget(tmp_path):
+    result = train(config_for("paper", scene="synthetic-6x5", episodes=3, learning_starts=16, out=str(tmp_path),
+                              threads=1, verbose=False, checkpoint_every=0))
+    assert result.episodes == 3 and result.updates > 0
+    assert load_policy(result.checkpoint).obs_preset == "paper"
 
 
 def test_bad_settings_raise_typed_errors():
