@@ -163,6 +163,8 @@ def main(cfg: BenchConfig) -> dict:
     if dyn is not None:
         m_dyn, _ = evaluate(policy, dyn, pairs=cfg.pairs)
         rows.append({"case": f"ours: {ds.name} -> {dyn.name}", **m_dyn.to_dict()})
+        m_sh, _ = evaluate(policy, dyn, pairs=cfg.pairs, shield=True)
+        rows.append({"case": f"ours: {ds.name} -> {dyn.name} (shielded)", **m_sh.to_dict()})
     print(f"tuned DQN: {result.env_steps} env steps, {result.updates} updates in {result.wall_s:.1f} s")
 
     sb3 = run_sb3(ds, dyn, cfg, ours_cfg, threads) if cfg.sb3 else {"skipped": "--no-sb3"}
@@ -202,13 +204,13 @@ def render_markdown(r: dict) -> str:
     d, t, sb3 = r["dataset"], r["train"], r["sb3"]
     src = "synthetic 42x18 stand-in (no ray-traced table built yet)" if d["synthetic"] else f"real twin {d['name']}"
     lines = [f"## RL benchmark ({src}; {r['machine']['cpus']} CPUs, torch {r['machine']['torch_threads']} threads, "
-             f"1-min load before start {r['machine']['load_1min_before']})", "",
+             f"1-min load before start {r['machine']['load_1min_before']:.2f})", "",
              "| measure | ours | reference | ratio |", "|---|---|---|---|"]
     thr = r["env_steps_per_s"]
     for k, v in thr.items():
         if k != "gymnasium":
             lines.append(f"| env steps/s, {k.replace('_', ' ')} robots | {v:,.0f} | "
-                         f"gymnasium env {thr['gymnasium']:,.0f} | {v / thr['gymnasium']:.0f}x |")
+                         f"gymnasium env {thr['gymnasium']:,.0f} | {v / thr['gymnasium']:.2g}x |")
     lines.append(f"| greedy decision latency | {r['decision_latency_ms']:.3f} ms | paper 17 ms | "
                  f"{r['decision_speedup_vs_paper']:.0f}x faster |")
     lines.append(f"| wall time, {t['env_steps']:,} env steps | {t['wall_s']:.1f} s | paper 46 min | "

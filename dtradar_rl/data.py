@@ -39,7 +39,8 @@ def synthetic_blocked(nx: int, ny: int, variant: str = "blueprint") -> np.ndarra
         raise unknown_name("variant", variant, VARIANTS)
     b = np.zeros((ny, nx), bool)
     if nx < 6 or ny < 6:
-        b[: max(1, ny - 2), nx // 2] = True if nx >= 3 else False
+        if nx >= 3:
+            b[: max(1, ny - 2), nx // 2] = True
     else:
         sx, sy = nx / 42.0, ny / 18.0
 

@@ -103,6 +103,8 @@ class DtradarNavEnv(gym.Env):
         super().reset(seed=seed)
         options = options or {}
         if "start" in options or "target" in options:
+            if not ("start" in options and "target" in options):
+                raise InvalidCoordinatesError("reset options need both 'start' and 'target' as (ix, iy)")
             start, target = self._cell_of(options["start"]), self._cell_of(options["target"])
             if not self.mdp.connected(start, target):
                 raise InvalidCoordinatesError(f"start {options['start']} and target {options['target']} are not "
