@@ -14,30 +14,12 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
+from .scene import Grid
 from .schema import RADIO_COLUMNS
 
 
-@dataclass(frozen=True)
-class GridInfo:
-    """Where the grid lies: centre of cell (0, 0), cell size, shape. ``nx`` columns (x), ``ny`` rows (y)."""
-
-    x0_m: float
-    y0_m: float
-    cell_m: float
-    nx: int
-    ny: int
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """``(H, W) = (ny, nx)``, the shape of every ``[H, W]`` array."""
-        return (self.ny, self.nx)
-
-    @classmethod
-    def from_meta(cls, grid: dict[str, Any]) -> GridInfo:
-        return cls(float(grid["x0_m"]), float(grid["y0_m"]), float(grid["cell_m"]), int(grid["nx"]), int(grid["ny"]))
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"x0_m": self.x0_m, "y0_m": self.y0_m, "cell_m": self.cell_m, "nx": self.nx, "ny": self.ny}
+#: The grid of a stored dataset is the scene's receiver grid (``meta["grid"]``); one class for both.
+GridInfo = Grid
 
 
 @dataclass(frozen=True)

@@ -139,6 +139,11 @@ class Grid:
     def to_dict(self) -> dict[str, Any]:
         return {"x0_m": self.x0_m, "y0_m": self.y0_m, "cell_m": self.cell_m, "nx": self.nx, "ny": self.ny}
 
+    @classmethod
+    def from_meta(cls, grid: dict[str, Any]) -> Grid:
+        """The grid recorded in a dataset's metadata (``meta["grid"]``, as written by :meth:`to_dict`)."""
+        return cls(float(grid["x0_m"]), float(grid["y0_m"]), float(grid["cell_m"]), int(grid["nx"]), int(grid["ny"]))
+
 
 @dataclass(frozen=True)
 class TxSpec:
