@@ -5,7 +5,7 @@ VARIANT ?= all
 NAME    ?= $(SCENE)/blueprint
 ARGS    ?=
 
-.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval bench bench-rt bench-rl clean-venv
+.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval offline bench bench-rt bench-rl clean-venv
 
 # One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
 setup:
@@ -52,6 +52,10 @@ train:
 
 eval:
 	$(PY) -m dtradar_rl eval --scene $(SCENE) $(ARGS)
+
+# Offline RL with d3rlpy on logged transitions, e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
+offline:
+	$(PY) -m dtradar_rl offline --scene $(SCENE) $(ARGS)
 
 bench: bench-rt bench-rl
 
