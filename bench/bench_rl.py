@@ -5,7 +5,8 @@
 
 Measures (paper figures in brackets): env steps/s of the batched torch env vs the gymnasium env; one greedy
 decision (vs the paper's 17 ms); wall time of the paper's budget of 600K env steps with the tuned DQN (vs the paper's
-46 min) and the success rate / SPL it reaches on blueprint -> blueprint and blueprint -> dynamic; and the same budget
+46 min) and the success rate / SPL it reaches on blueprint -> blueprint and blueprint -> dynamic; the same for the
+``robust`` preset (random extra obstacles while training; ``--no-robust`` skips it); and the same budget
 with Stable-Baselines3 DQN on our gymnasium env (what a user would otherwise run), capped in wall time and
 extrapolated when the cap is hit. Uses the real ``<scene>/blueprint`` twin when it is built, otherwise the synthetic
 42x18 cubicle-sized stand-in, and says which.
@@ -50,6 +51,9 @@ class BenchConfig:
     """seconds per throughput measurement"""
     pairs: int = 500
     """seeded (start, target) evaluation pairs per twin"""
+    robust: bool = True
+    """also train the robust preset (tuned + random extra obstacles while training) with the same budget, and
+    report it side by side with the tuned agent"""
     sb3: bool = True
     """also train Stable-Baselines3 DQN with the same budget on the gymnasium env"""
     sb3_max_seconds: float = 300.0
@@ -158,14 +162,32 @@ def main(cfg: BenchConfig) -> dict:
     result = train(ours_cfg, dataset=ds)
     policy = load_policy(result.checkpoint)
     m_bp, _ = evaluate(policy, ds, pairs=cfg.pairs)
-    rows = [{"case": f"ours: {ds.name} -> {ds.name}", **m_bp.to_dict()}]
+    rows = [{"case": f"ours (tuned): {ds.name} -> {ds.name}", **m_bp.to_dict()}]
     m_dyn = None
     if dyn is not None:
         m_dyn, _ = evaluate(policy, dyn, pairs=cfg.pairs)
-        rows.append({"case": f"ours: {ds.name} -> {dyn.name}", **m_dyn.to_dict()})
+        rows.append({"case": f"ours (tuned): {ds.name} -> {dyn.name}", **m_dyn.to_dict()})
         m_sh, _ = evaluate(policy, dyn, pairs=cfg.pairs, shield=True)
-        rows.append({"case": f"ours: {ds.name} -> {dyn.name} (shielded)", **m_sh.to_dict()})
+        rows.append({"case": f"ours (tuned): {ds.name} -> {dyn.name} (shielded)", **m_sh.to_dict()})
     print(f"tuned DQN: {result.env_steps} env steps, {result.updates} updates in {result.wall_s:.1f} s")
+
+    robust = None
+    if cfg.robust:
+        robust_cfg = config_for("robust", scene=scene, total_env_steps=cfg.budget,
+                                out=f"{cfg.runs}/{scene}/dqn_robust", threads=threads, checkpoint_every=0)
+        r_result = train(robust_cfg, dataset=ds)
+        r_policy = load_policy(r_result.checkpoint)
+        label = f"ours (robust, {robust_cfg.aug_obstacles} extra obstacles)"
+        m_rbp, _ = evaluate(r_policy, ds, pairs=cfg.pairs, latency=False)
+        rows.append({"case": f"{label}: {ds.name} -> {ds.name}", **m_rbp.to_dict()})
+        if dyn is not None:
+            for shield in (False, True):
+                m, _ = evaluate(r_policy, dyn, pairs=cfg.pairs, latency=False, shield=shield)
+                rows.append({"case": f"{label}: {ds.name} -> {dyn.name}" + (" (shielded)" if shield else ""),
+                             **m.to_dict()})
+        robust = {"config": robust_cfg.to_dict(), "env_steps": r_result.env_steps, "updates": r_result.updates,
+                  "wall_s": r_result.wall_s, "blueprint_success": m_rbp.success_rate, "blueprint_spl": m_rbp.spl}
+        print(f"robust DQN: {r_result.env_steps} env steps, {r_result.updates} updates in {r_result.wall_s:.1f} s")
 
     sb3 = run_sb3(ds, dyn, cfg, ours_cfg, threads) if cfg.sb3 else {"skipped": "--no-sb3"}
     for twin in ("blueprint", "dynamic"):
@@ -185,6 +207,7 @@ def main(cfg: BenchConfig) -> dict:
                   "speedup_vs_paper": PAPER_TRAIN_S / result.wall_s,
                   "goal": "budget in <= 60 s with >= 95% success and SPL >= 0.9 on blueprint -> blueprint",
                   "goal_met": bool(result.wall_s <= 60 and m_bp.success_rate >= 0.95 and m_bp.spl >= 0.9)},
+        "train_robust": robust,
         "eval": rows,
         "sb3": sb3,
     }
@@ -203,8 +226,8 @@ def main(cfg: BenchConfig) -> dict:
 def render_markdown(r: dict) -> str:
     d, t, sb3 = r["dataset"], r["train"], r["sb3"]
     src = "synthetic 42x18 stand-in (no ray-traced table built yet)" if d["synthetic"] else f"real twin {d['name']}"
-    lines = [f"## RL benchmark ({src}; {r['machine']['cpus']} CPUs, torch {r['machine']['torch_threads']} threads, "
-             f"1-min load before start {r['machine']['load_1min_before']:.2f})", "",
+    lines = [(f"## RL benchmark ({src}; {r['machine']['cpus']} CPUs, torch {r['machine']['torch_threads']} threads, "
+              f"1-min load before start {r['machine']['load_1min_before']:.2f})"), "",
              "| measure | ours | reference | ratio |", "|---|---|---|---|"]
     thr = r["env_steps_per_s"]
     for k, v in thr.items():
@@ -215,12 +238,17 @@ def render_markdown(r: dict) -> str:
                  f"{r['decision_speedup_vs_paper']:.0f}x faster |")
     lines.append(f"| wall time, {t['env_steps']:,} env steps | {t['wall_s']:.1f} s | paper 46 min | "
                  f"{t['speedup_vs_paper']:.0f}x faster |")
+    rob = r.get("train_robust")
+    if rob:
+        lines.append(f"| wall time, same budget, robust preset ({rob['config']['aug_obstacles']} extra obstacles "
+                     f"per episode) | {rob['wall_s']:.1f} s | tuned {t['wall_s']:.1f} s | "
+                     f"{rob['wall_s'] / t['wall_s']:.2f}x |")
     if "wall_s_for_budget" in sb3:
         cap = f" (capped at {sb3['env_steps']:,} steps; extrapolated)" if sb3["capped"] else ""
         lines.append(f"| wall time, same budget | {t['wall_s']:.1f} s | "
                      f"SB3 DQN {sb3['wall_s_for_budget']:.0f} s{cap} | {t['speedup_vs_sb3']:.1f}x faster |")
-    lines += ["", f"Goal (budget in <= 60 s, >= 95 % success, SPL >= 0.9 on blueprint -> blueprint): "
-              f"**{'met' if t['goal_met'] else 'not met'}**.", "", markdown_table(r["eval"])]
+    lines += ["", (f"Goal (budget in <= 60 s, >= 95 % success, SPL >= 0.9 on blueprint -> blueprint): "
+                   f"**{'met' if t['goal_met'] else 'not met'}**."), "", markdown_table(r["eval"])]
     return "\n".join(lines)
 
 
