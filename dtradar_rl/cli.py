@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     train_default = _train_default(argv)
 
     def train_cmd(cfg: Annotated[DQNConfig, tyro.conf.arg(name="")] = train_default) -> None:
-        """Train a DQN agent on a scene's blueprint twin (--preset tuned|paper picks the defaults below)."""
+        """Train a DQN agent on a scene's blueprint twin (--preset tuned|robust|paper picks the defaults below)."""
         run_train(cfg.validate())
 
     def eval_cmd(cfg: Annotated[EvalConfig, tyro.conf.arg(name="")] = EvalConfig()) -> None:
