@@ -18,11 +18,11 @@ from typing import Annotated
 import numpy as np
 import tyro
 
-from dtradar_data.errors import DatasetNotFoundError, DtradarError
+from dtradar_data.errors import DtradarError
 
 from .data import load_dataset
 from .dqn import PRESETS, DQNConfig, config_for, load_policy, train
-from .evaluate import cross_matrix, evaluate, write_results
+from .evaluate import cross_matrix, evaluate_twins, write_results
 from .offline import OfflineConfig
 from .plots import plot_matrix, plot_paths
 
@@ -86,27 +86,16 @@ def run_eval(cfg: EvalConfig) -> str:
     ckpt = Path(cfg.checkpoint or f"runs/{cfg.scene}/dqn/model.pt")
     out = Path(cfg.out or f"runs/{cfg.scene}/eval")
     policy = load_policy(ckpt, cfg.device)
-    trained = policy.meta["dataset"]["name"]
     rows = []
-    for variant in cfg.variants:
-        name = f"{cfg.scene}/{variant}"
-        try:
-            ds = load_dataset(name)
-        except DatasetNotFoundError as e:
-            print(f"skipping {name}: {e.message}")
-            continue
-        shields = [False] + ([True] if cfg.shield and policy.obs_preset == "neighbors" else [])
-        for shield in shields:
-            metrics, roll = evaluate(policy, ds, pairs=cfg.pairs, seed=cfg.seed, max_steps=cfg.max_steps or None,
-                                     device=cfg.device, shield=shield)
-            case = f"{trained} -> {ds.name}" + (" (shielded)" if shield else "")
-            rows.append({"case": case, "dataset": ds.name, "version": ds.version, "shield": shield,
-                         **metrics.to_dict()})
-            k = min(cfg.plot_paths, len(roll.paths))
-            out.mkdir(parents=True, exist_ok=True)
-            plot_paths(ds, roll.paths[:k], out / f"paths_{variant}{'_shielded' if shield else ''}.png",
-                       successes=list(roll.success[:k]),
-                       title=f"{case}: success {metrics.success_rate:.2f}, SPL {metrics.spl:.2f}")
+    for row, ds, roll in evaluate_twins(policy, cfg.scene, cfg.variants, pairs=cfg.pairs, seed=cfg.seed,
+                                        max_steps=cfg.max_steps or None, device=cfg.device, shield=cfg.shield):
+        rows.append(row)
+        k = min(cfg.plot_paths, len(roll.paths))
+        out.mkdir(parents=True, exist_ok=True)
+        png = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}.png"
+        plot_paths(ds, roll.paths[:k], out / png,
+                   successes=list(roll.success[:k]),
+                   title=f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}")
     config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
     md = write_results(rows, out, config)
     print(md, end="")

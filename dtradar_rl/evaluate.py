@@ -23,7 +23,9 @@ import numpy as np
 import torch
 
 from dtradar_data.dataset import Dataset
+from dtradar_data.errors import DatasetNotFoundError
 
+from .data import load_dataset
 from .dqn import Policy
 from .mdp import GridMDP
 
@@ -139,6 +141,31 @@ def evaluate(policy: Policy, ds: Dataset, *, pairs: int = 500, seed: int = 2024,
     """Metrics of ``policy`` on ``ds`` over ``pairs`` seeded (start, target) pairs."""
     r = rollout(policy, ds, sample_eval_pairs(ds, pairs, seed), max_steps=max_steps, device=device, shield=shield)
     return metrics_from_rollouts(r, decision_latency_ms(policy, ds) if latency else None), r
+
+
+def evaluate_twins(policy: Policy, scene: str, variants: Sequence[str], *, label: str = "", pairs: int = 500,
+                   seed: int = 2024, max_steps: int | None = None, device: str = "cpu", shield: bool = True,
+                   datasets: dict[str, Dataset] | None = None) -> list[tuple[dict[str, Any], Dataset, Rollouts]]:
+    """:func:`evaluate` on every twin ``<scene>/<variant>`` that is built (others are skipped with a message),
+    unshielded and, with ``shield`` and the neighbors preset, shielded. Returns ``(row, dataset, rollouts)`` per
+    case; a row is ``{"case": "<label><trained> -> <twin>[ (shielded)]", "dataset", "version", "shield",
+    **Metrics.to_dict()}``. ``datasets`` holds twins already loaded, by name."""
+    datasets = datasets or {}
+    trained = policy.meta["dataset"]["name"]
+    out = []
+    for variant in variants:
+        name = f"{scene}/{variant}"
+        try:
+            ds = datasets.get(name) or load_dataset(name)
+        except DatasetNotFoundError as e:
+            print(f"skipping {name}: {e.message}")
+            continue
+        for sh in [False] + ([True] if shield and policy.obs_preset == "neighbors" else []):
+            metrics, roll = evaluate(policy, ds, pairs=pairs, seed=seed, max_steps=max_steps, device=device, shield=sh)
+            case = f"{label}{trained} -> {ds.name}" + (" (shielded)" if sh else "")
+            out.append(({"case": case, "dataset": ds.name, "version": ds.version, "shield": sh, **metrics.to_dict()},
+                        ds, roll))
+    return out
 
 
 # -- reports ------------------------------------------------------------------------------------------------------

@@ -50,12 +50,12 @@ import numpy as np
 import torch
 
 from dtradar_data.dataset import Dataset
-from dtradar_data.errors import DatasetNotFoundError, unknown_name
+from dtradar_data.errors import unknown_name
 
 from .batched import BatchedNavEnv
 from .data import load_dataset
 from .dqn import CheckpointError, ConfigError, Policy, auto_threads
-from .evaluate import evaluate, write_results
+from .evaluate import evaluate_twins, write_results
 from .mdp import check_reward
 from .observations import Normalizer, build_observations, check_preset
 
@@ -534,24 +534,10 @@ def evaluate_offline(policy: OfflinePolicy, cfg: OfflineConfig,
                      datasets: dict[str, Dataset] | None = None) -> list[dict[str, Any]]:
     """Rows of :func:`dtradar_rl.evaluate.evaluate` on every twin in ``cfg.eval_variants`` (missing ones are
     skipped), unshielded and, with ``cfg.shield`` and the neighbors preset, shielded."""
-    datasets = datasets or {}
-    trained = policy.meta["dataset"]["name"]
-    rows = []
-    for variant in cfg.eval_variants:
-        name = f"{cfg.scene}/{variant}"
-        try:
-            ds = datasets.get(name) or load_dataset(name)
-        except DatasetNotFoundError as e:
-            print(f"skipping {name}: {e.message}")
-            continue
-        shields = [False] + ([True] if cfg.shield and policy.obs_preset == "neighbors" else [])
-        for shield in shields:
-            metrics, _ = evaluate(policy, ds, pairs=cfg.pairs, seed=cfg.eval_seed, max_steps=cfg.max_steps or None,
-                                  device=cfg.device, shield=shield)
-            case = f"{cfg.algorithm}: {trained} -> {ds.name}" + (" (shielded)" if shield else "")
-            rows.append({"case": case, "algorithm": cfg.algorithm, "dataset": ds.name, "version": ds.version,
-                         "shield": shield, **metrics.to_dict()})
-    return rows
+    rows = evaluate_twins(policy, cfg.scene, cfg.eval_variants, label=f"{cfg.algorithm}: ", pairs=cfg.pairs,
+                          seed=cfg.eval_seed, max_steps=cfg.max_steps or None, device=cfg.device, shield=cfg.shield,
+                          datasets=datasets)
+    return [{**row, "algorithm": cfg.algorithm} for row, _, _ in rows]
 
 
 __all__ = [
