@@ -249,8 +249,11 @@ class ShortestPathOracle:
     def _refresh(self) -> None:
         env = self.env
         if env.pool.numel() != self._pool_size:  # targets are rows of env.pool; it only grows
-            d = env.mdp.bfs_distances_many(env.pool.cpu().numpy())
-            self.dist = torch.as_tensor(d, dtype=torch.long, device=env.device)
+            if env.dist.shape[1]:  # the geodesic reward already keeps this table
+                self.dist = env.dist
+            else:
+                d = env.mdp.bfs_distances_many(env.pool.cpu().numpy())
+                self.dist = torch.as_tensor(d, dtype=torch.int32, device=env.device)
             self._pool_size = env.pool.numel()
 
     def optimal(self) -> torch.Tensor:
