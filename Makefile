@@ -13,7 +13,7 @@ setup:
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install torch==2.13.0
 	$(PY) -m pip install -e '.[all]'
-	$(PY) -c "from dtradar_data.llvm import main; raise SystemExit(main(['--check']))"
+	$(PY) -m dtradar_data check
 
 test:
 	$(PY) -m pytest -q

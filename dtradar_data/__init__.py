@@ -3,13 +3,24 @@
     >>> import dtradar_data
     >>> ds = dtradar_data.load("cubicle/blueprint")     # newest version in the data root
     >>> ds.frame, ds.table, ds.grid(), ds.blocked, ds.meta
+
+Layers, each importing only those below it (checked by import-linter in ``make test``)::
+
+    cli                     the ``python -m dtradar_data`` commands
+    publish | build         Hub, committed cards, load-with-fallback | the resumable ray-tracing pipeline
+    store   | rt            versions, local store, cards, listing    | LLVM discovery, Sionna tracer, path -> cell
+    geometry                meshes, Mitsuba XML, occupancy, floor plans
+    scenes                  the scene model, materials, scene files
+    core                    ids, schema, Dataset, Grid, errors, data-root layout
 """
 
 from __future__ import annotations
 
-from . import llvm as _llvm
-from .dataset import Dataset, GridInfo
-from .errors import DtradarError, RayTracerUnavailableError
+from dtradar_data.core.dataset import Dataset, GridInfo
+from dtradar_data.core.errors import DtradarError, RayTracerUnavailableError
+from dtradar_data.publish.loading import load
+from dtradar_data.rt import llvm as _llvm
+from dtradar_data.store.listing import list_datasets
 
 # Point Dr.Jit at a libLLVM >= 16 now, before anything imports mitsuba/drjit (they read it once, at import).
 # An explicit DRJIT_LIBLLVM_PATH wins; with none found, the ray tracer raises a typed error when first used.
@@ -19,12 +30,3 @@ except RayTracerUnavailableError:
     pass
 
 __all__ = ["Dataset", "GridInfo", "DtradarError", "load", "list_datasets"]
-
-
-def __getattr__(name: str):
-    # Loading lives in .store; imported lazily so `import dtradar_data` stays cheap and never touches Sionna.
-    if name in ("load", "list_datasets"):
-        from . import store
-
-        return getattr(store, name)
-    raise AttributeError(f"module 'dtradar_data' has no attribute {name!r}")

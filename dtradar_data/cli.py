@@ -11,11 +11,17 @@ import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import tyro
 
-from .errors import DtradarError
+from dtradar_data.build.pipeline import BuildConfig, build
+from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.layout import data_root
+from dtradar_data.publish import cards, hub
+from dtradar_data.rt import llvm
+from dtradar_data.rt.tracer import smoke_test
+from dtradar_data.store import listing, local
 
 #: A positional dataset id argument, shown as NAME in --help (the Makefile passes it positionally).
 Name = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="NAME")]
@@ -43,10 +49,7 @@ class ListCmd:
     """Print JSON instead of a table."""
 
     def run(self) -> int:
-        from . import store
-        from .paths import data_root
-
-        rows = store.list_datasets()
+        rows = listing.list_datasets()
         if self.json:
             print(json.dumps([{"name": r.name, "builtin": r.builtin, "latest": r.latest,
                                "versions": [{"tag": v.tag, "version": v.version, "created_utc": v.created_utc,
@@ -74,12 +77,10 @@ class InfoCmd:
     """Tag (v0, v1, ...) or version hash; default: the newest version."""
 
     def run(self) -> int:
-        from . import store
-
-        did, version, vdir = store.resolve(self.name, self.revision)
-        meta = store.read_meta(vdir)
+        did, version, vdir = local.resolve(self.name, self.revision)
+        meta = local.read_meta(vdir)
         grid, rt, stats = meta.get("grid", {}), meta.get("rt", {}), meta.get("stats", {})
-        tag = next((v.tag for v in store.version_infos(did) if v.version == version), None)
+        tag = next((v.tag for v in listing.version_infos(did) if v.version == version), None)
         print(f"{did.name}@{tag or version}  (version {version}, schema v{meta.get('schema_version')})")
         print(f"  title:       {meta.get('title') or (meta.get('scene_spec') or {}).get('title', '-')}")
         print(f"  created:     {meta.get('created_utc', '-')}")
@@ -94,7 +95,7 @@ class InfoCmd:
         for fname, rec in sorted((meta.get("files") or {}).items()):
             print(f"    {fname:<16} {_human(int(rec.get('bytes', 0))):>10}  sha256 {rec.get('sha256', '')[:16]}")
         print("  versions:")
-        for v in store.version_infos(did):
+        for v in listing.version_infos(did):
             mark = "*" if v.version == version else " "
             print(f"   {mark} {v.tag or '-':<4} {v.version}  {v.created_utc or '-':<26} {_human(v.size_bytes):>10}")
         return 0
@@ -110,9 +111,7 @@ class VerifyCmd:
     """Only this tag or version hash."""
 
     def run(self) -> int:
-        from . import store
-
-        results = store.verify(self.name, self.revision)
+        results = listing.verify(self.name, self.revision)
         bad = 0
         for version, problems in results.items():
             print(f"{version}: {'ok' if not problems else 'FAILED'}")
@@ -139,8 +138,6 @@ class CardsCmd:
     """Re-render every committed card from its card.json (after a template change; no datasets needed)."""
 
     def run(self) -> int:
-        from . import cards
-
         if not self.check:
             if self.rerender:
                 for d in cards.rerender(self.out):
@@ -173,8 +170,6 @@ class PublishCmd:
     """Create the repo as private if it does not exist."""
 
     def run(self) -> int:
-        from . import hub
-
         result = hub.publish(self.name, self.revision, repo_id=self.repo, private=self.private)
         print(result.describe())
         return 0
@@ -192,55 +187,38 @@ class PullCmd:
     """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>."""
 
     def run(self) -> int:
-        from . import hub
-
         path = hub.pull(self.name, self.revision, repo_id=self.repo)
         print(f"pulled into {path}")
         return 0
 
 
 @dataclass(frozen=True)
-class _BuildUnavailable:
-    """Ray-trace a scene into the data root (unavailable: dtradar_data.pipeline could not be imported)."""
-
-    scene: str = "cubicle"
-    variant: str = "all"
+class CheckCmd:
+    """Check the ray-tracing backend: find a libLLVM for Dr.Jit and run one JIT-compiled kernel (`make setup` ends
+    with this)."""
 
     def run(self) -> int:
-        try:
-            from . import pipeline  # noqa: F401  re-raise the original import problem, typed
-        except ImportError as exc:
-            raise DtradarError(f"the build pipeline cannot be imported: {exc}",
-                               hint="reinstall with `make setup` (pip install -e '.[all]')") from exc
+        print(f"libLLVM for Dr.Jit: {llvm.configure()}")
+        print(smoke_test())
         return 0
 
 
-def _build_entry() -> tuple[Any, Any]:
-    """``(config type, runner)`` of ``build``; imported here so every other command works without the pipeline."""
-    try:
-        from .pipeline import BuildConfig, build
-    except ImportError:
-        return _BuildUnavailable, lambda cfg: cfg.run()
-
-    def run(cfg) -> int:
-        for ds in build(cfg):
-            tag = ds.meta.get("tag")
-            print(f"{ds.name}@{tag or ds.version}: version {ds.version}, {ds.table.num_rows} cells, {ds.path}")
-        return 0
-
-    return BuildConfig, run
+def run_build(cfg: BuildConfig) -> int:
+    for ds in build(cfg):
+        tag = ds.meta.get("tag")
+        print(f"{ds.name}@{tag or ds.version}: version {ds.version}, {ds.table.num_rows} cells, {ds.path}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (console scripts and ``__main__`` pass it to ``sys.exit``)."""
-    build_type, build_run = _build_entry()
-    commands = {"build": build_type, "list": ListCmd, "info": InfoCmd, "verify": VerifyCmd, "cards": CardsCmd,
-                "publish": PublishCmd, "pull": PullCmd}
+    commands = {"build": BuildConfig, "list": ListCmd, "info": InfoCmd, "verify": VerifyCmd, "cards": CardsCmd,
+                "publish": PublishCmd, "pull": PullCmd, "check": CheckCmd}
     cfg = tyro.extras.subcommand_cli_from_dict(
         commands, prog="python -m dtradar_data", args=argv,
         description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull.")
     try:
-        return build_run(cfg) if isinstance(cfg, build_type) else cfg.run()
+        return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()
     except DtradarError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR

@@ -41,8 +41,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import InvalidCoordinatesError, unknown_name
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
 
 from .mdp import GridMDP, NoConnectedPairError, check_reward, potential_kind, reward_fn
 from .observations import Normalizer, ObservationTable, build_observations, check_preset

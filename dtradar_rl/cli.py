@@ -18,7 +18,7 @@ from typing import Annotated
 import numpy as np
 import tyro
 
-from dtradar_data.errors import DtradarError
+from dtradar_data.core.errors import DtradarError
 
 from .data import load_dataset
 from .dqn import PRESETS, DQNConfig, config_for, load_policy, train

@@ -15,9 +15,9 @@ import re
 
 import numpy as np
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import DatasetNotFoundError, UnknownNameError
-from dtradar_data.synthetic import synthetic_dataset
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import DatasetNotFoundError, UnknownNameError
+from dtradar_data.build.synthetic import synthetic_dataset
 
 VARIANTS = ("blueprint", "dynamic")
 _SYNTH = re.compile(r"^synthetic(?:-(\d+)x(\d+))?$")
@@ -34,7 +34,7 @@ def synthetic_blocked(nx: int, ny: int, variant: str = "blueprint") -> np.ndarra
     on free cells (a chair, two people). Tiny grids (< 6 cells a side) get a single short wall.
     """
     if variant not in VARIANTS:
-        from dtradar_data.errors import unknown_name
+        from dtradar_data.core.errors import unknown_name
 
         raise unknown_name("variant", variant, VARIANTS)
     b = np.zeros((ny, nx), bool)

@@ -48,8 +48,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import DtradarError, unknown_name
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import DtradarError, unknown_name
 
 from .batched import AUG_POTENTIALS, BatchedNavEnv
 from .data import is_synthetic, load_dataset

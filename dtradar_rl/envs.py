@@ -10,8 +10,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import InvalidCoordinatesError
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import InvalidCoordinatesError
 
 from .data import load_dataset
 from .mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
@@ -160,7 +160,7 @@ class DtradarNavEnv(gym.Env):
 # -- registration ------------------------------------------------------------------------------------------------
 def _data_root() -> Path:
     try:
-        from dtradar_data.paths import data_root
+        from dtradar_data.core.layout import data_root
 
         return Path(data_root())
     except Exception:  # noqa: BLE001 - store not available yet: same default as the interface

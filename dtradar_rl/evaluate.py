@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import DatasetNotFoundError
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import DatasetNotFoundError
 
 from .data import load_dataset
 from .dqn import Policy

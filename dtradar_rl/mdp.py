@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import DtradarError, InvalidCoordinatesError, unknown_name
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError, unknown_name
 
 ACTIONS: tuple[str, ...] = ("X-", "X+", "Y-", "Y+")
 #: ``(dx, dy)`` of each action, in cells.

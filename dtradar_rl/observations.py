@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import unknown_name
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import unknown_name
 
 from .mdp import ACTION_DELTAS
 

@@ -49,8 +49,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from dtradar_data.dataset import Dataset
-from dtradar_data.errors import unknown_name
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import unknown_name
 
 from .batched import BatchedNavEnv
 from .data import load_dataset

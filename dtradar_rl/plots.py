@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from dtradar_data.dataset import Dataset  # noqa: E402
+from dtradar_data.core.dataset import Dataset  # noqa: E402
 
 
 def moving_average(x: np.ndarray, k: int) -> np.ndarray:
@@ -45,8 +45,8 @@ def _draw_obstacles(ax, ds: Dataset, extent) -> str:
     """Floor plan from the scene spec when dtradar_data.floorplan is importable, else the blocked mask."""
     scene, _, variant = ds.name.partition("/")
     try:
-        from dtradar_data.floorplan import draw_floorplan
-        from dtradar_data.scene import load_scene_spec
+        from dtradar_data.geometry.floorplan import draw_floorplan
+        from dtradar_data.scenes.model import load_scene_spec
 
         draw_floorplan(ax, load_scene_spec(scene, variant.partition("@")[0]))
         return "floorplan"

@@ -9,8 +9,8 @@ import pytest
 from huggingface_hub import DatasetCard
 
 from dtradar_data import cards, cli, store
-from dtradar_data.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_SCHEMA
-from dtradar_data.synthetic import synthetic_dataset
+from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_SCHEMA
+from dtradar_data.build.synthetic import synthetic_dataset
 
 REPO_CARDS = Path(__file__).resolve().parents[2] / "cards"
 V0, V1 = "0123456789abcdef", "fedcba9876543210"

@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from dtradar_data import cli, store
-from dtradar_data.synthetic import synthetic_dataset
+from dtradar_data.build.synthetic import synthetic_dataset
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 

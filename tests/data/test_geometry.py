@@ -8,10 +8,10 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from dtradar_data.geometry import (box_mesh, footprints, free_components, largest_free_component,
+from dtradar_data.geometry.meshes import (box_mesh, footprints, free_components, largest_free_component,
                                    largest_free_component_fraction, material_meshes, material_thickness, occupancy,
                                    write_mitsuba_scene)
-from dtradar_data.scene import Box, load_scene_spec, parse_scene
+from dtradar_data.scenes.model import Box, load_scene_spec, parse_scene
 
 ALL_VARIANTS = [(s, v) for s in ("cubicle", "meeting") for v in ("blueprint", "dynamic")]
 
@@ -212,10 +212,10 @@ def test_free_components_are_labelled_largest_first():
 
 @pytest.mark.sionna
 def test_sionna_loads_the_written_scene_with_one_object_per_itu_material():
-    from dtradar_data.errors import RayTracerUnavailableError
+    from dtradar_data.core.errors import RayTracerUnavailableError
 
     try:
-        from dtradar_data.raytrace import RayTracer
+        from dtradar_data.rt.tracer import RayTracer
     except (ImportError, RayTracerUnavailableError) as e:  # pragma: no cover - machines without Sionna
         pytest.skip(f"Sionna RT unavailable: {e}")
     spec = load_scene_spec("meeting", "dynamic")

@@ -12,8 +12,8 @@ import pytest
 from huggingface_hub import CommitOperationAdd, CommitOperationDelete, constants
 
 from dtradar_data import hub, store
-from dtradar_data.errors import CorruptDatasetError, HubError
-from dtradar_data.synthetic import synthetic_dataset
+from dtradar_data.core.errors import CorruptDatasetError, HubError
+from dtradar_data.build.synthetic import synthetic_dataset
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 

@@ -2,8 +2,8 @@
 
 import pytest
 
-from dtradar_data.errors import UnknownNameError
-from dtradar_data.ids import DatasetId, format_id, known_scenes, parse_id
+from dtradar_data.core.errors import UnknownNameError
+from dtradar_data.core.ids import DatasetId, format_id, known_scenes, parse_id
 
 KNOWN = ["cubicle", "meeting", "dallas-q3"]
 

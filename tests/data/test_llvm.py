@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from dtradar_data import llvm
-from dtradar_data.errors import RayTracerUnavailableError
+from dtradar_data.core.errors import RayTracerUnavailableError
 
 
 def test_an_explicit_drjit_libllvm_path_wins(monkeypatch, tmp_path):

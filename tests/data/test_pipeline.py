@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dtradar_data.schema import CELL_COLUMNS
+from dtradar_data.core.schema import CELL_COLUMNS
 
 pytestmark = pytest.mark.sionna
 
@@ -19,8 +19,8 @@ def root(tmp_path, monkeypatch):
 
 @pytest.fixture
 def config():
-    from dtradar_data.pipeline import BuildConfig
-    from dtradar_data.raytrace import RTSettings
+    from dtradar_data.build.pipeline import BuildConfig
+    from dtradar_data.rt.tracer import RTSettings
 
     return BuildConfig(scene="cubicle", rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),
                        coverage_samples=20_000, progress=False)
@@ -29,7 +29,7 @@ def config():
 @pytest.fixture
 def small_cubicle():
     """The real cubicle blueprint, cut down to a 6 x 4 cell corner of the grid so it traces in a second."""
-    from dtradar_data.scene import load_scene_spec
+    from dtradar_data.scenes.model import load_scene_spec
 
     spec = load_scene_spec("cubicle", "blueprint")
     return replace(spec, grid=replace(spec.grid, nx=6, ny=4))
@@ -37,7 +37,7 @@ def small_cubicle():
 
 def test_a_built_dataset_loads_by_name_with_every_column_and_a_coverage_map(root, config, small_cubicle):
     import dtradar_data
-    from dtradar_data.pipeline import build_one
+    from dtradar_data.build.pipeline import build_one
 
     ds = build_one(small_cubicle, config)
     loaded = dtradar_data.load("cubicle/blueprint")
@@ -57,7 +57,7 @@ def test_a_built_dataset_loads_by_name_with_every_column_and_a_coverage_map(root
 def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_new_one(root, config, small_cubicle,
                                                                                        capsys):
     import dtradar_data
-    from dtradar_data.pipeline import build_one
+    from dtradar_data.build.pipeline import build_one
 
     first = build_one(small_cubicle, config)
     again = build_one(small_cubicle, config)
@@ -86,7 +86,7 @@ def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, 
     monkeypatch.undo()
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root))
     ds = pipeline.build_one(small_cubicle, config)
-    from dtradar_data.geometry import occupancy
+    from dtradar_data.geometry.meshes import occupancy
 
     assert ds.table.num_rows == 24
     np.testing.assert_array_equal(ds.blocked, occupancy(small_cubicle))

@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from dtradar_data.errors import InvalidCoordinatesError
-from dtradar_data.scene import Box, Grid, SceneSpec, TxSpec
+from dtradar_data.core.errors import InvalidCoordinatesError
+from dtradar_data.scenes.model import Box, Grid, SceneSpec, TxSpec
 
 pytestmark = pytest.mark.sionna
 
@@ -26,14 +26,14 @@ def tiny_spec() -> SceneSpec:
 
 @pytest.fixture(scope="module")
 def iso_settings():
-    from dtradar_data.raytrace import RTSettings
+    from dtradar_data.rt.tracer import RTSettings
 
     return RTSettings(rx_pattern="iso", rx_polarization="V", max_depth=2, samples_per_src=200_000, device="cpu", batch_size=4)
 
 
 @pytest.fixture(scope="module")
 def traced(iso_settings):
-    from dtradar_data.pipeline import trace_grid
+    from dtradar_data.build.pipeline import trace_grid
 
     cells, paths, blocked, tracer = trace_grid(tiny_spec(), iso_settings, progress=False)
     tracer.close()
@@ -70,7 +70,7 @@ def test_the_floor_reflection_is_found_and_the_los_path_is_the_strongest(traced)
 
 
 def test_the_same_scene_and_seed_give_identical_tables(traced, iso_settings):
-    from dtradar_data.pipeline import trace_grid
+    from dtradar_data.build.pipeline import trace_grid
 
     cells, paths, _, tracer = trace_grid(tiny_spec(), iso_settings, progress=False)
     tracer.close()
@@ -78,7 +78,7 @@ def test_the_same_scene_and_seed_give_identical_tables(traced, iso_settings):
 
 
 def test_an_interrupted_trace_resumes_from_its_finished_batches(tmp_path, traced, iso_settings):
-    from dtradar_data.pipeline import trace_grid
+    from dtradar_data.build.pipeline import trace_grid
 
     settings = replace(iso_settings, batch_size=2)  # 3 batches for 6 cells
     first, _, _, tracer = trace_grid(tiny_spec(), settings, tmp_path, progress=False)
@@ -93,7 +93,7 @@ def test_an_interrupted_trace_resumes_from_its_finished_batches(tmp_path, traced
 
 
 def test_receivers_outside_the_scene_are_rejected_before_tracing(iso_settings):
-    from dtradar_data.raytrace import RayTracer
+    from dtradar_data.rt.tracer import RayTracer
 
     tracer = RayTracer(tiny_spec(), iso_settings)
     try:
@@ -106,9 +106,9 @@ def test_receivers_outside_the_scene_are_rejected_before_tracing(iso_settings):
 
 
 def test_per_cell_features_follow_the_contract_on_the_paper_arrays():
-    from dtradar_data.pipeline import trace_grid
-    from dtradar_data.raytrace import RTSettings
-    from dtradar_data.schema import CELL_SCHEMA
+    from dtradar_data.build.pipeline import trace_grid
+    from dtradar_data.rt.tracer import RTSettings
+    from dtradar_data.core.schema import CELL_SCHEMA
 
     settings = RTSettings(max_depth=2, samples_per_src=5_000, device="cpu")  # -> vertical dipole
     paper_tx = TxSpec(position_m=TX, look_at_m=(1.0, 1.0, 0.0))  # 8x2 tr38901 VH, the paper's array

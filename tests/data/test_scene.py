@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dtradar_data.errors import InvalidCoordinatesError, SceneFileError, UnknownNameError
-from dtradar_data.scene import (ITU_MATERIALS, VARIANTS, Box, available_scenes, load_scene_file, load_scene_spec,
+from dtradar_data.core.errors import InvalidCoordinatesError, SceneFileError, UnknownNameError
+from dtradar_data.scenes.model import (ITU_MATERIALS, VARIANTS, Box, available_scenes, load_scene_file, load_scene_spec,
                                 material_valid_at, parse_scene, scene_file)
 
 # DT-RaDaR Sec. V-A / DESIGN.md section 1, plus the room structure we generate (4 walls, floor, ceiling).

@@ -10,10 +10,10 @@ import pytest
 
 import dtradar_data
 from dtradar_data import store
-from dtradar_data.errors import (CorruptDatasetError, DatasetNotFoundError, RevisionNotFoundError,
+from dtradar_data.core.errors import (CorruptDatasetError, DatasetNotFoundError, RevisionNotFoundError,
                                  SchemaMismatchError, UnknownNameError)
-from dtradar_data.schema import CELL_SCHEMA, PATH_SCHEMA, RADIO_COLUMNS
-from dtradar_data.synthetic import synthetic_dataset
+from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, RADIO_COLUMNS
+from dtradar_data.build.synthetic import synthetic_dataset
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 

@@ -5,8 +5,8 @@ import json
 import pytest
 
 from dtradar_data import store, versions
-from dtradar_data.errors import RevisionNotFoundError
-from dtradar_data.synthetic import synthetic_dataset
+from dtradar_data.core.errors import RevisionNotFoundError
+from dtradar_data.build.synthetic import synthetic_dataset
 
 SPEC = {"scene": "cubicle", "variant": "blueprint", "objects": [{"kind": "chair", "x_m": 1.0}]}
 RT = {"frequency_hz": 2.4e9, "max_depth": 5, "seed": 42}

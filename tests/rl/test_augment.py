@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from dtradar_data.errors import InvalidCoordinatesError, UnknownNameError
-from dtradar_data.synthetic import synthetic_dataset
+from dtradar_data.core.errors import InvalidCoordinatesError, UnknownNameError
+from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_rl.batched import BatchedNavEnv
 from dtradar_rl.data import load_dataset, synthetic_blocked
 from dtradar_rl.dqn import PRESETS, ConfigError, config_for, load_policy, train

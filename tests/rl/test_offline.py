@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from dtradar_data.errors import UnknownNameError
+from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.cli import main
 from dtradar_rl.data import load_dataset
 from dtradar_rl.dqn import ConfigError

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from dtradar_data.errors import UnknownNameError
+from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.data import load_dataset
 from dtradar_rl.dqn import ConfigError, DQNConfig, config_for, load_policy, train
 from dtradar_rl.mdp import GridMDP

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from dtradar_data.errors import DtradarError
+from dtradar_data.core.errors import DtradarError
 from dtradar_rl.cli import main
 from dtradar_rl.evaluate import markdown_table, path_length, spl
 from dtradar_rl.mdp import GridMDP

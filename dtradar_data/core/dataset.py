@@ -1,6 +1,6 @@
 """A loaded dataset: one version of one ``scene/variant`` per-cell table, plus its metadata.
 
-The object is a read-only view; building and storing live in :mod:`dtradar_data.pipeline` and
+The object is a read-only view; building and storing live in :mod:`dtradar_data.build` and
 :mod:`dtradar_data.store`. ``Dataset.from_table`` wraps an in-memory table (tests, synthetic data) the same way.
 """
 
@@ -14,8 +14,8 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
-from .scene import Grid
-from .schema import RADIO_COLUMNS
+from dtradar_data.core.grid import Grid
+from dtradar_data.core.schema import RADIO_COLUMNS
 
 
 #: The grid of a stored dataset is the scene's receiver grid (``meta["grid"]``); one class for both.

@@ -7,7 +7,8 @@ Sionna RT on the CPU runs through Dr.Jit's LLVM backend. Debian 12's default LLV
 2. the ``karellen-llvm-core`` wheel installed by ``make setup`` (``<venv>/lib/libLLVM.so.*``);
 3. a system LLVM 16+ (Debian ``libllvm16``..``libllvm23``: ``/usr/lib/llvm-N/lib/libLLVM*.so*``).
 
-``make setup`` ends with ``dtradar_data.llvm.main(["--check"])``, which prints what was found, or the install command when nothing was.
+``make setup`` ends with ``python -m dtradar_data check``, which prints what was found and runs one JIT kernel, or
+prints the install command when nothing was found.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import re
 import sys
 from pathlib import Path
 
-from .errors import RayTracerUnavailableError
+from dtradar_data.core.errors import RayTracerUnavailableError
 
 MIN_MAJOR = 16
 ENV_VAR = "DRJIT_LIBLLVM_PATH"
@@ -66,23 +67,3 @@ def configure() -> Path:
     path = find_libllvm()
     os.environ[ENV_VAR] = str(path)
     return path
-
-
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    try:
-        path = configure()
-    except RayTracerUnavailableError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    print(f"libLLVM for Dr.Jit: {path}")
-    if "--check" in argv:
-        # A real smoke test: start the LLVM backend and run one JIT-compiled kernel.
-        from .raytrace import smoke_test
-
-        print(smoke_test())
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

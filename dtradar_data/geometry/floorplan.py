@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .geometry import footprints, occupancy
-from .scene import SceneSpec
+from dtradar_data.geometry.occupancy import footprints, occupancy
+from dtradar_data.scenes.model import SceneSpec
 
 # Colours loosely follow the material's look (Sionna's own palette is for 3-D renders and too dark for a plan view).
 MATERIAL_COLOURS: dict[str, str] = {

@@ -23,17 +23,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import paths as P
-from .errors import DtradarError, HubError
-from .ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag, parse_id
+from dtradar_data.core import layout as P
+from dtradar_data.core.errors import (CorruptDatasetError, DatasetNotFoundError, DtradarError, HubError,
+                                      RevisionNotFoundError)
+from dtradar_data.core.ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
+from dtradar_data.store import listing, local
+from dtradar_data.store.card import default_hub_repo, render_version_card
+from dtradar_data.store.catalog import as_id
 
 #: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
 DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, P.COVERAGE_FILE, P.META_FILE)
 
 
 def default_repo(did: DatasetId) -> str:
-    from .cards import default_hub_repo
-
     return default_hub_repo(did.name)
 
 
@@ -132,18 +134,14 @@ def publish_operations(vdir: Path, card_text: str) -> list[Any]:
 def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None,
             private: bool = False, api: Any = None) -> PublishResult:
     """Upload one stored version (verified first) as one tagged commit; ``api`` replaces ``HfApi`` in tests."""
-    from . import store
-    from .cards import render_version_card
-    from .errors import CorruptDatasetError
-
-    did, version, vdir = store.resolve(name, revision)
+    did, version, vdir = local.resolve(name, revision)
     repo_id = repo_id or default_repo(did)
-    problems = store.verify_dir(vdir)
+    problems = local.verify_dir(vdir)
     if problems:
         raise CorruptDatasetError(f"refusing to publish damaged {did.name}@{version}: " + "; ".join(problems),
                                   hint="rebuild it first (`make dataset`)")
-    meta = store.read_meta(vdir)
-    history = store.history(did)
+    meta = local.read_meta(vdir)
+    history = listing.history(did)
     upto = history[: next((i + 1 for i, (_, m) in enumerate(history) if m.get("version") == version), len(history))]
     tag = next((t for t, m in history if m.get("version") == version), None)
     card = render_version_card(meta, tag=tag, history=upto, hub_repo=repo_id)
@@ -213,24 +211,23 @@ def _card_tag(readme: Path) -> str | None:
         return None
     from huggingface_hub import DatasetCard
 
+    import yaml
+
     try:
         tag = (DatasetCard.load(readme).data.to_dict().get("dtradar") or {}).get("tag")
-    except Exception:  # a hand-edited card must not block a verified download; fall back to the next free tag
-        return None
+    except (ValueError, TypeError, AttributeError, OSError, yaml.YAMLError):
+        return None  # a hand-edited card must not block a verified download; fall back to the next free tag
     return tag if isinstance(tag, str) and is_tag(tag) else None
 
 
 def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
     """Make ``name@revision`` available locally: return it if present, else download, verify and install it."""
-    from . import store
-    from .errors import DatasetNotFoundError, RevisionNotFoundError
-
     # With an explicit repo any well-formed name may be pulled (e.g. a scene this checkout has no file for).
-    did = name if isinstance(name, DatasetId) else parse_id(name, check_known=repo_id is None)
+    did = name if isinstance(name, DatasetId) else as_id(name, check_known=repo_id is None)
     revision = revision or did.revision
     if revision is not None:
         with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
-            return store.resolve(did.with_revision(None), revision)[2]
+            return local.resolve(did.with_revision(None), revision)[2]
     repo_id = repo_id or default_repo(did)
     P.work_root().mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f"pull-{did.scene}-{did.variant}-", dir=P.work_root()))
@@ -241,11 +238,11 @@ def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | N
             got = _download(repo_id, remote, stage / "download", stage / "cache")
         version_dir = stage / "version"
         version_dir.mkdir()
-        meta = store.read_meta(got)
+        meta = local.read_meta(got)
         for fname in [*(meta.get("files") or {}), P.META_FILE, P.CARD_FILE]:
             if (got / fname).is_file():
                 shutil.move(str(got / fname), version_dir / fname)
         preferred = revision if revision and is_tag(revision) else _card_tag(version_dir / P.CARD_FILE)
-        return store.install_staged(did.with_revision(None), version_dir, preferred_tag=preferred)
+        return local.install_staged(did.with_revision(None), version_dir, preferred_tag=preferred)
     finally:
         shutil.rmtree(stage, ignore_errors=True)

@@ -1,7 +1,7 @@
 """Sionna RT for dtradar: the only module that imports ``sionna.rt``, ``mitsuba`` or ``drjit``.
 
 A :class:`RayTracer` owns the one mutable object, the Sionna scene, built once from a :class:`SceneSpec` (through the
-Mitsuba XML that :mod:`dtradar_data.geometry` writes). Solvers are called with explicit keyword settings and a seed
+Mitsuba XML that :mod:`dtradar_data.geometry.meshes` writes). Solvers are called with explicit keyword settings and a seed
 taken from :class:`RTSettings`, and a cheap precondition check (:meth:`RayTracer.check_points`) runs before any
 expensive trace. Results leave this module as plain numpy (:class:`PathBatch`), so everything downstream tests
 without the ray tracer.
@@ -9,89 +9,19 @@ without the ray tracer.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+
 
 import numpy as np
 
-from .errors import InvalidCoordinatesError, RayTracerUnavailableError
+from dtradar_data.core.errors import InvalidCoordinatesError, RayTracerUnavailableError
+from dtradar_data.geometry.meshes import write_mitsuba_scene
+from dtradar_data.rt.llvm import configure as configure_llvm
+from dtradar_data.rt.settings import Device, RTSettings
 
-Device = Literal["auto", "cpu", "cuda"]
-
-
-@dataclass(frozen=True)
-class RTSettings:
-    """Ray-tracing settings. Every field except ``device`` and ``deterministic`` feeds the dataset version hash."""
-
-    frequency_hz: float = 2.4e9
-    """Carrier frequency (the paper: 2.4 GHz)."""
-    max_depth: int = 5
-    """Maximum number of interactions per path (the paper: 5)."""
-    samples_per_src: int = 10_000
-    """Rays shot from the transmitter per trace; chosen from `make bench-rt` (see README)."""
-    max_num_paths_per_src: int = 1_000_000
-    """Sionna's buffer of candidate paths per source; it also sizes the hash table that de-duplicates specular
-    chains, so a small one silently drops paths. Measured on the cubicle at 1e4 samples: 1e6 keeps 47 819 paths in
-    2.5 s, 1e7 keeps 58 652 in 6.8 s (2.3 GB); the strongest paths are the same. Use 1e7 with 1e6 samples."""
-    seed: int = 42
-    """Seed of the ray sampler; the same scene, settings and seed give identical tables."""
-    los: bool = True
-    """Trace the line-of-sight path."""
-    specular_reflection: bool = True
-    """Trace specular reflections (walls, floor, ceiling, objects)."""
-    diffuse_reflection: bool = False
-    """Trace diffuse reflections (off by default, like Sionna; costly)."""
-    refraction: bool = True
-    """Trace transmission through objects (ITU slab model)."""
-    diffraction: bool = False
-    """Trace first-order edge diffraction (off by default, like Sionna)."""
-    synthetic_array: bool = True
-    """Trace from the array centre and apply element phase shifts (Sionna's default, and much cheaper)."""
-    rx_pattern: str = "dipole"
-    rx_polarization: str = "V"
-    """Receiver: one vertical short dipole (the paper's 1x1 dipole)."""
-    batch_size: int = 1024
-    """Receivers per PathSolver call. Each call shoots all samples_per_src rays again, so bigger batches are
-    cheaper per cell; results depend on the batch partition (measured), so it is part of the version."""
-    deterministic: bool = True
-    """Bit-identical tables for the same inputs. On the CPU: pin Dr.Jit to one thread while tracing (its
-    multi-threaded path collection changes the weak-path count from run to run; measured no slower on 2 cores, and
-    lighter than Sionna's deterministic solver: 7.5 vs 17.8 GB at 1e5 samples). On CUDA: Sionna's
-    PathSolver(deterministic=True) (not measured here: no GPU)."""
-    device: Device = "auto"
-    """"auto" uses CUDA when Dr.Jit finds a GPU, else the CPU (LLVM)."""
-
-    def __post_init__(self) -> None:
-        problems = []
-        if not 1e8 <= self.frequency_hz <= 1e11:
-            problems.append(f"frequency_hz={self.frequency_hz:g} is outside 100 MHz .. 100 GHz")
-        if not 0 <= self.max_depth <= 10:
-            problems.append(f"max_depth={self.max_depth} must be in 0..10")
-        if self.samples_per_src < 1 or self.batch_size < 1 or self.max_num_paths_per_src < 1:
-            problems.append("samples_per_src, batch_size and max_num_paths_per_src must be positive")
-        if self.device not in ("auto", "cpu", "cuda"):
-            problems.append(f"device={self.device!r} must be 'auto', 'cpu' or 'cuda'")
-        if problems:
-            raise ValueError("invalid RTSettings: " + "; ".join(problems))
-
-    def hashed(self) -> dict[str, Any]:
-        """The settings that determine the result (and so the dataset version)."""
-        d = dataclasses.asdict(self)
-        d.pop("device")
-        d.pop("deterministic")  # changes only run-to-run noise, not what the table means
-        return d
-
-    def solver_kwargs(self) -> dict[str, Any]:
-        return dict(
-            max_depth=self.max_depth, max_num_paths_per_src=self.max_num_paths_per_src,
-            samples_per_src=self.samples_per_src, synthetic_array=self.synthetic_array, los=self.los,
-            specular_reflection=self.specular_reflection, diffuse_reflection=self.diffuse_reflection,
-            refraction=self.refraction, diffraction=self.diffraction, seed=self.seed,
-        )
 
 
 @dataclass
@@ -126,10 +56,8 @@ _MI = None  # the mitsuba module once a variant is set
 def _import_sionna(device: Device):
     """Configure LLVM, pick the Mitsuba variant, then import ``sionna.rt`` (order matters)."""
     global _MI
-    from .llvm import configure
-
     if device != "cuda":
-        configure()
+        configure_llvm()
     try:
         import drjit as dr
         import mitsuba as mi
@@ -159,8 +87,6 @@ class RayTracer:
     """A Sionna scene built from a :class:`SceneSpec`, with the paper's transmitter and receiver arrays."""
 
     def __init__(self, spec, settings: RTSettings = RTSettings(), *, scene_dir: Path | None = None):
-        from .geometry import write_mitsuba_scene
-
         self.spec = spec
         self.settings = settings
         self.mi, self.rt = _import_sionna(settings.device)

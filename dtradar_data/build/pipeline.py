@@ -23,9 +23,18 @@ from typing import Literal
 import numpy as np
 from tqdm.auto import tqdm
 
-from .dataset import Dataset
-from .raytrace import RTSettings
-from .schema import SCHEMA_VERSION
+from dtradar_data.build.coverage import render_coverage_png
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.ids import DatasetId, format_id
+from dtradar_data.core.layout import work_root
+from dtradar_data.core.schema import SCHEMA_VERSION
+from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.rt import features
+from dtradar_data.rt.settings import RTSettings
+from dtradar_data.rt.tracer import RayTracer, active_variant
+from dtradar_data.scenes import load_scene_spec
+from dtradar_data.core.ids import VARIANTS
+from dtradar_data.store import local, versions
 
 REDUCTION_DOC = (
     "path power = |a|^2 averaged over all (RX port, TX port) pairs; strongest path = largest path power; "
@@ -39,7 +48,7 @@ class BuildConfig:
     """Ray-trace a scene into the data root (both variants unless one is named)."""
 
     scene: str = "cubicle"
-    """Scene name (a file in dtradar_data/scenes/), e.g. cubicle or meeting."""
+    """A built-in scene (cubicle, meeting) or the path of your own scene file (.toml)."""
     variant: Literal["blueprint", "dynamic", "all"] = "all"
     """Which twin to build: blueprint (static objects), dynamic (blueprint + movable objects), or all."""
     rt: RTSettings = field(default_factory=RTSettings)
@@ -56,9 +65,7 @@ class BuildConfig:
 
 def build_inputs(spec, settings: RTSettings, *, per_path: bool) -> dict:
     """Everything that determines a dataset's content; its hash is the dataset version."""
-    from .versions import build_inputs as base_inputs
-
-    return {**base_inputs(spec.to_dict(), settings.hashed(), SCHEMA_VERSION), "per_path": per_path}
+    return {**versions.build_inputs(spec.to_dict(), settings.hashed(), SCHEMA_VERSION), "per_path": per_path}
 
 
 def _save_npz_atomic(path: Path, **arrays) -> None:
@@ -75,9 +82,6 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
 
     With ``work_dir``, each finished batch is saved there and reused on the next call (resumable).
     """
-    from . import features
-    from .geometry import occupancy
-
     blocked = occupancy(spec)
     xs, ys = spec.grid.centres()
     iy, ix = np.nonzero(~blocked)  # row-major order of the free cells
@@ -96,8 +100,6 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
                 paths = {k[2:]: z[k] for k in z.files if k.startswith("p_")}
         else:
             if tracer is None:
-                from .raytrace import RayTracer
-
                 tracer = RayTracer(spec, settings)
                 tracer.check_points(points)  # the cheap check, once, before the first expensive trace
             batch = tracer.trace(points[sl])
@@ -117,54 +119,17 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
     return cells_tbl, paths_tbl, blocked, tracer
 
 
-def render_coverage_png(spec, tracer, path: Path, *, samples: int) -> Path:
-    """RadioMapSolver path gain over the grid (4 sub-cells per cell side), obstacles drawn on top (paper Fig. 4)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .floorplan import draw_floorplan
-
-    g = spec.grid
-    width, height = g.nx * g.cell_m, g.ny * g.cell_m
-    x_lo, y_lo = g.x0_m - g.cell_m / 2, g.y0_m - g.cell_m / 2
-    centre = (x_lo + width / 2, y_lo + height / 2, spec.rx_height_m)
-    gain = tracer.radio_map(centre_m=centre, size_m=(width, height), cell_m=g.cell_m / 4, samples_per_tx=samples)
-    with np.errstate(divide="ignore"):
-        db = 10 * np.log10(gain)
-    db[~np.isfinite(db)] = np.nan
-    fig, ax = plt.subplots(figsize=(max(6.0, width / max(width, height) * 10), max(4.0, height / max(width, height) * 8)))
-    im = ax.imshow(db, origin="lower", extent=(x_lo, x_lo + width, y_lo, y_lo + height), cmap="viridis",
-                   vmin=np.nanpercentile(db, 2) if np.isfinite(db).any() else None)
-    draw_floorplan(ax, spec)
-    fig.colorbar(im, ax=ax, label=f"path gain [dB] at z = {spec.rx_height_m} m")
-    ax.set_title(f"{spec.name}: coverage map, {tracer.settings.frequency_hz / 1e9:g} GHz")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
 def build_one(spec, config: BuildConfig) -> Dataset:
     """Build (or reuse) one variant of one scene."""
-    from . import store, versions
-    from .features import column_stats
-    from .ids import DatasetId, format_id
-    from .paths import data_root
-    from .raytrace import active_variant
-
     settings = config.rt
     ds_id = DatasetId(spec.scene, spec.variant, None)
     name = format_id(ds_id)
     inputs = build_inputs(spec, settings, per_path=config.per_path)
     version = versions.version_id(inputs)
-    if store.version_exists(ds_id, version):
+    if local.version_exists(ds_id, version):
         print(f"{name}: version {version} already built, reusing it")
-        return store.load(name, revision=version)
-    work_dir = data_root() / "work" / spec.scene / spec.variant / version
+        return local.load(name, revision=version)
+    work_dir = work_root() / spec.scene / spec.variant / version
     t0 = time.perf_counter()
     cells, paths, blocked, tracer = trace_grid(spec, settings, work_dir, per_path=config.per_path,
                                                progress=config.progress)
@@ -173,8 +138,6 @@ def build_one(spec, config: BuildConfig) -> Dataset:
         extra = {}
         if config.coverage_map:
             if tracer is None:
-                from .raytrace import RayTracer
-
                 tracer = RayTracer(spec, settings)
             extra["coverage.png"] = render_coverage_png(spec, tracer, Path(tmp) / "coverage.png",
                                                         samples=config.coverage_samples)
@@ -207,20 +170,17 @@ def build_one(spec, config: BuildConfig) -> Dataset:
                 "num_with_paths": int(np.count_nonzero(cells.column("num_paths").to_numpy() > 0)),
                 "num_paths_total": paths.num_rows if paths is not None else None,
                 "trace_seconds": round(trace_s, 2),
-                "columns": column_stats(cells),
             },
         }
-        out = store.write_version(ds_id, version, cells, meta, paths=paths, extra_files=extra)
+        out = local.write_version(ds_id, version, cells, meta, paths=paths, extra_files=extra)
     if tracer is not None:
         tracer.close()
     shutil.rmtree(work_dir, ignore_errors=True)
     print(f"{name}: stored version {version} in {out}")
-    return store.load(name, revision=version)
+    return local.load(name, revision=version)
 
 
 def build(config: BuildConfig) -> list[Dataset]:
     """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
-    from .scene import VARIANTS, load_scene_spec
-
     variants = VARIANTS if config.variant == "all" else (config.variant,)
     return [build_one(load_scene_spec(config.scene, v), config) for v in variants]

@@ -15,15 +15,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from .errors import CorruptDatasetError, RevisionNotFoundError
-from .ids import MIN_HASH_PREFIX, TAG_RE, is_hash, is_tag
+from dtradar_data.core.errors import CorruptDatasetError, RevisionNotFoundError
+from dtradar_data.core.files import write_atomic
+from dtradar_data.core.ids import MIN_HASH_PREFIX, TAG_RE, is_hash, is_tag
 
 VERSION_CHARS = 16
 #: Distributions whose versions change the numbers in a dataset (the ray tracer stack) or its files (pyarrow).
@@ -115,21 +114,6 @@ def read_refs(path: Path) -> Refs:
             f"{path} is not a valid refs file ({exc})",
             hint="delete it and re-run the build (versions on disk are kept and re-tagged), or re-pull") from exc
     return Refs(tags, latest)
-
-
-def write_atomic(path: Path, text: str) -> None:
-    """Write via a temp file in the same directory + ``os.replace``: readers see the old or the new file, never half."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def write_refs(path: Path, refs: Refs) -> None:

@@ -1,12 +1,12 @@
-"""Geometry of a :class:`~dtradar_data.scene.SceneSpec`: triangle meshes, the Sionna/Mitsuba scene files and the
-occupancy grid. trimesh + numpy only: this module never imports Sionna or Mitsuba, so it tests without them.
+"""Triangle meshes of a :class:`~dtradar_data.scenes.model.SceneSpec` and the Sionna/Mitsuba scene files.
+
+trimesh + numpy only: this module never imports Sionna or Mitsuba, so it tests without them.
 
 - :func:`material_meshes` builds each box as a closed 12-triangle mesh with outward normals and concatenates the
   boxes of one ITU material into one mesh (vertices are *not* welded across boxes, so every box stays a closed
   2-manifold even where two boxes touch).
 - :func:`write_mitsuba_scene` writes ``meshes/<material>.ply`` (binary little endian, written by hand so the bytes
   depend only on the spec) and ``scene.xml`` in the Sionna RT 2.x format.
-- :func:`occupancy` is the robot's blocked-cell map, :func:`footprints` the polygons for drawing.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 import trimesh
 
-from .scene import Box, SceneSpec
+from dtradar_data.scenes.model import Box, SceneSpec
 
 # Slab thickness per material for Sionna's transmission model (it treats every surface a ray crosses as a slab of the
 # material's thickness; Sionna's default is 0.1 m). Our obstacles are closed boxes, so a ray through one crosses two
@@ -34,7 +34,6 @@ MATERIAL_THICKNESS_M: dict[str, float] = {
     "plasterboard": 0.0125,
 }
 DEFAULT_THICKNESS_M = 0.1
-OCCUPANCY_FLOOR_CLEARANCE_M = 0.05  # ignore objects wholly below this (rugs, cables): the robot drives over them
 
 
 def material_thickness(material: str) -> float:
@@ -120,101 +119,3 @@ def write_mitsuba_scene(spec: SceneSpec, out_dir: Path) -> Path:
     xml_path = out_dir / "scene.xml"
     _write_if_changed(xml_path, "\n".join(lines).encode("utf-8"))
     return xml_path
-
-
-# ---------------------------------------------------------------------------------------------------- 2-D views
-def footprints(spec: SceneSpec, include_structure: bool = False) -> list[tuple[Box, np.ndarray]]:
-    """``(box, corners float64[4, 2])`` for every obstacle (walls included), lowest first so that things standing on
-    others (laptops on tables) draw on top. ``include_structure=True`` adds the floor and ceiling slabs."""
-    boxes = spec.objects if include_structure else spec.obstacles()
-    order = sorted(range(len(boxes)), key=lambda i: (boxes[i].z_m, boxes[i].top_m, i))
-    return [(boxes[i], boxes[i].corners()) for i in order]
-
-
-def _overlap_cells(corners: np.ndarray, cx: np.ndarray, cy: np.ndarray, half: float, eps: float) -> np.ndarray:
-    """Separating-axis test of one convex quadrilateral against axis-aligned squares centred at (cx, cy).
-
-    Axes: x, y and the quadrilateral's two edge normals. The squares overlap the polygon when the projections overlap
-    by more than ``eps`` on every axis, so a box that merely touches a cell edge does not block that cell.
-    """
-    hit = np.ones(cx.shape, dtype=bool)
-    for axis in (np.array([1.0, 0.0]), np.array([0.0, 1.0])):
-        p = corners @ axis
-        c = cx * axis[0] + cy * axis[1]
-        hit &= (np.minimum(p.max(), c + half) - np.maximum(p.min(), c - half)) > eps
-    for edge in (corners[1] - corners[0], corners[2] - corners[1]):
-        n = np.array([-edge[1], edge[0]]) / np.hypot(*edge)
-        p = corners @ n
-        c = cx * n[0] + cy * n[1]
-        r = half * (abs(n[0]) + abs(n[1]))  # projected half-extent of a square of half side `half`
-        hit &= (np.minimum(p.max(), c + r) - np.maximum(p.min(), c - r)) > eps
-    return hit
-
-
-def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
-    """bool[ny, nx]: True where the robot cannot be.
-
-    Rule: a cell is blocked when an obstacle (any box except floor and ceiling slabs; walls count) whose vertical
-    span ``[z_m, z_m + height_m]`` overlaps ``[0.05 m, robot_height_m]`` covers any part of the cell with positive
-    area. The overlap is exact (separating-axis test of the rotated footprint against the square cell), with ``eps``
-    (1 micrometre) of slack so that a box flush with a cell edge leaves the neighbour free. Consequences: a wall-
-    mounted TV above the robot does not block; a table (0.75 m) does; a cell is blocked if a chair clips its corner.
-    """
-    g = spec.grid
-    blocked = np.zeros(g.shape, dtype=bool)
-    xs, ys = g.centres()
-    half = g.cell_m / 2
-    lo, hi = OCCUPANCY_FLOOR_CLEARANCE_M, spec.robot_height_m
-    for box, corners in footprints(spec):
-        if not (box.z_m < hi and box.top_m > lo):
-            continue
-        # Candidate cells from the footprint's bounding box, then the exact test on them only.
-        ix0 = max(0, math.floor((corners[:, 0].min() - g.x0_m) / g.cell_m + 0.5))
-        ix1 = min(g.nx - 1, math.floor((corners[:, 0].max() - g.x0_m) / g.cell_m + 0.5))
-        iy0 = max(0, math.floor((corners[:, 1].min() - g.y0_m) / g.cell_m + 0.5))
-        iy1 = min(g.ny - 1, math.floor((corners[:, 1].max() - g.y0_m) / g.cell_m + 0.5))
-        if ix0 > ix1 or iy0 > iy1:
-            continue
-        cx, cy = np.meshgrid(xs[ix0:ix1 + 1], ys[iy0:iy1 + 1])
-        blocked[iy0:iy1 + 1, ix0:ix1 + 1] |= _overlap_cells(corners, cx, cy, half, eps)
-    return blocked
-
-
-def free_components(blocked: np.ndarray) -> np.ndarray:
-    """int32[ny, nx] labels of the 4-connected free regions (the robot moves X-/X+/Y-/Y+): 0 on blocked cells,
-    1 for the largest region, 2 for the next largest, ... (ties by first cell in row-major order)."""
-    free = ~np.asarray(blocked, dtype=bool)
-    ny, nx = free.shape
-    labels = np.zeros(free.shape, dtype=np.int32)
-    sizes: list[int] = []
-    for start in zip(*np.nonzero(free)):
-        if labels[start]:
-            continue
-        label = len(sizes) + 1
-        labels[start] = label
-        stack, size = [start], 0
-        while stack:
-            y, x = stack.pop()
-            size += 1
-            for yy, xx in ((y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1)):
-                if 0 <= yy < ny and 0 <= xx < nx and free[yy, xx] and not labels[yy, xx]:
-                    labels[yy, xx] = label
-                    stack.append((yy, xx))
-        sizes.append(size)
-    # Relabel by decreasing size (stable), so label 1 is always the largest region.
-    order = sorted(range(len(sizes)), key=lambda k: -sizes[k])
-    remap = np.zeros(len(sizes) + 1, dtype=np.int32)
-    remap[[k + 1 for k in order]] = np.arange(1, len(sizes) + 1, dtype=np.int32)
-    return remap[labels]
-
-
-def largest_free_component(blocked: np.ndarray) -> np.ndarray:
-    """bool[ny, nx]: the free cells of the largest 4-connected region; draw start/target pairs from it so that
-    every pair is reachable."""
-    return free_components(blocked) == 1
-
-
-def largest_free_component_fraction(blocked: np.ndarray) -> float:
-    """Share of the free cells that lie in the largest 4-connected free region (1.0 when all free cells connect)."""
-    total = int((~np.asarray(blocked, dtype=bool)).sum())
-    return float(largest_free_component(blocked).sum()) / total if total else 0.0

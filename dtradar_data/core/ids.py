@@ -6,9 +6,9 @@ Modelled on Minari (``namespace/name-v0``) and huggingface_hub (``repo@revision`
 * ``variant``  — ``blueprint`` (static objects) or ``dynamic`` (blueprint + movable objects);
 * ``revision`` — optional: a tag ``v0``, ``v1``, ... or a version hash (hex, a prefix of at least 7 characters).
 
-``parse_id`` checks the grammar and, unless told otherwise, that the scene is known: a scene with a description file
-(:func:`dtradar_data.scene.available_scenes`) or one that already has data in the data root (datasets imported or
-pulled from elsewhere). Unknown names fail with a "did you mean ...?" built from the known ``scene/variant`` names.
+``parse_id`` checks the grammar and, given the ``known`` scenes, that the scene is one of them; unknown names fail with
+a "did you mean ...?" built from the known ``scene/variant`` names. Which scenes are known (built-in ones and those
+with data in the data root) is the store's business: :func:`dtradar_data.store.catalog.as_id`.
 """
 
 from __future__ import annotations
@@ -17,11 +17,9 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .errors import UnknownNameError, did_you_mean, unknown_name
+from dtradar_data.core.errors import UnknownNameError, did_you_mean, unknown_name
 
 VARIANTS: tuple[str, ...] = ("blueprint", "dynamic")
-#: Scenes assumed when :mod:`dtradar_data.scene` is not importable (it is written in parallel with this module).
-FALLBACK_SCENES: tuple[str, ...] = ("cubicle", "meeting")
 
 SCENE_RE = re.compile(r"[a-z0-9][a-z0-9_-]*")
 TAG_RE = re.compile(r"v(0|[1-9][0-9]*)")
@@ -58,49 +56,24 @@ def is_hash(revision: str) -> bool:
     return HASH_RE.fullmatch(revision) is not None
 
 
-def builtin_scenes() -> list[str]:
-    """Scenes with a description file shipped in :mod:`dtradar_data.scenes`."""
-    try:
-        from .scene import available_scenes
-    except ModuleNotFoundError as exc:  # only the missing module itself; a bug inside scene.py must surface
-        if exc.name != f"{__package__}.scene":
-            raise
-        return list(FALLBACK_SCENES)
-    return list(available_scenes())
-
-
-def stored_scenes() -> list[str]:
-    """Scenes that have at least one dataset directory in the data root."""
-    from .paths import datasets_root
-
-    root = datasets_root()
-    if not root.is_dir():
-        return []
-    return sorted(p.name for p in root.iterdir() if p.is_dir() and SCENE_RE.fullmatch(p.name))
-
-
-def known_scenes() -> list[str]:
-    return sorted(set(builtin_scenes()) | set(stored_scenes()))
-
-
-def known_names(scenes: Iterable[str] | None = None) -> list[str]:
-    """Every ``scene/variant`` name for the given scenes (default: :func:`known_scenes`)."""
-    scenes = known_scenes() if scenes is None else scenes
+def names_of(scenes: Iterable[str]) -> list[str]:
+    """Every ``scene/variant`` name of the given scenes."""
     return [f"{s}/{v}" for s in sorted(set(scenes)) for v in VARIANTS]
 
 
-def parse_id(text: str, *, known: Iterable[str] | None = None, check_known: bool = True) -> DatasetId:
+def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
     """Parse ``scene/variant[@revision]``.
 
-    ``known`` is the set of valid scenes (default: :func:`known_scenes`); ``check_known=False`` checks the grammar
-    only. Raises :class:`UnknownNameError` with a suggestion on a malformed id or an unknown scene or variant.
+    ``known`` is the set of valid scenes; without it only the grammar is checked. Raises :class:`UnknownNameError`
+    with a suggestion on a malformed id or an unknown scene or variant.
     """
+    check_known = known is not None
     if not isinstance(text, str):
         raise UnknownNameError(f"dataset id must be a string, got {type(text).__name__}", hint=f"use {GRAMMAR}")
     raw = text.strip()
     name, sep, revision = raw.partition("@")
-    scenes = sorted(set(known_scenes() if known is None else known))
-    candidates = known_names(scenes)
+    scenes = sorted(set(known or ()))
+    candidates = names_of(scenes)
     if sep and not revision:
         raise UnknownNameError(f"dataset id {text!r} has an empty revision after '@'",
                                hint="write a tag (v0, v1, ...) or a version hash after '@', or drop the '@'")
@@ -123,11 +96,6 @@ def parse_id(text: str, *, known: Iterable[str] | None = None, check_known: bool
 
 
 def format_id(dataset_id: DatasetId) -> str:
-    """The inverse of :func:`parse_id`: ``parse_id(format_id(d), check_known=False) == d``."""
+    """The inverse of :func:`parse_id`: ``parse_id(format_id(d)) == d``."""
     suffix = f"@{dataset_id.revision}" if dataset_id.revision else ""
     return f"{dataset_id.scene}/{dataset_id.variant}{suffix}"
-
-
-def as_id(name: str | DatasetId, *, check_known: bool = True) -> DatasetId:
-    """Accept either a string or an already parsed id (public functions take both)."""
-    return name if isinstance(name, DatasetId) else parse_id(name, check_known=check_known)

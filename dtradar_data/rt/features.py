@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from .schema import CELL_SCHEMA, PATH_SCHEMA
+from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA
 
 # Sionna InteractionType codes -> one letter each (the per-path table's `interactions` column).
 INTERACTION_LETTERS = {1: "S", 2: "D", 4: "R", 8: "F"}
@@ -131,17 +131,3 @@ def paths_table(rows: list[dict[str, np.ndarray]]) -> pa.Table:
         cols[f.name] = pa.array(values.tolist() if f.name == "interactions" else values, f.type)
     table = pa.Table.from_pydict(cols, schema=PATH_SCHEMA)
     return table.sort_by([("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")])
-
-
-def column_stats(table: pa.Table) -> dict[str, dict[str, float]]:
-    """Min / max / null count of every numeric column (for the metadata and the card)."""
-    import pyarrow.compute as pc
-
-    out = {}
-    for name in table.column_names:
-        col = table.column(name)
-        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type):
-            mm = pc.min_max(col)
-            lo, hi = mm["min"].as_py(), mm["max"].as_py()
-            out[name] = {"min": lo, "max": hi, "nulls": col.null_count}
-    return out

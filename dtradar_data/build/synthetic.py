@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from .dataset import Dataset, GridInfo
-from .schema import CELL_SCHEMA, SCHEMA_VERSION
+from dtradar_data.core.dataset import Dataset, GridInfo
+from dtradar_data.core.schema import CELL_SCHEMA, SCHEMA_VERSION
 
 C = 299_792_458.0
 

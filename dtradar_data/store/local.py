@@ -1,7 +1,7 @@
 """The local dataset store: versioned Parquet under the data root, written atomically, read with checks.
 
 Writing (:func:`write_version`): everything goes into a staging directory under ``<root>/work/``; the Parquet files
-carry the explicit :data:`~dtradar_data.schema.CELL_SCHEMA` / ``PATH_SCHEMA`` (zstd, page checksums) and the build
+carry the explicit :data:`~dtradar_data.core.schema.CELL_SCHEMA` / ``PATH_SCHEMA`` (zstd, page checksums) and the build
 metadata as JSON under the schema-metadata key ``b"dtradar.meta"``; ``meta.json`` records the sha256 and size of every
 data file. Only then is the directory renamed into ``<root>/datasets/<scene>/<variant>/<version>`` (one ``rename``:
 a version is either complete or absent) and ``refs.json`` replaced atomically. A failure anywhere removes the staging
@@ -17,15 +17,12 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import hashlib
 import json
 import logging
-import math
 import os
 import shutil
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -34,13 +31,16 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from . import paths as P
-from .dataset import Dataset
-from .errors import (CorruptDatasetError, DatasetNotFoundError, DtradarError, RevisionNotFoundError,
-                     SchemaMismatchError)
-from .ids import HASH_RE, DatasetId, as_id, builtin_scenes, known_names, VARIANTS
-from .schema import CELL_SCHEMA, PATH_SCHEMA, SCHEMA_VERSION
-from .versions import Refs, read_refs, resolve_revision, write_refs
+from dtradar_data.core import layout as P
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import (CorruptDatasetError, DatasetNotFoundError, DtradarError, RevisionNotFoundError,
+                                      SchemaMismatchError)
+from dtradar_data.core.files import json_safe, sha256_file
+from dtradar_data.core.ids import HASH_RE, DatasetId
+from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, SCHEMA_VERSION
+from dtradar_data.store.card import render_version_card
+from dtradar_data.store.catalog import as_id
+from dtradar_data.store.versions import Refs, read_refs, resolve_revision, write_refs
 
 log = logging.getLogger(__name__)
 
@@ -118,33 +118,10 @@ def table_stats(cells: pa.Table) -> dict[str, Any]:
             "num_free": cells.num_rows - int(pc.sum(blocked).as_py() or 0),
             "num_with_paths": int(pc.sum(pc.greater(cells.column("num_paths"), 0)).as_py() or 0),
             "num_los": int(pc.sum(cells.column("los")).as_py() or 0),
-            "columns": _json_safe(ranges)}
+            "columns": json_safe(ranges)}
 
 
 # ------------------------------------------------------------------------------------------------------ file utils
-
-def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
-
-
-def _json_safe(obj: Any) -> Any:
-    # Stats of an all-null column come out as NaN; strict JSON (and the YAML card) has no NaN, so store null.
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return _json_safe(obj.item())
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
-
 
 def _write_parquet(table: pa.Table, path: Path, meta_json: bytes) -> None:
     schema_meta = dict(table.schema.metadata or {})
@@ -191,7 +168,7 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
                                 hint=f"pass {did.name!r} and the version separately")
     if not isinstance(version, str) or not HASH_RE.fullmatch(version):
         raise InvalidTableError(f"version {version!r} is not a lowercase hex content hash",
-                                hint="compute it with dtradar_data.versions.version_id(inputs)")
+                                hint="compute it with dtradar_data.store.versions.version_id(inputs)")
     final = P.version_dir(did.scene, did.variant, version)
     if version_exists(did, version):
         log.info("%s: version %s exists, reusing it", did.name, version)
@@ -212,7 +189,7 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
         if not Path(src).is_file():
             raise InvalidTableError(f"extra file {fname!r}: {src} does not exist", hint="write it before storing")
 
-    meta = _json_safe(copy.deepcopy(meta))
+    meta = json_safe(copy.deepcopy(meta))
     meta["stats"] = {**table_stats(cells), **(meta.get("stats") or {})}
     meta.update(name=did.name, scene=did.scene, variant=did.variant, version=version, schema_version=SCHEMA_VERSION)
     meta.setdefault("created_utc", datetime.now(timezone.utc).isoformat(timespec="seconds"))
@@ -238,8 +215,6 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
 def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], preferred_tag: str | None = None
              ) -> Path:
     """Under the dataset lock: tag, write meta.json and the card into ``stage``, rename it into place."""
-    from .cards import render_version_card  # cards imports store for history; import here to avoid a cycle
-
     ddir = P.dataset_dir(did.scene, did.variant)
     final = ddir / version
     with _locked(ddir):
@@ -250,7 +225,7 @@ def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], pr
         if tag is None:
             tag = preferred_tag if preferred_tag and preferred_tag not in refs.tags else refs.next_tag()
         (stage / P.META_FILE).write_text(json.dumps(meta, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
-        history = _history_metas(did, refs) + [(tag, meta)]
+        history = history_metas(did, refs) + [(tag, meta)]
         (stage / P.CARD_FILE).write_text(render_version_card(meta, tag=tag, history=history))
         if final.exists():  # a leftover without meta.json (e.g. copied by hand): never merge into it
             raise CorruptDatasetError(f"{final} exists but has no {P.META_FILE}",
@@ -271,7 +246,7 @@ def _is_newer(tag: str, refs: Refs) -> bool:
 def install_staged(dataset_id: str | DatasetId, stage: Path, *, preferred_tag: str | None = None) -> Path:
     """Install an already complete version directory (e.g. downloaded from the Hub) after verifying it fully.
 
-    Used by :mod:`dtradar_data.hub`; ``stage`` must be under the data root's work dir and is consumed.
+    Used by :mod:`dtradar_data.publish.hub`; ``stage`` must be under the data root's work dir and is consumed.
     """
     did = as_id(dataset_id, check_known=False)
     meta = read_meta(stage)
@@ -361,23 +336,13 @@ def resolve(name: str | DatasetId, revision: str | None = None) -> tuple[Dataset
     return did.with_revision(revision), version, P.version_dir(did.scene, did.variant, version)
 
 
-def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = False, verify: bool = True,
-         from_hub: bool = False, repo_id: str | None = None) -> Dataset:
-    """Load a dataset version: the newest without ``revision`` (or ``@rev`` in ``name``), else a tag or hash.
+def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = False, verify: bool = True) -> Dataset:
+    """Load a stored dataset version: the newest without ``revision`` (or ``@rev`` in ``name``), else a tag or hash.
 
     ``paths=True`` also reads the per-path table into ``Dataset.paths_table`` (eagerly). ``verify`` re-hashes the
-    files read against ``meta.json``. ``from_hub=True`` pulls the revision from the Hugging Face Hub when it is not
-    in the local store (see :func:`dtradar_data.hub.pull`).
+    files read against ``meta.json``. (``dtradar_data.load`` adds the Hub fallback on top of this.)
     """
-    try:
-        did, version, vdir = resolve(name, revision)
-    except (DatasetNotFoundError, RevisionNotFoundError):
-        if not from_hub:
-            raise
-        from .hub import pull
-
-        pull(name, revision, repo_id=repo_id)
-        did, version, vdir = resolve(name, revision)
+    did, version, vdir = resolve(name, revision)
     meta = read_meta(vdir)
     if verify:
         _check_hash(vdir, P.CELLS_FILE, meta)
@@ -397,71 +362,6 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
         raise CorruptDatasetError(f"{vdir / P.CELLS_FILE} has {table.num_rows} rows, meta.json grid is "
                                   f"{grid.get('nx')}x{grid.get('ny')}", hint="rebuild the dataset or re-pull it")
     return Dataset(name=did.name, table=table, meta=meta, version=version, path=vdir, paths_table=paths_table)
-
-
-# ------------------------------------------------------------------------------------------------ listing, verify
-
-@dataclass(frozen=True)
-class VersionInfo:
-    tag: str | None
-    version: str
-    created_utc: str | None
-    num_rows: int | None
-    size_bytes: int
-    path: Path
-
-
-@dataclass(frozen=True)
-class DatasetEntry:
-    """One ``scene/variant``: built-in (has a scene file) and/or stored (has versions)."""
-
-    name: str
-    scene: str
-    variant: str
-    builtin: bool
-    versions: tuple[VersionInfo, ...]
-    latest: str | None
-
-    @property
-    def built(self) -> bool:
-        return bool(self.versions)
-
-
-def version_infos(did: DatasetId) -> list[VersionInfo]:
-    refs = read_refs(P.refs_path(did.scene, did.variant))
-    out = []
-    for v in local_versions(did):
-        vdir = P.version_dir(did.scene, did.variant, v)
-        meta = read_meta(vdir)
-        files = meta.get("files") or {}
-        out.append(VersionInfo(tag=refs.tag_of(v), version=v, created_utc=meta.get("created_utc"),
-                               num_rows=(meta.get("stats") or {}).get("num_cells", _grid_cells(meta)),
-                               size_bytes=sum(int(f.get("bytes", 0)) for f in files.values()), path=vdir))
-    return out
-
-
-def _grid_cells(meta: dict[str, Any]) -> int | None:
-    g = meta.get("grid") or {}
-    return int(g["nx"]) * int(g["ny"]) if "nx" in g and "ny" in g else None
-
-
-def list_datasets() -> list[DatasetEntry]:
-    """Every built-in ``scene/variant`` (built or not) and every stored one, sorted by name."""
-    builtin = set(builtin_scenes())
-    names = set(known_names(builtin))
-    root = P.datasets_root()
-    if root.is_dir():
-        names |= {f"{s.name}/{v.name}" for s in root.iterdir() if s.is_dir()
-                  for v in s.iterdir() if v.is_dir() and v.name in VARIANTS}
-    rows = []
-    for name in sorted(names):
-        scene, variant = name.split("/")
-        did = DatasetId(scene, variant)
-        infos = version_infos(did)
-        refs = read_refs(P.refs_path(scene, variant))
-        latest = refs.latest if refs.latest in {i.version for i in infos} else (infos[-1].version if infos else None)
-        rows.append(DatasetEntry(name, scene, variant, scene in builtin, tuple(infos), latest))
-    return rows
 
 
 def verify_dir(vdir: Path) -> list[str]:
@@ -489,17 +389,7 @@ def verify_dir(vdir: Path) -> list[str]:
     return problems
 
 
-def verify(name: str | DatasetId, revision: str | None = None) -> dict[str, list[str]]:
-    """``{version: problems}`` for one version (``revision`` or ``@rev`` in ``name``) or, without one, all."""
-    did = as_id(name)
-    if revision or did.revision:
-        _, version, vdir = resolve(did, revision)
-        return {version: verify_dir(vdir)}
-    resolve(did)  # raises DatasetNotFoundError with the build hint when there is nothing
-    return {v: verify_dir(P.version_dir(did.scene, did.variant, v)) for v in local_versions(did)}
-
-
-def _history_metas(did: DatasetId, refs: Refs) -> list[tuple[str, dict[str, Any]]]:
+def history_metas(did: DatasetId, refs: Refs) -> list[tuple[str, dict[str, Any]]]:
     """``(tag, meta)`` of the stored versions, oldest first (for the card's version history)."""
     out = []
     for tag, version in refs.ordered():
@@ -507,8 +397,3 @@ def _history_metas(did: DatasetId, refs: Refs) -> list[tuple[str, dict[str, Any]
         if (vdir / P.META_FILE).is_file():
             out.append((tag, read_meta(vdir)))
     return out
-
-
-def history(name: str | DatasetId) -> list[tuple[str, dict[str, Any]]]:
-    did = as_id(name)
-    return _history_metas(did, read_refs(P.refs_path(did.scene, did.variant)))

@@ -4,30 +4,20 @@ Rendering uses ``huggingface_hub.DatasetCard.from_template`` with ``dtradar_data
 front matter (``DatasetCardData``) carries licence, tags, size category and ``configs`` whose ``data_files`` point at
 ``cells.parquet`` / ``paths.parquet`` in the same directory, so the Hub viewer and ``datasets.load_dataset`` read
 the Parquet directly. A card is a pure function of ``(meta, tag, history, hub_repo)``: no clock, no environment.
-
-Committed cards of the built-in datasets live in ``cards/<scene>/<variant>/``: ``card.json`` (the newest stored
-version's ``meta.json``, its tag and the version history: the card's only input), ``README.md`` (rendered from
-``card.json``) and ``coverage.png``. ``python -m dtradar_data cards`` refreshes them from the local store;
-``--check`` (and the test suite) re-renders every committed ``card.json`` and fails when ``README.md`` differs, so
-a template or metadata change without ``make cards`` is caught without needing the datasets themselves.
+The store writes the card of every version it installs; :mod:`dtradar_data.publish.cards` keeps the committed copies.
 """
 
 from __future__ import annotations
 
-import json
-import shutil
 from collections import Counter
 from importlib import resources
-from pathlib import Path
 from typing import Any
 
 from huggingface_hub import DatasetCard, DatasetCardData
 
-from . import paths as P
-from .errors import DatasetNotFoundError
-from .schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_COLUMN_DESCRIPTIONS, PATH_SCHEMA
+from dtradar_data.core import layout as P
+from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_COLUMN_DESCRIPTIONS, PATH_SCHEMA
 
-CARD_INPUTS = "card.json"
 DEFAULT_HUB_NAMESPACE = "dtradar"
 TAGS = ("robotics", "reinforcement-learning", "wireless", "radio", "ray-tracing", "sionna", "digital-twin",
         "parquet")
@@ -197,7 +187,7 @@ def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str
                      "changes": _changes(history[i - 1] if i else None, h)})
     card = DatasetCard.from_template(
         card_data(meta, tag=tag, hub_repo=hub_repo),
-        template_path=str(resources.files("dtradar_data") / "templates" / "dataset_card.md"),
+        template_path=str(resources.files("dtradar_data.store") / "templates" / "dataset_card.md"),
         pretty_name=_pretty_name(meta), summary=summary, name=name, version=meta.get("version"), tag=tag,
         schema_version=meta.get("schema_version"), created_utc=meta.get("created_utc", "—"), num_rows=n,
         nx=grid.get("nx"), ny=grid.get("ny"), cell_m=grid.get("cell_m"), x0_m=grid.get("x0_m"),
@@ -230,69 +220,3 @@ def render_version_card(meta: dict[str, Any], *, tag: str | None, history: list[
                         hub_repo: str | None = None) -> str:
     """The card of a stored version; ``history`` holds ``(tag, meta)`` pairs, oldest first (store's format)."""
     return render_card(meta, tag=tag, history=[history_entry(t, m) for t, m in history], hub_repo=hub_repo)
-
-
-# ------------------------------------------------------------------------------------------------ committed cards
-
-def render_inputs(inputs: dict[str, Any]) -> str:
-    return render_card(inputs["meta"], tag=inputs.get("tag"), history=inputs.get("history") or [])
-
-
-def snapshot(name: str, out_dir: Path) -> Path:
-    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png}`` from the newest stored version."""
-    from . import store
-
-    _, version, vdir = store.resolve(name)
-    entries = store.history(name)
-    meta = store.read_meta(vdir)
-    tag = next((t for t, m in entries if m.get("version") == version), None)
-    # History up to the snapshotted version: later untagged/pulled versions are not part of its story.
-    upto = [history_entry(t, m) for t, m in entries]
-    upto = upto[: next((i + 1 for i, h in enumerate(upto) if h["version"] == version), len(upto))]
-    inputs = {"tag": tag, "meta": meta, "history": upto}
-    target = out_dir / meta["scene"] / meta["variant"]
-    target.mkdir(parents=True, exist_ok=True)
-    (target / CARD_INPUTS).write_text(json.dumps(inputs, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
-    (target / P.CARD_FILE).write_text(render_inputs(inputs))
-    if (vdir / P.COVERAGE_FILE).is_file():
-        shutil.copyfile(vdir / P.COVERAGE_FILE, target / P.COVERAGE_FILE)
-    return target
-
-
-def write_builtin_cards(out_dir: Path, names: list[str] | None = None) -> tuple[list[Path], list[str]]:
-    """Refresh the committed cards of ``names`` (default: every built-in dataset); returns (written, skipped)."""
-    from . import store
-
-    entries = store.list_datasets()
-    wanted = names or [e.name for e in entries if e.builtin]
-    written, skipped = [], []
-    for name in wanted:
-        try:
-            written.append(snapshot(name, out_dir))
-        except DatasetNotFoundError:
-            skipped.append(name)  # not built here: its committed card (if any) is left as it is
-    return written, skipped
-
-
-def committed_cards(cards_dir: Path) -> list[Path]:
-    return sorted(p.parent for p in cards_dir.glob(f"*/*/{CARD_INPUTS}"))
-
-
-def stale_cards(cards_dir: Path) -> list[Path]:
-    """Card directories whose ``README.md`` differs from what their ``card.json`` renders to now."""
-    stale = []
-    for d in committed_cards(cards_dir):
-        inputs = json.loads((d / CARD_INPUTS).read_text())
-        readme = d / P.CARD_FILE
-        if not readme.is_file() or readme.read_text() != render_inputs(inputs):
-            stale.append(d)
-    return stale
-
-
-def rerender(cards_dir: Path) -> list[Path]:
-    """Re-render every committed card from its ``card.json`` (after a template change, no datasets needed)."""
-    out = []
-    for d in committed_cards(cards_dir):
-        (d / P.CARD_FILE).write_text(render_inputs(json.loads((d / CARD_INPUTS).read_text())))
-        out.append(d)
-    return out

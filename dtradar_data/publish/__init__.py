@@ -1,0 +1,1 @@
+"""Sharing datasets: the Hugging Face Hub (publish, pull, load with a Hub fallback) and the committed cards."""

@@ -1,0 +1,82 @@
+"""The committed cards of the built-in datasets, in ``cards/<scene>/<variant>/``.
+
+Each holds ``card.json`` (the newest stored version's ``meta.json``, its tag and the version history: the card's only
+input), ``README.md`` (rendered from ``card.json`` by :func:`dtradar_data.store.card.render_card`) and
+``coverage.png``. ``python -m dtradar_data cards`` refreshes them from the local store; ``--check`` (and the test
+suite) re-renders every committed ``card.json`` and fails when ``README.md`` differs, so a template or metadata change
+without ``make cards`` is caught without needing the datasets themselves.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+from dtradar_data.core import layout as P
+from dtradar_data.core.errors import DatasetNotFoundError
+from dtradar_data.store.local import listing, local
+from dtradar_data.store.card import history_entry, render_card
+
+CARD_INPUTS = "card.json"
+
+
+def render_inputs(inputs: dict[str, Any]) -> str:
+    return render_card(inputs["meta"], tag=inputs.get("tag"), history=inputs.get("history") or [])
+
+
+def snapshot(name: str, out_dir: Path) -> Path:
+    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png}`` from the newest stored version."""
+    _, version, vdir = local.resolve(name)
+    entries = listing.history(name)
+    meta = local.read_meta(vdir)
+    tag = next((t for t, m in entries if m.get("version") == version), None)
+    # History up to the snapshotted version: later untagged/pulled versions are not part of its story.
+    upto = [history_entry(t, m) for t, m in entries]
+    upto = upto[: next((i + 1 for i, h in enumerate(upto) if h["version"] == version), len(upto))]
+    inputs = {"tag": tag, "meta": meta, "history": upto}
+    target = out_dir / meta["scene"] / meta["variant"]
+    target.mkdir(parents=True, exist_ok=True)
+    (target / CARD_INPUTS).write_text(json.dumps(inputs, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
+    (target / P.CARD_FILE).write_text(render_inputs(inputs))
+    if (vdir / P.COVERAGE_FILE).is_file():
+        shutil.copyfile(vdir / P.COVERAGE_FILE, target / P.COVERAGE_FILE)
+    return target
+
+
+def write_builtin_cards(out_dir: Path, names: list[str] | None = None) -> tuple[list[Path], list[str]]:
+    """Refresh the committed cards of ``names`` (default: every built-in dataset); returns (written, skipped)."""
+    entries = listing.list_datasets()
+    wanted = names or [e.name for e in entries if e.builtin]
+    written, skipped = [], []
+    for name in wanted:
+        try:
+            written.append(snapshot(name, out_dir))
+        except DatasetNotFoundError:
+            skipped.append(name)  # not built here: its committed card (if any) is left as it is
+    return written, skipped
+
+
+def committed_cards(cards_dir: Path) -> list[Path]:
+    return sorted(p.parent for p in cards_dir.glob(f"*/*/{CARD_INPUTS}"))
+
+
+def stale_cards(cards_dir: Path) -> list[Path]:
+    """Card directories whose ``README.md`` differs from what their ``card.json`` renders to now."""
+    stale = []
+    for d in committed_cards(cards_dir):
+        inputs = json.loads((d / CARD_INPUTS).read_text())
+        readme = d / P.CARD_FILE
+        if not readme.is_file() or readme.read_text() != render_inputs(inputs):
+            stale.append(d)
+    return stale
+
+
+def rerender(cards_dir: Path) -> list[Path]:
+    """Re-render every committed card from its ``card.json`` (after a template change, no datasets needed)."""
+    out = []
+    for d in committed_cards(cards_dir):
+        (d / P.CARD_FILE).write_text(render_inputs(json.loads((d / CARD_INPUTS).read_text())))
+        out.append(d)
+    return out

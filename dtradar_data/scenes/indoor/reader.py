@@ -1,0 +1,453 @@
+"""Read an indoor scene file (TOML) into a :class:`~dtradar_data.scenes.model.SceneSpec`.
+
+A room scene is a rectangular room (walls, floor, optional ceiling) plus obstacles, each a box as the paper describes
+them. One TOML file per scene holds the *blueprint* objects and a ``[dynamic]`` section that lists the *changes*
+(objects added, moved / re-oriented by name, removed): the dynamic twin is blueprint + changes, so the two variants can
+never drift apart silently.
+
+File layout (``cubicle.toml`` beside this module is a commented example)::
+
+    format = 1
+    [scene]    name, title, description, source, licence, attribution
+    [room]     width_m (x), length_m (y), height_m, wall_thickness_m, wall_material, floor_material,
+               floor_thickness_m, [ceiling_material, ceiling_thickness_m]
+    [grid]     cell_m, nx, ny, [x0_m, y0_m]          (default: first cell centre at cell_m/2 from the corner)
+    [tx]       position_m, [look_at_m, num_rows, num_cols, pattern, polarization, power_dbm]
+    [robot]    rx_height_m, robot_height_m
+    [kinds.<kind>]   defaults for objects of that kind: material, width_m, length_m, height_m, [z_m, yaw_deg]
+    [[objects]]      name, kind, x_m, y_m, [material, width_m, length_m, height_m, z_m, yaw_deg]
+    [dynamic]        description, [[dynamic.add]] (like objects), [[dynamic.move]] (name + fields to change),
+                     remove = [names]
+
+The room frame: the interior floor spans ``[0, width_m] x [0, length_m]`` at ``z = 0``; walls stand outside it.
+
+The document's shape (sections, keys, types, ranges, names) is checked by pydantic models; what pydantic cannot see
+(objects inside the room, unique names, changes that name existing objects) is checked after it. Either way a mistake
+raises :class:`~dtradar_data.core.errors.SceneFileError` naming the file, the object and the field, and how to fix it.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
+from pydantic_core import PydanticCustomError
+
+from dtradar_data.core.errors import SceneFileError, did_you_mean
+from dtradar_data.core.grid import Grid
+from dtradar_data.scenes.materials import ITU_MATERIALS
+from dtradar_data.scenes.model import POLARIZATIONS, PATTERNS, Box, Room, SceneSpec, TxSpec
+
+FORMAT = 1
+_EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
+NAME_CHARS = "lower-case letters, digits, '-' and '_'"
+
+
+# ------------------------------------------------------------------------------------------- field types
+def _fail(problem: str, hint: str) -> PydanticCustomError:
+    return PydanticCustomError("dtradar", "{problem}", {"problem": problem, "hint": hint})
+
+
+def _finite(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _fail("must be a finite number, got {!r}".format(value), "write a number, e.g. `1.0`")
+    return float(value)
+
+
+def _positive(value: Any) -> float:
+    value = _finite(value)
+    if value <= 0:
+        raise _fail(f"must be > 0, got {value!r}", "give a positive size in metres")
+    return value
+
+
+def _positive_int(value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+        raise _fail(f"must be a positive integer, got {value!r}", "write e.g. `8`")
+    return value
+
+
+def _text(value: Any) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise _fail(f"must be a non-empty string, got {value!r}", 'write `"..."`')
+    return value.strip()
+
+
+def _choice(choices: tuple[str, ...], what: str):
+    def check(value: Any) -> str:
+        value = _text(value)
+        if value not in choices:
+            close = did_you_mean(value, choices)
+            raise _fail(f"{value!r} is not {what}" + (f"; {close}" if close else ""), "use one of: " + ", ".join(choices))
+        return value
+    return check
+
+
+def _name(kind_of_name: str, allow_dash: bool):
+    chars = NAME_CHARS if allow_dash else "lower-case letters, digits and '_'"
+
+    def check(value: Any) -> str:
+        value = _text(value)
+        ok = value[0].isalnum() and all(c.islower() or c.isdigit() or c == "_" or (allow_dash and c == "-")
+                                        for c in value) and value.isascii()
+        if not ok or (not allow_dash and not value[0].isalpha()):
+            raise _fail(f"{value!r} is not a valid {kind_of_name}", f"use {chars} (e.g. 'chair_01')")
+        return value
+    return check
+
+
+def _vec3(value: Any) -> tuple[float, float, float]:
+    if not (isinstance(value, list) and len(value) == 3):
+        raise _fail(f"must be a list of three numbers [x, y, z], got {value!r}", "write e.g. `[1.0, 2.0, 2.9]`")
+    return tuple(_finite(v) for v in value)  # type: ignore[return-value]
+
+
+Num = Annotated[float, BeforeValidator(_finite)]
+Pos = Annotated[float, BeforeValidator(_positive)]
+PosInt = Annotated[int, BeforeValidator(_positive_int)]
+Text = Annotated[str, BeforeValidator(_text)]
+Material = Annotated[str, BeforeValidator(_choice(ITU_MATERIALS, "an ITU material"))]
+SceneName = Annotated[str, BeforeValidator(_name("scene name", allow_dash=True))]
+ObjName = Annotated[str, BeforeValidator(_name("name", allow_dash=False))]
+Vec3 = Annotated[tuple[float, float, float], BeforeValidator(_vec3)]
+
+
+# ------------------------------------------------------------------------------------------- document models
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SceneMeta(_Model):
+    name: SceneName
+    title: Text
+    description: Text
+    source: Text
+    licence: Text
+    attribution: Text
+
+
+class RoomModel(_Model):
+    width_m: Pos
+    length_m: Pos
+    height_m: Pos
+    wall_thickness_m: Pos
+    wall_material: Material
+    floor_material: Material
+    floor_thickness_m: Pos
+    ceiling_material: Material | None = None
+    ceiling_thickness_m: Pos | None = None
+
+
+class GridModel(_Model):
+    cell_m: Pos
+    nx: PosInt
+    ny: PosInt
+    x0_m: Num | None = None
+    y0_m: Num | None = None
+
+
+class TxModel(_Model):
+    position_m: Vec3
+    look_at_m: Vec3 | None = None
+    num_rows: PosInt = 8
+    num_cols: PosInt = 2
+    pattern: Annotated[str, BeforeValidator(_choice(PATTERNS, "an antenna pattern"))] = "tr38901"
+    polarization: Annotated[str, BeforeValidator(_choice(POLARIZATIONS, "a polarization"))] = "VH"
+    power_dbm: Num = 0.0
+
+
+class RobotModel(_Model):
+    rx_height_m: Pos
+    robot_height_m: Pos
+
+
+class KindDefaults(_Model):
+    material: Material | None = None
+    width_m: Pos | None = None
+    length_m: Pos | None = None
+    height_m: Pos | None = None
+    z_m: Num | None = None
+    yaw_deg: Num | None = None
+
+
+class ObjectModel(_Model):
+    name: ObjName
+    kind: ObjName
+    x_m: Num
+    y_m: Num
+    material: Material
+    width_m: Pos
+    length_m: Pos
+    height_m: Pos
+    z_m: Num = 0.0
+    yaw_deg: Num = 0.0
+
+
+class MoveModel(_Model):
+    name: Text
+    x_m: Num | None = None
+    y_m: Num | None = None
+    z_m: Num | None = None
+    yaw_deg: Num | None = None
+
+
+class DynamicModel(_Model):
+    description: Text
+    add: list[dict[str, Any]] = []
+    move: list[MoveModel] = []
+    remove: list[Text] = []
+
+
+class RoomDocument(_Model):
+    format: int
+    scene: SceneMeta
+    room: RoomModel
+    grid: GridModel
+    tx: TxModel
+    robot: RobotModel
+    kinds: dict[Annotated[str, BeforeValidator(_name("kind name", allow_dash=False))], KindDefaults] = {}
+    objects: list[dict[str, Any]]
+    dynamic: DynamicModel | None = None
+
+
+_OBJECT_KEYS = tuple(ObjectModel.model_fields)
+_SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
+_SECTION_HINTS = {"scene": "name, title, description, source, licence, attribution", "room": "width_m, ...",
+                  "grid": "cell_m, nx, ny", "tx": "position_m", "robot": "rx_height_m, robot_height_m",
+                  "objects": "[[objects]] blocks"}
+
+
+# ------------------------------------------------------------------------------------------- entry points
+def load_room_file(path: str | Path, variant: str) -> SceneSpec:
+    """Read and validate a room scene TOML file; :class:`SceneFileError` names the file and field of any problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise SceneFileError(f"{path}: cannot read scene file ({getattr(e, 'strerror', None) or e})",
+                             hint="check the path, or use a built-in scene name (`python -m dtradar_data list`)") from e
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneFileError(f"{path}: not valid TOML: {e}",
+                             hint="fix the syntax at the reported line (https://toml.io)") from e
+    return parse_room(data, variant, origin=str(path))
+
+
+def parse_room(data: dict[str, Any], variant: str, *, origin: str = "<scene>") -> SceneSpec:
+    """Build a :class:`SceneSpec` from an already parsed TOML document (tests and generated scenes)."""
+    return _Reader(origin, data).spec(variant)
+
+
+# ------------------------------------------------------------------------------------------- the reader
+class _Reader:
+    def __init__(self, origin: str, data: dict[str, Any]):
+        self.origin = origin
+        self.data = data
+
+    def fail(self, where: str, problem: str, hint: str) -> SceneFileError:
+        return SceneFileError(f"{self.origin}: {where}: {problem}", hint=hint)
+
+    # pydantic's error locations, spoken the way the file is written: "[room]", "objects[1] 'table_01'", ...
+    def where(self, loc: tuple) -> str:
+        if not loc:
+            return "top level"
+        head = loc[0]
+        if head in ("objects", "add") and len(loc) > 1 and isinstance(loc[1], int):
+            items = self.data.get("objects") if head == "objects" else (self.data.get("dynamic") or {}).get("add")
+            prefix = "objects" if head == "objects" else "dynamic.add"
+            name = items[loc[1]].get("name") if isinstance(items, list) and isinstance(items[loc[1]], dict) else None
+            return f"{prefix}[{loc[1]}]" + (f" {name!r}" if isinstance(name, str) else "")
+        if head == "dynamic" and len(loc) > 2 and isinstance(loc[2], int):
+            return f"dynamic.{loc[1]}[{loc[2]}]"
+        if head == "kinds" and len(loc) > 1:
+            return f"[kinds.{loc[1]}]"
+        return f"[{head}]" if len(loc) > 1 else "top level"
+
+    def raise_first(self, exc: ValidationError, base_loc: tuple = ()) -> None:
+        errors = exc.errors()
+        # A misspelt key also makes the right one "missing": report the misspelling, it explains both.
+        errors.sort(key=lambda e: e["type"] != "extra_forbidden")
+        e = errors[0]
+        loc = base_loc + tuple(e["loc"])
+        # a union (e.g. `Material | None`) reports its branch in the location: keep only the field names
+        loc = tuple(p for p in loc if not (isinstance(p, str) and ("[" in p or p in ("function-before", "none"))))
+        where, field = self.where(loc), next((p for p in reversed(loc) if isinstance(p, str)), None)
+        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+        if e["type"] == "extra_forbidden":
+            parent = self.allowed_keys(loc[:-1])
+            close = did_you_mean(str(field), parent)
+            raise self.fail(where, f"unknown key {field!r}" + (f"; {close}" if close else "") + more,
+                            "allowed keys: " + ", ".join(sorted(parent)))
+        if e["type"] == "missing":
+            if len(loc) == 1:
+                raise self.fail(where, f"missing section [{field}]" + more,
+                                f"add a [{field}] table ({_SECTION_HINTS.get(field, 'see cubicle.toml')})")
+            raise self.fail(where, f"missing field {field!r}" + more, f"add `{field} = ...` to {where}")
+        if e["type"] == "dtradar":
+            raise self.fail(where, f"{field} {e['ctx']['problem']}" + more, e["ctx"]["hint"])
+        if e["type"] in ("model_type", "dict_type"):
+            raise self.fail(where, f"{field or 'this'} must be a table" + more, "write key = value lines under it")
+        if e["type"] == "list_type":
+            raise self.fail(where, f"{field} must be an array" + more,
+                            f"write each entry as a [[{'.'.join(str(p) for p in loc)}]] block or a [list]")
+        raise self.fail(where, f"{field}: {e['msg']}" + more, "see cubicle.toml for the expected form")
+
+    def allowed_keys(self, loc: tuple) -> tuple[str, ...]:
+        model = {(): RoomDocument, ("scene",): SceneMeta, ("room",): RoomModel, ("grid",): GridModel,
+                 ("tx",): TxModel, ("robot",): RobotModel, ("dynamic",): DynamicModel}.get(tuple(loc[:1]))
+        if loc and loc[0] in ("objects", "add") or (len(loc) > 1 and loc[:2] == ("dynamic", "add")):
+            return _OBJECT_KEYS
+        if len(loc) > 1 and loc[0] == "kinds":
+            return tuple(KindDefaults.model_fields)
+        if len(loc) > 2 and loc[:2] == ("dynamic", "move"):
+            return tuple(MoveModel.model_fields)
+        return tuple((model or RoomDocument).model_fields)
+
+    # -- the document
+    def spec(self, variant: str) -> SceneSpec:
+        fmt = self.data.get("format")
+        if "format" in self.data and fmt != FORMAT:
+            raise self.fail("format", f"unsupported format {fmt!r}", f"this dtradar reads format = {FORMAT}")
+        try:
+            doc = RoomDocument.model_validate(self.data)
+        except ValidationError as exc:
+            self.raise_first(exc)
+        room, structure = self.room(doc.room)
+        grid = self.grid(doc.grid, room)
+        tx = self.tx(doc.tx, room)
+        for key in ("rx_height_m", "robot_height_m"):
+            h = getattr(doc.robot, key)
+            if h >= room.height_m:
+                raise self.fail("[robot]", f"{key} = {h} is not below the ceiling ({room.height_m} m)",
+                                f"choose {key} between 0 and room.height_m")
+        kinds = {k: v.model_dump(exclude_none=True) for k, v in doc.kinds.items()}
+        for k in kinds:
+            if k in ("floor", "ceiling"):
+                raise self.fail(f"[kinds.{k}]", f"invalid kind name {k!r}", "floor and ceiling come from [room]")
+        objects = [self.obj(o, ("objects", i), kinds) for i, o in enumerate(doc.objects)]
+        description = doc.scene.description
+        if variant == "dynamic":
+            if doc.dynamic is None:
+                raise self.fail("top level", "missing section [dynamic]",
+                                "add a [dynamic] table listing the changes of the dynamic twin")
+            objects = self.dynamic(doc.dynamic, objects, kinds)
+            description += "\n\nDynamic twin (blueprint + changes): " + doc.dynamic.description
+        boxes = structure + objects
+        seen: set[str] = set()
+        for b in boxes:
+            if b.name in seen:
+                raise self.fail(f"object {b.name!r}", "duplicate name",
+                                "give every object a unique name (walls/floor/ceiling names are reserved)")
+            seen.add(b.name)
+        for b in objects:
+            self.check_inside(b, room)
+        meta = doc.scene
+        return SceneSpec(scene=meta.name, variant=variant,
+                         title=meta.title + (" (dynamic twin)" if variant == "dynamic" else " (blueprint)"),
+                         description=description, source=meta.source, licence=meta.licence,
+                         attribution=meta.attribution, grid=grid, tx=tx, rx_height_m=doc.robot.rx_height_m,
+                         robot_height_m=doc.robot.robot_height_m, objects=tuple(boxes), room=room)
+
+    def room(self, r: RoomModel) -> tuple[Room, list[Box]]:
+        W, L, H, wt, ft = r.width_m, r.length_m, r.height_m, r.wall_thickness_m, r.floor_thickness_m
+        # Floor and ceiling slabs cover the walls' outer footprint, so the room is closed at the corners.
+        ox, oy = W + 2 * wt, L + 2 * wt
+        boxes = [Box("floor", "floor", r.floor_material, W / 2, L / 2, ox, oy, ft, z_m=-ft)]
+        if (r.ceiling_material is None) != (r.ceiling_thickness_m is None):
+            raise self.fail("[room]", "ceiling_material and ceiling_thickness_m go together",
+                            "give both (closed room) or neither (open-top room)")
+        if r.ceiling_material is not None:
+            boxes.append(Box("ceiling", "ceiling", r.ceiling_material, W / 2, L / 2, ox, oy, r.ceiling_thickness_m,
+                             z_m=H))
+        boxes += [Box("wall_south", "wall", r.wall_material, W / 2, -wt / 2, ox, wt, H),
+                  Box("wall_north", "wall", r.wall_material, W / 2, L + wt / 2, ox, wt, H),
+                  Box("wall_west", "wall", r.wall_material, -wt / 2, L / 2, wt, L, H),
+                  Box("wall_east", "wall", r.wall_material, W + wt / 2, L / 2, wt, L, H)]
+        return Room(W, L, H), boxes
+
+    def grid(self, g: GridModel, room: Room) -> Grid:
+        cell = g.cell_m
+        grid = Grid(x0_m=cell / 2 if g.x0_m is None else g.x0_m, y0_m=cell / 2 if g.y0_m is None else g.y0_m,
+                    cell_m=cell, nx=g.nx, ny=g.ny)
+        xmin, ymin, xmax, ymax = grid.bounds()
+        if xmin < -_EPS or ymin < -_EPS or xmax > room.width_m + _EPS or ymax > room.length_m + _EPS:
+            raise self.fail("[grid]", f"grid [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}] m is not inside the room "
+                                      f"[0, {room.width_m:g}] x [0, {room.length_m:g}] m",
+                            "shrink nx/ny or cell_m, or move x0_m/y0_m (cell centres of the first cell)")
+        return grid
+
+    def tx(self, t: TxModel, room: Room) -> TxSpec:
+        pos = t.position_m
+        if not (0 < pos[0] < room.width_m and 0 < pos[1] < room.length_m and 0 < pos[2] < room.height_m):
+            raise self.fail("[tx]", f"position_m {list(pos)} is outside the room "
+                                    f"(0..{room.width_m:g}, 0..{room.length_m:g}, 0..{room.height_m:g} m)",
+                            "put the transmitter inside the room, e.g. just below the ceiling")
+        if t.look_at_m is not None and np.allclose(t.look_at_m, pos):
+            raise self.fail("[tx]", "look_at_m equals position_m", "point the array at another point, e.g. the floor")
+        return TxSpec(position_m=pos, look_at_m=t.look_at_m, num_rows=t.num_rows, num_cols=t.num_cols,
+                      pattern=t.pattern, polarization=t.polarization, power_dbm=t.power_dbm)
+
+    def obj(self, raw: Any, loc: tuple, kinds: dict[str, dict[str, Any]]) -> Box:
+        where = self.where(loc)
+        if not isinstance(raw, dict):
+            raise self.fail(where, "must be a table", "write it as an [[objects]] block")
+        kind = raw.get("kind")
+        if isinstance(kind, str) and kind in ("floor", "ceiling"):
+            raise self.fail(where, f"invalid kind {kind!r}", "floor and ceiling come from [room]")
+        merged = {**kinds.get(kind, {}), **raw} if isinstance(kind, str) else dict(raw)
+        for key in _SIZE_KEYS:
+            if key not in merged and set(raw) <= set(_OBJECT_KEYS) and {"name", "kind", "x_m", "y_m"} <= set(raw):
+                known = did_you_mean(str(kind), kinds)
+                raise self.fail(where, f"missing field {key!r} (and no [kinds.{kind}] default)"
+                                + (f"; kind {known}" if known and kind not in kinds else ""),
+                                f"add `{key} = ...` to the object or to a [kinds.{kind}] table")
+        try:
+            o = ObjectModel.model_validate(merged)
+        except ValidationError as exc:
+            self.raise_first(exc, loc)
+        return Box(name=o.name, kind=o.kind, material=o.material, x_m=o.x_m, y_m=o.y_m, width_m=o.width_m,
+                   length_m=o.length_m, height_m=o.height_m, z_m=o.z_m, yaw_deg=o.yaw_deg)
+
+    def dynamic(self, d: DynamicModel, objects: list[Box], kinds: dict[str, dict[str, Any]]) -> list[Box]:
+        """Apply the [dynamic] changes in a fixed order: remove, move (in place), add (appended)."""
+        by_name = {b.name: i for i, b in enumerate(objects)}
+        out: list[Box | None] = list(objects)
+        for n in d.remove:
+            if n not in by_name or out[by_name[n]] is None:
+                raise self._unknown_object("[dynamic] remove", n, by_name)
+            out[by_name[n]] = None
+        for i, m in enumerate(d.move):
+            where = f"dynamic.move[{i}]"
+            if m.name not in by_name or out[by_name[m.name]] is None:
+                raise self._unknown_object(where, m.name, by_name)
+            changes = m.model_dump(exclude_none=True, exclude={"name"})
+            if not changes:
+                raise self.fail(where, f"move of {m.name!r} changes nothing",
+                                "give at least one of x_m, y_m, z_m, yaw_deg")
+            out[by_name[m.name]] = replace(out[by_name[m.name]], **changes)
+        added = [self.obj(a, ("add", i), kinds) for i, a in enumerate(d.add)]
+        return [b for b in out if b is not None] + added
+
+    def _unknown_object(self, where: str, name: str, by_name: dict) -> SceneFileError:
+        close = did_you_mean(name, by_name)
+        return self.fail(where, f"no blueprint object named {name!r}" + (f"; {close}" if close else ""),
+                         "name an object from [[objects]]")
+
+    def check_inside(self, b: Box, room: Room) -> None:
+        c = b.corners()
+        if (c[:, 0].min() < -_EPS or c[:, 1].min() < -_EPS or c[:, 0].max() > room.width_m + _EPS
+                or c[:, 1].max() > room.length_m + _EPS):
+            raise self.fail(f"object {b.name!r}",
+                            f"footprint x {c[:, 0].min():.3f}..{c[:, 0].max():.3f}, y {c[:, 1].min():.3f}.."
+                            f"{c[:, 1].max():.3f} m is outside the room "
+                            f"[0, {room.width_m:g}] x [0, {room.length_m:g}] m",
+                            "move it (x_m, y_m), shrink it, or change yaw_deg so it fits inside the walls")
+        if b.z_m < -_EPS or b.top_m > room.height_m + _EPS:
+            raise self.fail(f"object {b.name!r}", f"spans z {b.z_m:g}..{b.top_m:g} m, outside the room's "
+                                                  f"0..{room.height_m:g} m", "fix z_m or height_m")

@@ -1,0 +1,124 @@
+"""The scene model: one variant of one digital twin as frozen, validated data.
+
+A :class:`SceneSpec` holds the receiver grid, the transmitter, the robot's heights and the objects: boxes as the paper
+describes obstacles, ``(x, y, height, width, length)`` with a yaw about +z, a bottom height ``z`` and an ITU material
+(walls, floor and ceiling slabs of a room are boxes too). Readers (:mod:`dtradar_data.scenes.indoor` for the TOML room
+files) build specs; geometry, ray tracing and the store consume them. Its :meth:`SceneSpec.digest` identifies the
+scene in dataset versions, so its canonical JSON must not change for an unchanged scene.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from dtradar_data.core.grid import Grid
+
+STRUCTURE_KINDS = ("wall", "floor", "ceiling")  # generated from [room]; walls also obstruct the robot
+PATTERNS = ("iso", "dipole", "hw_dipole", "tr38901")
+POLARIZATIONS = ("V", "H", "VH", "cross")
+
+
+@dataclass(frozen=True)
+class Box:
+    """One obstacle (or wall / floor / ceiling slab): a box of ``width_m`` (local x) x ``length_m`` (local y) x
+    ``height_m``, footprint centred at ``(x_m, y_m)``, bottom at ``z_m``, rotated ``yaw_deg`` counter-clockwise."""
+
+    name: str
+    kind: str
+    material: str
+    x_m: float
+    y_m: float
+    width_m: float
+    length_m: float
+    height_m: float
+    z_m: float = 0.0
+    yaw_deg: float = 0.0
+
+    @property
+    def top_m(self) -> float:
+        return self.z_m + self.height_m
+
+    def corners(self) -> np.ndarray:
+        """Footprint corners, float64[4, 2], counter-clockwise."""
+        hw, hl = self.width_m / 2, self.length_m / 2
+        local = np.array([[-hw, -hl], [hw, -hl], [hw, hl], [-hw, hl]])
+        t = math.radians(self.yaw_deg)
+        rot = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+        return local @ rot.T + np.array([self.x_m, self.y_m])
+
+
+@dataclass(frozen=True)
+class TxSpec:
+    """The transmitter: an ``num_rows`` x ``num_cols`` planar array (paper: 8 x 2, tr38901, dual-polarised)."""
+
+    position_m: tuple[float, float, float]
+    look_at_m: tuple[float, float, float] | None = None
+    num_rows: int = 8
+    num_cols: int = 2
+    pattern: str = "tr38901"
+    polarization: str = "VH"
+    power_dbm: float = 0.0
+
+
+@dataclass(frozen=True)
+class Room:
+    """Interior dimensions: the floor spans ``[0, width_m] x [0, length_m]``; the ceiling (if any) is at
+    ``height_m``."""
+
+    width_m: float
+    length_m: float
+    height_m: float
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """Everything that defines one variant of one scene; its :meth:`digest` identifies it in dataset versions."""
+
+    scene: str
+    variant: str
+    title: str
+    description: str
+    source: str
+    licence: str
+    attribution: str
+    grid: Grid
+    tx: TxSpec
+    rx_height_m: float
+    robot_height_m: float
+    objects: tuple[Box, ...]
+    room: Room | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.scene}/{self.variant}"
+
+    def obstacles(self) -> tuple[Box, ...]:
+        """Objects that can obstruct the robot: everything except floor and ceiling slabs."""
+        return tuple(b for b in self.objects if b.kind not in ("floor", "ceiling"))
+
+    def count_by_kind(self) -> dict[str, int]:
+        counts: dict[str, int] = {}
+        for b in self.objects:
+            counts[b.kind] = counts.get(b.kind, 0) + 1
+        return counts
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able and canonical: tuples become lists, key order is fixed by :meth:`digest`'s ``sort_keys``."""
+        d = asdict(self)
+        d["objects"] = [asdict(b) for b in self.objects]
+        d["tx"]["position_m"] = list(self.tx.position_m)
+        d["tx"]["look_at_m"] = None if self.tx.look_at_m is None else list(self.tx.look_at_m)
+        return d
+
+    def canonical_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+
+    def digest(self) -> str:
+        """sha256 hex of the canonical JSON: equal specs, equal digests, whatever file they were read from."""
+        return hashlib.sha256(self.canonical_json().encode("ascii")).hexdigest()

@@ -1,0 +1,17 @@
+"""The local dataset store: versioned, content-hashed Parquet under the data root.
+
+- :mod:`.versions` — version ids (content hashes of the build inputs) and the tags in ``refs.json``;
+- :mod:`.local` — atomic writes of one version, checked reads, ``load``;
+- :mod:`.listing` — every dataset and version, full verification, history;
+- :mod:`.catalog` — which dataset names exist (built-in scenes and stored ones);
+- :mod:`.card` — the dataset card of a version, a pure function of its metadata.
+"""
+
+from dtradar_data.store.catalog import as_id, known_names, known_scenes
+from dtradar_data.store.listing import DatasetEntry, VersionInfo, history, list_datasets, verify, version_infos
+from dtradar_data.store.local import (InvalidTableError, install_staged, load, read_meta, read_table, resolve,
+                                      version_exists, write_version)
+
+__all__ = ["DatasetEntry", "InvalidTableError", "VersionInfo", "as_id", "history", "install_staged", "known_names",
+           "known_scenes", "list_datasets", "load", "read_meta", "read_table", "resolve", "verify", "version_exists",
+           "version_infos", "write_version"]

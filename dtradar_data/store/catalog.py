@@ -1,0 +1,40 @@
+"""Which datasets exist: the built-in scenes plus every scene with data in the data root, and ids checked against them.
+
+Every public function of the store takes a name as text or as a parsed :class:`~dtradar_data.core.ids.DatasetId`;
+:func:`as_id` turns text into an id, with a "did you mean ...?" over the names known here.
+"""
+
+from __future__ import annotations
+
+from dtradar_data.core import layout
+from dtradar_data.core.ids import SCENE_RE, DatasetId, names_of, parse_id
+from dtradar_data.scenes import available_scenes
+
+
+def builtin_scenes() -> list[str]:
+    """Scenes that ship with the package (a scene file each)."""
+    return list(available_scenes())
+
+
+def stored_scenes() -> list[str]:
+    """Scenes that have at least one dataset directory in the data root (built from a user file, or pulled)."""
+    root = layout.datasets_root()
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if p.is_dir() and SCENE_RE.fullmatch(p.name))
+
+
+def known_scenes() -> list[str]:
+    return sorted(set(builtin_scenes()) | set(stored_scenes()))
+
+
+def known_names() -> list[str]:
+    """Every ``scene/variant`` name a user can load or build here."""
+    return names_of(known_scenes())
+
+
+def as_id(name: str | DatasetId, *, check_known: bool = True) -> DatasetId:
+    """Accept either a string or an already parsed id (public functions take both)."""
+    if isinstance(name, DatasetId):
+        return name
+    return parse_id(name, known=known_scenes() if check_known else None)

@@ -1,0 +1,91 @@
+"""What the store holds: every dataset with its versions (listing), full verification, version history."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from dtradar_data.core import layout as P
+from dtradar_data.core.ids import VARIANTS, DatasetId, names_of
+from dtradar_data.store.catalog import as_id, builtin_scenes
+from dtradar_data.store.local import history_metas, local_versions, read_meta, resolve, verify_dir
+from dtradar_data.store.versions import read_refs
+
+
+@dataclass(frozen=True)
+class VersionInfo:
+    tag: str | None
+    version: str
+    created_utc: str | None
+    num_rows: int | None
+    size_bytes: int
+    path: Path
+
+
+@dataclass(frozen=True)
+class DatasetEntry:
+    """One ``scene/variant``: built-in (has a scene file) and/or stored (has versions)."""
+
+    name: str
+    scene: str
+    variant: str
+    builtin: bool
+    versions: tuple[VersionInfo, ...]
+    latest: str | None
+
+    @property
+    def built(self) -> bool:
+        return bool(self.versions)
+
+
+def version_infos(did: DatasetId) -> list[VersionInfo]:
+    refs = read_refs(P.refs_path(did.scene, did.variant))
+    out = []
+    for v in local_versions(did):
+        vdir = P.version_dir(did.scene, did.variant, v)
+        meta = read_meta(vdir)
+        files = meta.get("files") or {}
+        out.append(VersionInfo(tag=refs.tag_of(v), version=v, created_utc=meta.get("created_utc"),
+                               num_rows=(meta.get("stats") or {}).get("num_cells", _grid_cells(meta)),
+                               size_bytes=sum(int(f.get("bytes", 0)) for f in files.values()), path=vdir))
+    return out
+
+
+def _grid_cells(meta: dict[str, Any]) -> int | None:
+    g = meta.get("grid") or {}
+    return int(g["nx"]) * int(g["ny"]) if "nx" in g and "ny" in g else None
+
+
+def list_datasets() -> list[DatasetEntry]:
+    """Every built-in ``scene/variant`` (built or not) and every stored one, sorted by name."""
+    builtin = set(builtin_scenes())
+    names = set(names_of(builtin))
+    root = P.datasets_root()
+    if root.is_dir():
+        names |= {f"{s.name}/{v.name}" for s in root.iterdir() if s.is_dir()
+                  for v in s.iterdir() if v.is_dir() and v.name in VARIANTS}
+    rows = []
+    for name in sorted(names):
+        scene, variant = name.split("/")
+        did = DatasetId(scene, variant)
+        infos = version_infos(did)
+        refs = read_refs(P.refs_path(scene, variant))
+        latest = refs.latest if refs.latest in {i.version for i in infos} else (infos[-1].version if infos else None)
+        rows.append(DatasetEntry(name, scene, variant, scene in builtin, tuple(infos), latest))
+    return rows
+
+
+def verify(name: str | DatasetId, revision: str | None = None) -> dict[str, list[str]]:
+    """``{version: problems}`` for one version (``revision`` or ``@rev`` in ``name``) or, without one, all."""
+    did = as_id(name)
+    if revision or did.revision:
+        _, version, vdir = resolve(did, revision)
+        return {version: verify_dir(vdir)}
+    resolve(did)  # raises DatasetNotFoundError with the build hint when there is nothing
+    return {v: verify_dir(P.version_dir(did.scene, did.variant, v)) for v in local_versions(did)}
+
+
+def history(name: str | DatasetId) -> list[tuple[str, dict[str, Any]]]:
+    did = as_id(name)
+    return history_metas(did, read_refs(P.refs_path(did.scene, did.variant)))
