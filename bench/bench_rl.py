@@ -26,9 +26,13 @@ from pathlib import Path
 import torch
 import tyro
 
+from dtradar_data.core.errors import DtradarError
 from dtradar_rl.batched import BatchedNavEnv
 from dtradar_rl.data import load_dataset
-from dtradar_rl.dqn import Policy, auto_threads, config_for, load_policy, train
+from dtradar_rl.config import config_for
+from dtradar_rl.dqn import train
+from dtradar_rl.policy import Policy, load_policy
+from dtradar_rl.runtime import auto_threads
 from dtradar_rl.envs import DtradarNavEnv
 from dtradar_rl.evaluate import evaluate, markdown_table
 from dtradar_rl.observations import Normalizer
@@ -71,10 +75,10 @@ def _datasets(scene: str):
         bp = load_dataset(f"{scene}/blueprint")
         try:
             dyn = load_dataset(f"{scene}/dynamic")
-        except Exception:  # noqa: BLE001
+        except DtradarError:
             dyn = None
         return bp, dyn, False
-    except Exception as e:  # noqa: BLE001 - not built (or the store is not there): synthetic stand-in
+    except DtradarError as e:  # not built here: synthetic stand-in
         print(f"{scene}/blueprint not available ({type(e).__name__}); using the synthetic 42x18 stand-in")
         return load_dataset("synthetic/blueprint"), load_dataset("synthetic/dynamic"), True
 

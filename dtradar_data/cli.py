@@ -1,7 +1,7 @@
 """``python -m dtradar_data`` / ``dtradar-data``: build, list, inspect, verify, card, publish and pull datasets.
 
 Generated with tyro from frozen dataclasses (the field docstrings are the ``--help`` text), one subcommand each.
-Typed errors (:class:`~dtradar_data.errors.DtradarError`) print as one ``error: ...`` line plus how to fix it and
+Typed errors (:class:`~dtradar_data.core.errors.DtradarError`) print as one ``error: ...`` line plus how to fix it and
 exit with status 2; a failed ``verify`` or ``cards --check`` exits with status 1.
 """
 
@@ -15,8 +15,10 @@ from typing import Annotated
 
 import tyro
 
-from dtradar_data.build.pipeline import BuildConfig, build
+from dtradar_data.build import pipeline
+from dtradar_data.build.pipeline import BuildConfig
 from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.files import human_size
 from dtradar_data.core.layout import data_root
 from dtradar_data.publish import cards, hub
 from dtradar_data.rt import llvm
@@ -29,16 +31,6 @@ Revision = Annotated["str | None", tyro.conf.arg(metavar="TAG|HASH")]
 
 EXIT_ERROR = 2
 EXIT_FAILED_CHECK = 1
-
-
-def _human(n: int | None) -> str:
-    if n is None:
-        return "-"
-    for unit in ("B", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
-            return f"{n} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024
-    return str(n)
 
 
 @dataclass(frozen=True)
@@ -63,7 +55,7 @@ class ListCmd:
             tags = ",".join(v.tag or v.version[:7] for v in r.versions) or "(not built)"
             shown = f"{latest.tag} {latest.version[:12]}" if latest else "-"
             print(f"{r.name:<24} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
-                  f"{_human(latest.size_bytes) if latest else '-':>10}")
+                  f"{human_size(latest.size_bytes) if latest else '-':>10}")
         return 0
 
 
@@ -93,11 +85,11 @@ class InfoCmd:
         print(f"  licence:     {meta.get('licence') or (meta.get('scene_spec') or {}).get('licence', '-')}")
         print(f"  path:        {vdir}")
         for fname, rec in sorted((meta.get("files") or {}).items()):
-            print(f"    {fname:<16} {_human(int(rec.get('bytes', 0))):>10}  sha256 {rec.get('sha256', '')[:16]}")
+            print(f"    {fname:<16} {human_size(int(rec.get('bytes', 0))):>10}  sha256 {rec.get('sha256', '')[:16]}")
         print("  versions:")
         for v in listing.version_infos(did):
             mark = "*" if v.version == version else " "
-            print(f"   {mark} {v.tag or '-':<4} {v.version}  {v.created_utc or '-':<26} {_human(v.size_bytes):>10}")
+            print(f"   {mark} {v.tag or '-':<4} {v.version}  {v.created_utc or '-':<26} {human_size(v.size_bytes):>10}")
         return 0
 
 
@@ -204,7 +196,7 @@ class CheckCmd:
 
 
 def run_build(cfg: BuildConfig) -> int:
-    for ds in build(cfg):
+    for ds in pipeline.build(cfg):
         tag = ds.meta.get("tag")
         print(f"{ds.name}@{tag or ds.version}: version {ds.version}, {ds.table.num_rows} cells, {ds.path}")
     return 0

@@ -18,7 +18,8 @@ _EXPORTS = {
     "OBS_PRESETS": ".observations", "Normalizer": ".observations", "build_observations": ".observations",
     "DtradarNavEnv": ".envs", "register_dataset_envs": ".envs",
     "BatchedNavEnv": ".batched",
-    "DQNConfig": ".dqn", "config_for": ".dqn", "train": ".dqn", "load_policy": ".dqn", "PRESETS": ".dqn",
+    "DQNConfig": ".config", "config_for": ".config", "PRESETS": ".config", "train": ".dqn",
+    "Policy": ".policy", "load_policy": ".policy", "OfflineConfig": ".offline", "train_offline": ".offline",
     "evaluate": ".evaluate", "spl": ".evaluate", "cross_matrix": ".evaluate",
     "load_dataset": ".data",
 }

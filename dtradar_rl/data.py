@@ -4,7 +4,7 @@ Names
 -----
 ``"<scene>/<variant>[@<revision>]"``  a dataset in the data root (``dtradar_data.load``), e.g. ``cubicle/blueprint``.
 ``"synthetic/<variant>"``            a synthetic cubicle-sized 42 x 18 table (0.25 m cells, free-space line-of-sight
-                                     radio features from :mod:`dtradar_data.synthetic`) with desk-like obstacles; the
+                                     radio features from :mod:`dtradar_data.build.synthetic`) with desk-like obstacles; the
                                      ``dynamic`` variant adds a chair and two people, like the paper's dynamic twin.
 ``"synthetic-<nx>x<ny>/<variant>"``  the same generator at another size (tests use tiny ones).
 """
@@ -16,10 +16,10 @@ import re
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import DatasetNotFoundError, UnknownNameError
 from dtradar_data.build.synthetic import synthetic_dataset
-
-VARIANTS = ("blueprint", "dynamic")
+from dtradar_data.core.errors import DtradarError, unknown_name
+from dtradar_data.core.ids import VARIANTS
+from dtradar_data.publish.loading import load
 _SYNTH = re.compile(r"^synthetic(?:-(\d+)x(\d+))?$")
 
 
@@ -34,8 +34,6 @@ def synthetic_blocked(nx: int, ny: int, variant: str = "blueprint") -> np.ndarra
     on free cells (a chair, two people). Tiny grids (< 6 cells a side) get a single short wall.
     """
     if variant not in VARIANTS:
-        from dtradar_data.core.errors import unknown_name
-
         raise unknown_name("variant", variant, VARIANTS)
     b = np.zeros((ny, nx), bool)
     if nx < 6 or ny < 6:
@@ -78,20 +76,7 @@ def load_dataset(name: str) -> Dataset:
         cell_m = 0.25
         tx = (nx * cell_m / 2, ny * cell_m / 2, 3.0)
         return synthetic_dataset(nx, ny, blocked, cell_m=cell_m, tx=tx, name=f"{scene}/{variant}")
-    try:
-        import dtradar_data
-
-        loader = dtradar_data.load
-    except (ImportError, AttributeError) as e:  # the store module is not there yet
-        raise DatasetNotFoundError(f"cannot load {name!r}: the dataset store is unavailable ({e})",
-                                   hint="build it with `make dataset SCENE=...`, or use a synthetic name "
-                                        "such as 'synthetic/blueprint'") from e
-    try:
-        return loader(f"{scene}/{variant}", revision or None)
-    except UnknownNameError:
-        raise
-    except TypeError:
-        return loader(f"{scene}/{variant}" + (f"@{revision}" if revision else ""))
+    return load(f"{scene}/{variant}", revision or None)
 
 
 def dataset_exists(name: str) -> bool:
@@ -99,5 +84,5 @@ def dataset_exists(name: str) -> bool:
     try:
         load_dataset(name)
         return True
-    except Exception:  # noqa: BLE001 - any failure means "not usable here"
+    except DtradarError:  # not built, damaged or unknown: not usable here
         return False

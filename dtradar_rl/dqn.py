@@ -35,9 +35,7 @@ from __future__ import annotations
 
 import copy
 import csv
-import dataclasses
 import json
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,184 +47,17 @@ import torch.nn.functional as F
 from torch import nn
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import DtradarError, unknown_name
 
-from .batched import AUG_POTENTIALS, BatchedNavEnv
-from .data import is_synthetic, load_dataset
-from .mdp import check_reward
-from .observations import Normalizer, build_observations, check_preset
-
-CHECKPOINT_FORMAT = "dtradar-dqn/1"
-INDOOR_SCENES = ("cubicle", "meeting")
-
-
-class ConfigError(DtradarError, ValueError):
-    """A training or evaluation setting that is out of range."""
+from .batched import BatchedNavEnv
+from .config import PRESETS, DQNConfig, config_for
+from .data import load_dataset
+from .observations import Normalizer
+from .policy import (CHECKPOINT_FORMAT, QNetwork, load_policy, read_checkpoint, save_checkpoint, save_torch_atomic,
+                     write_config)
+from .runtime import auto_threads
 
 
-class CheckpointError(DtradarError, FileNotFoundError):
-    """A checkpoint that is missing or not a dtradar DQN checkpoint."""
-
-
-@dataclass(frozen=True)
-class DQNConfig:
-    """Deep Q-learning on the navigation MDP of one dataset (defaults: the ``tuned`` preset)."""
-
-    scene: str = "cubicle"
-    """scene to train on; the dataset is <scene>/<variant> (synthetic = a 42x18 stand-in, no ray tracer)"""
-    variant: str = "blueprint"
-    """twin to train on (the paper trains on the blueprint)"""
-    revision: str | None = None
-    """dataset version tag or hash (default: the newest)"""
-    preset: str = "tuned"
-    """the preset these settings started from (tuned, robust or paper); recorded in config.json"""
-    obs: str = "neighbors"
-    """observation preset: paper (10 inputs, no target), goal (+ target), neighbors (+ neighbouring cells' radio)"""
-    reward: str = "geodesic"
-    """reward: paper (exact), scaled, euclidean or geodesic (shaped; see dtradar_rl.mdp)"""
-    max_steps: int = 0
-    """episode step limit (truncation); 0 = 4 * (nx + ny)"""
-    num_envs: int = 256
-    """robots stepped together in the batched environment"""
-    aug_obstacles: int = 0
-    """obstacle augmentation: extra random obstacles per robot, redrawn at every episode reset, that collide and
-    read as blocked neighbours (0 = off; see dtradar_rl.batched)"""
-    aug_obstacle_size: int = 2
-    """largest side of an extra obstacle in cells (each is a 1..size x 1..size rectangle; 2 = 1 m at 0.5 m cells)"""
-    aug_potential: str = "replan"
-    """geodesic shaping with extra obstacles: replan (BFS per robot on its augmented grid) or blueprint"""
-    total_env_steps: int = 600_000
-    """training budget in environment steps (all robots together); the paper's is 600K"""
-    episodes: int = 0
-    """also stop after this many finished episodes (0 = no limit; the paper: 500 indoor, 80 outdoor)"""
-    hidden: tuple[int, ...] = (256, 256)
-    """sizes of the dense ReLU hidden layers"""
-    lr: float = 1e-3
-    """Adam learning rate"""
-    lr_end: float = 1e-4
-    """learning rate at the end of the budget, reached linearly (negative = constant lr)"""
-    gamma: float = 0.5
-    """discount factor (the paper: 0.9; with the geodesic reward every step is informative, so a short horizon
-    learns faster and keeps the shortest-path optimum)"""
-    batch_size: int = 512
-    """minibatch size of one gradient update"""
-    buffer_size: int = 200_000
-    """replay buffer capacity (transitions)"""
-    learning_starts: int = 10_000
-    """environment steps collected before the first update"""
-    env_steps_per_update: int = 48
-    """environment steps per gradient update (1 = an update every step, as in the paper)"""
-    target_update_every: int = 250
-    """copy the online network into the target network every this many updates"""
-    double_dqn: bool = True
-    """Double DQN targets (the online network picks the next action, the target network values it)"""
-    eps_start: float = 1.0
-    """initial exploration rate"""
-    eps_end: float = 0.05
-    """final exploration rate"""
-    eps_decay_fraction: float = 0.4
-    """fraction of the budget over which exploration decays linearly from eps_start to eps_end"""
-    max_grad_norm: float = 10.0
-    """gradient-norm clipping (0 = off)"""
-    seed: int = 0
-    """seed of the network, the environment and exploration"""
-    device: str = "cpu"
-    """torch device (cpu, cuda)"""
-    threads: int = 0
-    """torch CPU threads (0 = auto: up to 2, fewer when other processes keep cores busy; see auto_threads)"""
-    out: str = ""
-    """output directory (default runs/<scene>/dqn)"""
-    checkpoint_every: int = 200_000
-    """write last.pt every this many environment steps (0 = only at the end)"""
-    save_replay: bool = True
-    """include the replay buffer in last.pt, so a resumed run is exact"""
-    resume: bool = False
-    """continue from <out>/last.pt up to the (possibly raised) budget (exploration follows the new budget)"""
-    verbose: bool = True
-    """print progress"""
-
-    @property
-    def dataset_name(self) -> str:
-        return f"{self.scene}/{self.variant}" + (f"@{self.revision}" if self.revision else "")
-
-    @property
-    def out_dir(self) -> Path:
-        return Path(self.out or f"runs/{self.scene}/dqn")
-
-    def validate(self) -> DQNConfig:
-        check_preset(self.obs)
-        check_reward(self.reward)
-        if self.preset not in PRESETS:
-            raise unknown_name("training preset", self.preset, PRESETS)
-        positive = ("num_envs", "total_env_steps", "batch_size", "buffer_size", "env_steps_per_update",
-                    "target_update_every")
-        for name in positive:
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.aug_obstacles < 0 or self.aug_obstacle_size < 1:
-            raise ConfigError(f"aug_obstacles must be >= 0 and aug_obstacle_size >= 1, got {self.aug_obstacles} "
-                              f"and {self.aug_obstacle_size}")
-        if self.aug_potential not in AUG_POTENTIALS:
-            raise unknown_name("augmentation potential", self.aug_potential, AUG_POTENTIALS)
-        if self.threads < 0:
-            raise ConfigError(f"threads must be >= 0 (0 = auto), got {self.threads}")
-        if not 0 < self.gamma < 1:
-            raise ConfigError(f"gamma must be in (0, 1), got {self.gamma}")
-        for name in ("eps_start", "eps_end", "eps_decay_fraction"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ConfigError(f"{name} must be in [0, 1], got {getattr(self, name)}")
-        if not self.hidden or min(self.hidden) < 1:
-            raise ConfigError(f"hidden must list positive layer sizes, got {self.hidden}")
-        return self
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> DQNConfig:
-        names = {f.name for f in dataclasses.fields(cls)}
-        d = {k: (tuple(v) if k == "hidden" else v) for k, v in d.items() if k in names}
-        return cls(**d)
-
-
-PRESETS: dict[str, dict[str, Any]] = {
-    "tuned": {},
-    "robust": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan"},
-    "paper": dict(obs="paper", reward="paper", num_envs=1, episodes=500, hidden=(256,) * 5, lr=1e-3, lr_end=-1.0,
-                  gamma=0.9,
-                  batch_size=64, buffer_size=100_000, learning_starts=1_000, env_steps_per_update=1,
-                  target_update_every=500, double_dqn=False, eps_start=0.1, eps_end=0.1),
-}
-
-
-def config_for(preset: str = "tuned", **overrides) -> DQNConfig:
-    """The config of a preset, with ``overrides``; the paper preset uses 80 episodes for outdoor scenes."""
-    if preset not in PRESETS:
-        raise unknown_name("training preset", preset, PRESETS)
-    values = {**PRESETS[preset], "preset": preset}
-    scene = overrides.get("scene", DQNConfig.scene)
-    if preset == "paper" and scene.split("-")[0] not in INDOOR_SCENES and not is_synthetic(scene):
-        values["episodes"] = 80
-    return DQNConfig(**{**values, **overrides}).validate()
-
-
-# -- network and replay buffer -------------------------------------------------------------------------------------
-class QNetwork(nn.Module):
-    """``obs -> [Linear, ReLU] x len(hidden) -> Linear -> 4 action values``."""
-
-    def __init__(self, in_dim: int, hidden: tuple[int, ...], n_actions: int = 4):
-        super().__init__()
-        layers: list[nn.Module] = []
-        for h in hidden:
-            layers += [nn.Linear(in_dim, h), nn.ReLU()]
-            in_dim = h
-        layers.append(nn.Linear(in_dim, n_actions))
-        self.net = nn.Sequential(*layers)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
-
-
+# -- replay buffer -------------------------------------------------------------------------------------------------
 class ReplayBuffer:
     """A ring buffer of transitions ``(obs, action, reward, next_obs, terminated)`` as preallocated tensors."""
 
@@ -278,32 +109,6 @@ class TrainResult:
     final: dict[str, float] = field(default_factory=dict)
 
 
-def idle_cores(interval_s: float = 0.25) -> float:
-    """Cores left idle by other processes right now (from ``/proc/stat`` over ``interval_s``; Linux), else from
-    the 1-minute load average."""
-    def snapshot():
-        with open("/proc/stat") as f:
-            v = [int(x) for x in f.readline().split()[1:]]
-        return v[3] + v[4], sum(v)  # idle + iowait, total
-
-    cores = os.cpu_count() or 1
-    try:
-        (i0, t0), _ = snapshot(), time.sleep(interval_s)
-        i1, t1 = snapshot()
-        return cores * (i1 - i0) / max(1, t1 - t0)
-    except (OSError, ValueError, IndexError):
-        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else 0.0
-        return max(0.0, cores - load)
-
-
-def auto_threads(max_threads: int = 2) -> int:
-    """Torch threads for small networks: ``max_threads`` on an idle machine, fewer when other processes keep cores
-    busy. Measured on 2 cores: with another busy process, 2 torch threads collapse to ~5 % of the 1-thread speed
-    (the threads wait on each other), while on an idle machine 2 threads are ~1.5x faster than 1.
-    """
-    return max(1, min(max_threads, int(round(idle_cores()))))
-
-
 def epsilon(cfg: DQNConfig, env_steps: int) -> float:
     """Linear decay from ``eps_start`` to ``eps_end`` over ``eps_decay_fraction`` of the budget."""
     span = cfg.eps_decay_fraction * cfg.total_env_steps
@@ -320,10 +125,8 @@ def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
     torch.manual_seed(cfg.seed)
     device = torch.device(cfg.device)
     out = cfg.out_dir
-    out.mkdir(parents=True, exist_ok=True)
-    write_config(cfg, out)
-
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
+    write_config(cfg, out)  # only once the dataset loaded: a failed start leaves an earlier run's config alone
     normalizer = Normalizer.fit(ds)
     env = BatchedNavEnv.from_dataset(ds, cfg.num_envs, obs=cfg.obs, normalizer=normalizer, reward=cfg.reward,
                                      max_steps=cfg.max_steps or None, device=device, seed=cfg.seed,
@@ -343,7 +146,8 @@ def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
     ep_collisions = torch.zeros(n, dtype=torch.long, device=device)
     env.reset()
     if cfg.resume and (out / "last.pt").exists():
-        state = torch.load(out / "last.pt", map_location=device, weights_only=False)
+        state = read_checkpoint(out / "last.pt", (CHECKPOINT_FORMAT,), what="resumable DQN run (last.pt)",
+                                device=cfg.device)
         q.load_state_dict(state["q"])
         q_target.load_state_dict(state["q_target"])
         optimizer.load_state_dict(state["optimizer"])
@@ -368,7 +172,7 @@ def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
                  "normalizer": normalizer.to_dict()}
         if cfg.save_replay:
             state["replay"] = buffer.state_dict()
-        torch.save(state, out / "last.pt")
+        save_torch_atomic(state, out / "last.pt")
 
     obs = env.observe()
     next_checkpoint = (env_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every if cfg.checkpoint_every else None
@@ -451,80 +255,7 @@ def _summary(episodes: list[tuple]) -> dict[str, float]:
             "collisions": float(tail[:, 2].mean()), "success_rate": float(tail[:, 3].mean())}
 
 
-# -- checkpoints, configs, curves ----------------------------------------------------------------------------------
-def write_config(cfg: DQNConfig, directory: Path) -> Path:
-    path = Path(directory) / "config.json"
-    path.write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
-    return path
-
-
-def save_checkpoint(path: Path, q: QNetwork, cfg: DQNConfig, normalizer: Normalizer, obs_names, ds: Dataset,
-                    stats: dict[str, Any] | None = None) -> Path:
-    """A self-contained policy: weights, architecture, config, observation preset and normaliser."""
-    torch.save({"format": CHECKPOINT_FORMAT, "config": json.dumps(cfg.to_dict()),
-                "arch": {"in_dim": len(obs_names), "hidden": list(cfg.hidden), "n_actions": 4},
-                "obs": {"preset": cfg.obs, "names": list(obs_names)}, "normalizer": normalizer.to_dict(),
-                "dataset": {"name": ds.name, "version": ds.version}, "stats": stats or {},
-                "q": {k: v.detach().cpu() for k, v in q.state_dict().items()}}, path)
-    write_config(cfg, Path(path).parent)
-    return Path(path)
-
-
-@dataclass
-class Policy:
-    """A trained greedy policy and everything needed to observe a twin the way it was trained."""
-
-    q: QNetwork
-    config: DQNConfig
-    normalizer: Normalizer
-    obs_preset: str
-    meta: dict[str, Any]
-
-    def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
-        """Greedy actions. ``shield=True`` (``neighbors`` preset only) never picks a move into a neighbour that
-        the twin shows without radio features (blocked or off the grid), unless every move is such."""
-        with torch.no_grad():
-            q = self.q(obs)
-            if shield:
-                flags = obs[..., self.shield_columns()] > 0.5
-                q = torch.where(flags | ~flags.any(-1, keepdim=True), q, torch.full_like(q, -torch.inf))
-            return q.argmax(-1)
-
-    def shield_columns(self) -> list[int]:
-        """Observation columns of the four has-radio flags (``neighbors`` preset), in action order."""
-        if self.obs_preset != "neighbors":
-            raise ConfigError(f"the obstacle shield needs the 'neighbors' observation preset, "
-                              f"this policy observes {self.obs_preset!r}")
-        from .observations import PAPER_COLUMNS, RADIO_FEATURES
-
-        k = len(RADIO_FEATURES) + 1
-        return [len(PAPER_COLUMNS) + a * k + k - 1 for a in range(4)]
-
-    def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
-        """A batched env over ``ds`` that observes with this policy's preset and training normaliser."""
-        return BatchedNavEnv.from_dataset(ds, num_envs, obs=self.obs_preset, normalizer=self.normalizer, **kwargs)
-
-    def observations(self, ds: Dataset):
-        return build_observations(ds, self.obs_preset, self.normalizer)
-
-
-def load_policy(path: str | Path, device: str = "cpu") -> Policy:
-    path = Path(path)
-    if not path.exists():
-        raise CheckpointError(f"no checkpoint at {path}", hint="train one first, e.g. `make train SCENE=cubicle`")
-    state = torch.load(path, map_location=device, weights_only=False)
-    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT or "arch" not in state:
-        raise CheckpointError(f"{path} is not a dtradar DQN checkpoint (model.pt)",
-                              hint="pass the model.pt written by `python -m dtradar_rl train`")
-    arch = state["arch"]
-    q = QNetwork(arch["in_dim"], tuple(arch["hidden"]), arch["n_actions"]).to(device)
-    q.load_state_dict(state["q"])
-    q.eval()
-    cfg = DQNConfig.from_dict(json.loads(state["config"]))
-    return Policy(q, cfg, Normalizer.from_dict(state["normalizer"]), state["obs"]["preset"],
-                  {"dataset": state["dataset"], "stats": state["stats"], "path": str(path)})
-
-
+# -- curves ----------------------------------------------------------------------------------------------------------
 def write_curves(episodes: list[tuple], out: Path) -> tuple[Path, Path]:
     """``curves.csv`` (one row per episode) and ``curves.png`` (reward, steps, collisions; moving averages)."""
     csv_path, png_path = out / "curves.csv", out / "curves.png"
@@ -538,5 +269,4 @@ def write_curves(episodes: list[tuple], out: Path) -> tuple[Path, Path]:
     return csv_path, png_path
 
 
-__all__ = ["DQNConfig", "PRESETS", "config_for", "train", "TrainResult", "QNetwork", "ReplayBuffer", "Policy",
-           "load_policy", "save_checkpoint", "epsilon"]
+__all__ = ["DQNConfig", "PRESETS", "config_for", "train", "TrainResult", "ReplayBuffer", "epsilon", "load_policy"]

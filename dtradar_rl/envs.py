@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import gymnasium as gym
@@ -12,6 +10,7 @@ from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError
+from dtradar_data.store.listing import list_datasets
 
 from .data import load_dataset
 from .mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
@@ -158,26 +157,9 @@ class DtradarNavEnv(gym.Env):
 
 
 # -- registration ------------------------------------------------------------------------------------------------
-def _data_root() -> Path:
-    try:
-        from dtradar_data.core.layout import data_root
-
-        return Path(data_root())
-    except Exception:  # noqa: BLE001 - store not available yet: same default as the interface
-        return Path(os.environ.get("DTRADAR_DATA_ROOT", Path.home() / ".cache" / "dtradar"))
-
-
 def built_datasets() -> list[str]:
-    """Names ``scene/variant`` of the datasets built in the data root (those with a ``refs.json``)."""
-    root = _data_root() / "datasets"
-    names = []
-    for refs in sorted(root.glob("*/*/refs.json")):
-        try:
-            if json.loads(refs.read_text()).get("latest"):
-                names.append(f"{refs.parent.parent.name}/{refs.parent.name}")
-        except (OSError, ValueError):
-            continue
-    return names
+    """Names ``scene/variant`` of the datasets built in the data root."""
+    return [entry.name for entry in list_datasets() if entry.built]
 
 
 def env_id(name: str) -> str:

@@ -26,7 +26,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError
 
 from .data import load_dataset
-from .dqn import Policy
+from .policy import Policy
 from .mdp import GridMDP
 
 

@@ -41,6 +41,7 @@ import dataclasses
 import io
 import json
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,13 +52,16 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import unknown_name
+from dtradar_data.core.files import write_atomic
 
 from .batched import BatchedNavEnv
 from .data import load_dataset
-from .dqn import CheckpointError, ConfigError, Policy, auto_threads
+from .config import ConfigError, TwinConfig
 from .evaluate import evaluate_twins, write_results
 from .mdp import check_reward
-from .observations import Normalizer, build_observations, check_preset
+from .observations import Normalizer, build_observations
+from .policy import CheckpointError, Policy
+from .runtime import auto_threads
 
 OFFLINE_FORMAT = "dtradar-offline/1"
 #: Algorithm names and the d3rlpy config class each one uses.
@@ -87,19 +91,11 @@ def _quiet_d3rlpy():
 
 
 @dataclass(frozen=True)
-class OfflineConfig:
+class OfflineConfig(TwinConfig):
     """Offline RL with d3rlpy: log a behaviour policy on a twin, train on the log, evaluate on the twins."""
 
-    scene: str = "cubicle"
-    """scene to log and train on; the dataset is <scene>/<variant> (synthetic = a 42x18 stand-in, no ray tracer)"""
-    variant: str = "blueprint"
-    """twin to log transitions on"""
-    revision: str | None = None
-    """dataset version tag or hash (default: the newest)"""
     algorithm: str = "cql"
     """d3rlpy algorithm: cql (DiscreteCQL), bcq (DiscreteBCQ), bc (DiscreteBC), dqn (DQN, offline)"""
-    obs: str = "neighbors"
-    """observation preset: paper (10 inputs, no target), goal (+ target), neighbors (+ neighbouring cells' radio)"""
     reward: str = "geodesic"
     """reward logged with each transition: paper, scaled, euclidean or geodesic (see dtradar_rl.mdp)"""
     behaviour: str = "noisy-shortest"
@@ -109,10 +105,6 @@ class OfflineConfig:
     """noisy-shortest: probability of the shortest-path move at each step"""
     transitions: int = 100_000
     """environment steps to log (all robots together; about, rounded up to whole steps of num-envs robots)"""
-    num_envs: int = 256
-    """robots logging in parallel in the batched environment"""
-    max_steps: int = 0
-    """episode step limit while logging and evaluating (truncation); 0 = 4 * (nx + ny)"""
     n_steps: int = 10_000
     """d3rlpy gradient updates"""
     batch_size: int = 256
@@ -123,16 +115,12 @@ class OfflineConfig:
     """discount factor of the Q-learning algorithms (not used by bc)"""
     target_update_interval: int = 500
     """updates between target-network syncs (cql, bcq, dqn; d3rlpy's default is 8000)"""
-    hidden: tuple[int, ...] = (256, 256)
-    """sizes of the dense ReLU hidden layers (d3rlpy VectorEncoder)"""
     bc_beta: float = 0.5
     """bc (and the imitation part of bcq): weight of the penalty on squared policy logits (d3rlpy's default)"""
     cql_alpha: float = 1.0
     """cql: weight of the conservative term"""
     bcq_flexibility: float = 0.3
     """bcq: actions whose behaviour probability is below this fraction of the likeliest are not taken"""
-    seed: int = 0
-    """seed of logging (robots, behaviour) and of d3rlpy (d3rlpy.seed)"""
     eval_variants: tuple[str, ...] = ("blueprint", "dynamic")
     """twins of the scene to evaluate on after training (empty = no evaluation)"""
     pairs: int = 500
@@ -145,50 +133,23 @@ class OfflineConfig:
     """write the logged data as dataset.h5 (d3rlpy dump) and transitions.npz"""
     out: str = ""
     """output directory (default runs/<scene>/offline/<algorithm>)"""
-    device: str = "cpu"
-    """torch device for d3rlpy and the environment (cpu, cuda, cuda:1)"""
-    threads: int = 0
-    """torch CPU threads (0 = auto: up to 2, fewer when other processes keep cores busy)"""
-    verbose: bool = True
-    """print progress (d3rlpy's own log lines and progress bars are always off)"""
-
-    @property
-    def dataset_name(self) -> str:
-        return f"{self.scene}/{self.variant}" + (f"@{self.revision}" if self.revision else "")
 
     @property
     def out_dir(self) -> Path:
         return Path(self.out or f"runs/{self.scene}/offline/{self.algorithm}")
 
     def validate(self) -> OfflineConfig:
+        super().validate()
         check_algorithm(self.algorithm)
-        check_preset(self.obs)
-        check_reward(self.reward)
         if self.behaviour not in BEHAVIOURS:
             raise unknown_name("behaviour policy", self.behaviour, BEHAVIOURS)
-        for name in ("transitions", "num_envs", "n_steps", "batch_size", "target_update_interval", "pairs"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if not 0 <= self.shortest_prob <= 1:
-            raise ConfigError(f"shortest_prob must be in [0, 1], got {self.shortest_prob}")
-        if not 0 < self.gamma < 1:
-            raise ConfigError(f"gamma must be in (0, 1), got {self.gamma}")
-        if not 0 < self.bcq_flexibility < 1:
-            raise ConfigError(f"bcq_flexibility must be in (0, 1), got {self.bcq_flexibility}")
-        if self.max_steps < 0 or self.threads < 0 or self.lr <= 0 or self.bc_beta < 0 or self.cql_alpha < 0:
-            raise ConfigError("max_steps, threads, bc_beta and cql_alpha must be >= 0 and lr > 0")
-        if not self.hidden or min(self.hidden) < 1:
-            raise ConfigError(f"hidden must list positive layer sizes, got {self.hidden}")
+        self.check_at_least(1, "transitions", "n_steps", "batch_size", "target_update_interval", "pairs")
+        self.check_within(0, 1, "shortest_prob")
+        self.check_within(0, 1, "gamma", "bcq_flexibility", open_interval=True)
+        if not self.lr > 0:
+            raise ConfigError(f"--lr must be > 0, got {self.lr}")
+        self.check_at_least(0, "bc_beta", "cql_alpha")
         return self
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> OfflineConfig:
-        names = {f.name for f in dataclasses.fields(cls)}
-        tuples = ("hidden", "eval_variants")
-        return cls(**{k: (tuple(v) if k in tuples else v) for k, v in d.items() if k in names})
 
 
 def check_algorithm(name: str) -> str:
@@ -447,11 +408,13 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
     train_s = time.perf_counter() - t_fit
 
     model = out / "model.d3"
-    algo.save(str(model))
+    tmp_model = out / ".model.d3.tmp"
+    algo.save(str(tmp_model))
+    os.replace(tmp_model, model)  # a kill mid-save leaves the previous model, never half of one
     meta = {"format": OFFLINE_FORMAT, "config": cfg.to_dict(), "normalizer": normalizer.to_dict(),
             "obs": {"preset": cfg.obs, "names": obs_names}, "dataset": {"name": ds.name, "version": ds.version},
             "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s}}
-    (out / "config.json").write_text(json.dumps(meta, indent=2) + "\n")
+    write_atomic(out / "config.json", json.dumps(meta, indent=2) + "\n")
     _write_losses(losses, out / "losses.csv")
 
     policy = load_offline_policy(model, cfg.device)
@@ -519,8 +482,11 @@ def load_offline_policy(path: str | Path, device: str = "cpu") -> OfflinePolicy:
     if not model.exists() or not meta_path.exists():
         raise CheckpointError(f"no offline model at {model} (with config.json beside it)",
                               hint="train one first, e.g. `make offline SCENE=cubicle`")
-    meta = json.loads(meta_path.read_text())
-    if meta.get("format") != OFFLINE_FORMAT:
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (OSError, ValueError) as e:
+        raise CheckpointError(f"{meta_path} cannot be read ({e})", hint="train again with `make offline`") from e
+    if not isinstance(meta, dict) or meta.get("format") != OFFLINE_FORMAT:
         raise CheckpointError(f"{meta_path} is not a dtradar offline-RL config",
                               hint="pass the model.d3 written by `python -m dtradar_rl offline`")
     d3rlpy = _d3rlpy()

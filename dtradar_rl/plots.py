@@ -12,6 +12,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from dtradar_data.core.dataset import Dataset  # noqa: E402
+from dtradar_data.geometry.floorplan import draw_floorplan  # noqa: E402
+from dtradar_data.scenes import available_scenes, load_scene_spec  # noqa: E402
 
 
 def moving_average(x: np.ndarray, k: int) -> np.ndarray:
@@ -42,19 +44,15 @@ def plot_curves(episodes: Sequence[tuple], path: Path) -> Path:
 
 
 def _draw_obstacles(ax, ds: Dataset, extent) -> str:
-    """Floor plan from the scene spec when dtradar_data.floorplan is importable, else the blocked mask."""
+    """Floor plan from the scene's file for a built-in scene, else (synthetic or imported tables) the blocked mask."""
     scene, _, variant = ds.name.partition("/")
-    try:
-        from dtradar_data.geometry.floorplan import draw_floorplan
-        from dtradar_data.scenes.model import load_scene_spec
-
+    if scene in available_scenes():
         draw_floorplan(ax, load_scene_spec(scene, variant.partition("@")[0]))
         return "floorplan"
-    except Exception:  # noqa: BLE001 - synthetic scenes or the scene module not available: blocked mask
-        mask = np.ma.masked_where(~ds.blocked, np.ones(ds.shape))
-        ax.imshow(mask, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1.4, alpha=0.9,
-                  interpolation="nearest")
-        return "blocked mask"
+    mask = np.ma.masked_where(~ds.blocked, np.ones(ds.shape))
+    ax.imshow(mask, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1.4, alpha=0.9,
+              interpolation="nearest")
+    return "blocked mask"
 
 
 def plot_paths(ds: Dataset, paths: Sequence[Sequence[int]], path: Path, *, title: str = "",

@@ -9,7 +9,7 @@ Angles follow Sionna: ``*_zen_rad`` is the **zenith** angle θ ∈ [0, π] measu
 |a|² after the antenna-port reduction documented in :mod:`dtradar_data.features`.
 
 Changing a schema means bumping ``SCHEMA_VERSION`` and checking in a new golden file
-(``dtradar_data/golden/cells_v{N}.json``); ``tests/data/test_schema.py`` enforces both.
+(``dtradar_data/core/golden/cells_v{N}.json``); ``tests/data/test_schema.py`` enforces both.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from typing import Any
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import DatasetNotFoundError
-from dtradar_data.store.local import listing, local
+from dtradar_data.store import listing, local
 from dtradar_data.store.card import history_entry, render_card
 
 CARD_INPUTS = "card.json"

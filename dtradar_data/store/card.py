@@ -16,6 +16,7 @@ from typing import Any
 from huggingface_hub import DatasetCard, DatasetCardData
 
 from dtradar_data.core import layout as P
+from dtradar_data.core.files import human_size
 from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_COLUMN_DESCRIPTIONS, PATH_SCHEMA
 
 DEFAULT_HUB_NAMESPACE = "dtradar"
@@ -74,14 +75,6 @@ def _fmt(value: Any) -> str:
     if isinstance(value, dict):
         return ", ".join(f"{k}={_fmt(v)}" for k, v in sorted(value.items()))
     return str(value).replace("|", "\\|").replace("\n", " ")
-
-
-def _size(n: int) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
-            return f"{n} B" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1024
-    return str(n)
 
 
 def _flatten(d: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
@@ -207,7 +200,7 @@ def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str
         path_columns=_columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS) if P.PATHS_FILE in files else [],
         num_free=stats.get("num_free", "—"), num_with_paths=stats.get("num_with_paths", "—"),
         num_blocked=(n - stats["num_free"]) if "num_free" in stats else "—",
-        files=[{"name": k, "size": _size(int(v.get("bytes", 0))), "sha256": str(v.get("sha256", ""))[:16]}
+        files=[{"name": k, "size": human_size(int(v.get("bytes", 0))), "sha256": str(v.get("sha256", ""))[:16]}
                for k, v in sorted(files.items())],
         range_rows=[{"name": c, "min": _fmt(r.get("min")), "max": _fmt(r.get("max")), "nulls": r.get("nulls", "—")}
                     for c, r in ranges.items() if isinstance(r, dict)],

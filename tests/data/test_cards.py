@@ -8,7 +8,9 @@ import pyarrow as pa
 import pytest
 from huggingface_hub import DatasetCard
 
-from dtradar_data import cards, cli, store
+from dtradar_data import cli
+from dtradar_data.publish import cards
+from dtradar_data.store import card, local as store
 from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_SCHEMA
 from dtradar_data.build.synthetic import synthetic_dataset
 
@@ -138,10 +140,10 @@ def test_the_committed_cards_of_the_builtin_datasets_are_up_to_date():
 
 @pytest.mark.parametrize("n, label", [(0, "n<1K"), (999, "n<1K"), (1000, "1K<n<10K"), (240_000, "100K<n<1M")])
 def test_size_categories_follow_the_hub_buckets(n, label):
-    assert cards.size_category(n) == label
+    assert card.size_category(n) == label
 
 
 @pytest.mark.parametrize("text, hub", [("ODbL-1.0", "odbl"), ("Open Database License", "odbl"),
                                        ("CC-BY-4.0", "cc-by-4.0"), ("proprietary", "other"), (None, "other")])
 def test_licences_map_to_hub_identifiers(text, hub):
-    assert cards.license_id(text) == hub
+    assert card.license_id(text) == hub

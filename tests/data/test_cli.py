@@ -5,7 +5,8 @@ import sys
 
 import pytest
 
-from dtradar_data import cli, store
+from dtradar_data import cli
+from dtradar_data.store import local as store
 from dtradar_data.build.synthetic import synthetic_dataset
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
@@ -63,7 +64,7 @@ def test_verify_passes_then_fails_after_a_flipped_byte(root, capsys):
 
 
 def test_build_calls_the_pipeline_with_the_parsed_config(root, capsys, monkeypatch):
-    pipeline = pytest.importorskip("dtradar_data.pipeline")
+    pipeline = pytest.importorskip("dtradar_data.build.pipeline")
     seen = []
 
     def fake_build(config):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dtradar_data import features
+from dtradar_data.rt import features
 from dtradar_data.rt.tracer import PathBatch
 from dtradar_data.core.schema import CELL_COLUMNS, CELL_SCHEMA, PATH_SCHEMA
 

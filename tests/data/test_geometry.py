@@ -8,10 +8,12 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from dtradar_data.geometry.meshes import (box_mesh, footprints, free_components, largest_free_component,
-                                   largest_free_component_fraction, material_meshes, material_thickness, occupancy,
-                                   write_mitsuba_scene)
-from dtradar_data.scenes.model import Box, load_scene_spec, parse_scene
+from dtradar_data.geometry.meshes import box_mesh, material_meshes, material_thickness, write_mitsuba_scene
+from dtradar_data.geometry.occupancy import (footprints, free_components, largest_free_component,
+                                             largest_free_component_fraction, occupancy)
+from dtradar_data.scenes import load_scene_spec
+from dtradar_data.scenes.indoor.reader import parse_room as parse_scene
+from dtradar_data.scenes.model import Box
 
 ALL_VARIANTS = [(s, v) for s in ("cubicle", "meeting") for v in ("blueprint", "dynamic")]
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from dtradar_data.geometry.floorplan import draw_floorplan, material_colour, save_floorplan_png
-from dtradar_data.geometry.meshes import footprints
-from dtradar_data.scenes.model import load_scene_spec
+from dtradar_data.geometry.occupancy import footprints
+from dtradar_data.scenes import load_scene_spec
 
 
 @pytest.mark.parametrize("scene", ["cubicle", "meeting"])

@@ -11,7 +11,9 @@ from types import SimpleNamespace
 import pytest
 from huggingface_hub import CommitOperationAdd, CommitOperationDelete, constants
 
-from dtradar_data import hub, store
+from dtradar_data.publish import hub
+from dtradar_data.store import local as store
+import dtradar_data
 from dtradar_data.core.errors import CorruptDatasetError, HubError
 from dtradar_data.build.synthetic import synthetic_dataset
 
@@ -203,5 +205,5 @@ def test_a_tampered_download_is_rejected_and_nothing_is_installed(root, remote):
 
 
 def test_load_from_hub_pulls_a_missing_revision(root, remote):
-    ds = store.load("cubicle/blueprint", revision="v0", from_hub=True, repo_id="me/bp")
+    ds = dtradar_data.load("cubicle/blueprint", revision="v0", from_hub=True, repo_id="me/bp")
     assert ds.version == V0 and remote.requests == [("me/bp", "v0")]

@@ -3,7 +3,8 @@
 import pytest
 
 from dtradar_data.core.errors import UnknownNameError
-from dtradar_data.core.ids import DatasetId, format_id, known_scenes, parse_id
+from dtradar_data.core.ids import DatasetId, format_id, parse_id
+from dtradar_data.store.catalog import as_id, known_scenes
 
 KNOWN = ["cubicle", "meeting", "dallas-q3"]
 
@@ -46,7 +47,7 @@ def test_malformed_ids_are_rejected_with_the_grammar(bad):
 
 
 def test_grammar_only_parsing_accepts_scenes_that_are_not_known():
-    assert parse_id("newscene/dynamic", known=KNOWN, check_known=False) == DatasetId("newscene", "dynamic")
+    assert parse_id("newscene/dynamic") == DatasetId("newscene", "dynamic")
 
 
 def test_scenes_stored_in_the_data_root_are_known(tmp_path, monkeypatch):
@@ -54,4 +55,4 @@ def test_scenes_stored_in_the_data_root_are_known(tmp_path, monkeypatch):
     assert "imported" not in known_scenes()
     (tmp_path / "datasets" / "imported" / "blueprint").mkdir(parents=True)
     assert "imported" in known_scenes()
-    assert parse_id("imported/blueprint").scene == "imported"
+    assert as_id("imported/blueprint").scene == "imported"

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from dtradar_data import llvm
+from dtradar_data.rt import llvm
 from dtradar_data.core.errors import RayTracerUnavailableError
 
 

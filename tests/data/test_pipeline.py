@@ -20,7 +20,7 @@ def root(tmp_path, monkeypatch):
 @pytest.fixture
 def config():
     from dtradar_data.build.pipeline import BuildConfig
-    from dtradar_data.rt.tracer import RTSettings
+    from dtradar_data.rt.settings import RTSettings
 
     return BuildConfig(scene="cubicle", rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),
                        coverage_samples=20_000, progress=False)
@@ -29,7 +29,7 @@ def config():
 @pytest.fixture
 def small_cubicle():
     """The real cubicle blueprint, cut down to a 6 x 4 cell corner of the grid so it traces in a second."""
-    from dtradar_data.scenes.model import load_scene_spec
+    from dtradar_data.scenes import load_scene_spec
 
     spec = load_scene_spec("cubicle", "blueprint")
     return replace(spec, grid=replace(spec.grid, nx=6, ny=4))
@@ -70,7 +70,7 @@ def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_n
 
 
 def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, monkeypatch):
-    from dtradar_data import pipeline
+    from dtradar_data.build import pipeline
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
@@ -86,7 +86,7 @@ def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, 
     monkeypatch.undo()
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root))
     ds = pipeline.build_one(small_cubicle, config)
-    from dtradar_data.geometry.meshes import occupancy
+    from dtradar_data.geometry.occupancy import occupancy
 
     assert ds.table.num_rows == 24
     np.testing.assert_array_equal(ds.blocked, occupancy(small_cubicle))

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from dtradar_data.core.errors import InvalidCoordinatesError
-from dtradar_data.scenes.model import Box, Grid, SceneSpec, TxSpec
+from dtradar_data.core.grid import Grid
+from dtradar_data.scenes.model import Box, SceneSpec, TxSpec
 
 pytestmark = pytest.mark.sionna
 
@@ -26,7 +27,7 @@ def tiny_spec() -> SceneSpec:
 
 @pytest.fixture(scope="module")
 def iso_settings():
-    from dtradar_data.rt.tracer import RTSettings
+    from dtradar_data.rt.settings import RTSettings
 
     return RTSettings(rx_pattern="iso", rx_polarization="V", max_depth=2, samples_per_src=200_000, device="cpu", batch_size=4)
 
@@ -107,7 +108,7 @@ def test_receivers_outside_the_scene_are_rejected_before_tracing(iso_settings):
 
 def test_per_cell_features_follow_the_contract_on_the_paper_arrays():
     from dtradar_data.build.pipeline import trace_grid
-    from dtradar_data.rt.tracer import RTSettings
+    from dtradar_data.rt.settings import RTSettings
     from dtradar_data.core.schema import CELL_SCHEMA
 
     settings = RTSettings(max_depth=2, samples_per_src=5_000, device="cpu")  # -> vertical dipole

@@ -10,8 +10,12 @@ import numpy as np
 import pytest
 
 from dtradar_data.core.errors import InvalidCoordinatesError, SceneFileError, UnknownNameError
-from dtradar_data.scenes.model import (ITU_MATERIALS, VARIANTS, Box, available_scenes, load_scene_file, load_scene_spec,
-                                material_valid_at, parse_scene, scene_file)
+from dtradar_data.core.ids import VARIANTS
+from dtradar_data.scenes import available_scenes, load_scene_spec, scene_file
+from dtradar_data.scenes.indoor.reader import load_room_file as load_scene_file
+from dtradar_data.scenes.indoor.reader import parse_room as parse_scene
+from dtradar_data.scenes.materials import ITU_MATERIALS, material_valid_at
+from dtradar_data.scenes.model import Box
 
 # DT-RaDaR Sec. V-A / DESIGN.md section 1, plus the room structure we generate (4 walls, floor, ceiling).
 STRUCTURE = {"wall": 4, "floor": 1, "ceiling": 1}

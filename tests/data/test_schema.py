@@ -5,9 +5,9 @@ from importlib import resources
 
 import pytest
 
-from dtradar_data import schema
+from dtradar_data.core import schema
 
-GOLDEN = resources.files("dtradar_data") / "golden"
+GOLDEN = resources.files("dtradar_data.core") / "golden"
 
 
 @pytest.mark.parametrize("kind, current", [("cells", schema.CELL_SCHEMA), ("paths", schema.PATH_SCHEMA)])

@@ -9,7 +9,7 @@ import pyarrow.parquet as pq
 import pytest
 
 import dtradar_data
-from dtradar_data import store
+from dtradar_data.store import local as store
 from dtradar_data.core.errors import (CorruptDatasetError, DatasetNotFoundError, RevisionNotFoundError,
                                  SchemaMismatchError, UnknownNameError)
 from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, RADIO_COLUMNS

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from dtradar_data import store, versions
+from dtradar_data.store import local as store, versions
 from dtradar_data.core.errors import RevisionNotFoundError
 from dtradar_data.build.synthetic import synthetic_dataset
 

@@ -9,7 +9,9 @@ from dtradar_data.core.errors import InvalidCoordinatesError, UnknownNameError
 from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_rl.batched import BatchedNavEnv
 from dtradar_rl.data import load_dataset, synthetic_blocked
-from dtradar_rl.dqn import PRESETS, ConfigError, config_for, load_policy, train
+from dtradar_rl.config import PRESETS, ConfigError, config_for
+from dtradar_rl.dqn import train
+from dtradar_rl.policy import load_policy
 from dtradar_rl.envs import DtradarNavEnv
 from dtradar_rl.mdp import GridMDP
 from dtradar_rl.observations import Normalizer

@@ -8,7 +8,9 @@ import torch
 
 from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.data import load_dataset
-from dtradar_rl.dqn import ConfigError, DQNConfig, config_for, load_policy, train
+from dtradar_rl.config import ConfigError, DQNConfig, config_for
+from dtradar_rl.dqn import train
+from dtradar_rl.policy import load_policy
 from dtradar_rl.mdp import GridMDP
 
 TINY = dict(scene="synthetic-4x3", obs="goal", reward="geodesic", num_envs=32, total_env_steps=16_000,

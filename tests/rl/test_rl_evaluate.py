@@ -75,7 +75,7 @@ def test_shield_never_moves_into_a_sensed_obstacle(tmp_path):
                  "--hidden", "16", "--learning-starts", "500", "--out", str(tmp_path), "--no-verbose",
                  "--threads", "1"]) == 0
     from dtradar_rl.data import load_dataset
-    from dtradar_rl.dqn import load_policy
+    from dtradar_rl.policy import load_policy
     from dtradar_rl.evaluate import evaluate
 
     policy = load_policy(tmp_path / "model.pt")
@@ -87,7 +87,7 @@ def test_shield_needs_the_neighbors_preset(tmp_path):
     assert main(["train", "--scene", "synthetic-6x5", "--obs", "goal", "--total-env-steps", "600",
                  "--num-envs", "16", "--hidden", "8", "--learning-starts", "500", "--out", str(tmp_path),
                  "--no-verbose", "--threads", "1"]) == 0
-    from dtradar_rl.dqn import load_policy
+    from dtradar_rl.policy import load_policy
 
     with pytest.raises(DtradarError, match="neighbors"):
         load_policy(tmp_path / "model.pt").shield_columns()
