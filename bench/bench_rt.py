@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from dtradar_data.rt import features
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer
-from dtradar_data.store.versions import library_versions
 from dtradar_data.scenes import load_scene_spec
+from dtradar_data.store.versions import library_versions
 
 TAU_TOL_S = 1e-10
 ANGLE_TOL_RAD = np.deg2rad(1.0)

@@ -20,13 +20,13 @@ import tyro
 
 from dtradar_data.core.errors import DtradarError
 
-from .data import load_dataset
 from .config import PRESETS, DQNConfig, config_for
+from .data import load_dataset
 from .dqn import train
-from .policy import load_policy
 from .evaluate import cross_matrix, evaluate_twins, write_results
 from .offline import OfflineConfig
 from .plots import plot_matrix, plot_paths
+from .policy import load_policy
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,12 @@ import re
 
 import numpy as np
 
-from dtradar_data.core.dataset import Dataset
 from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, unknown_name
 from dtradar_data.core.ids import VARIANTS
 from dtradar_data.publish.loading import load
+
 _SYNTH = re.compile(r"^synthetic(?:-(\d+)x(\d+))?$")
 
 

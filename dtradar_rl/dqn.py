@@ -52,8 +52,16 @@ from .batched import BatchedNavEnv
 from .config import PRESETS, DQNConfig, config_for
 from .data import load_dataset
 from .observations import Normalizer
-from .policy import (CHECKPOINT_FORMAT, QNetwork, load_policy, read_checkpoint, save_checkpoint, save_torch_atomic,
-                     write_config)
+from .plots import plot_curves
+from .policy import (
+    CHECKPOINT_FORMAT,
+    QNetwork,
+    load_policy,
+    read_checkpoint,
+    save_checkpoint,
+    save_torch_atomic,
+    write_config,
+)
 from .runtime import auto_threads
 
 
@@ -263,8 +271,6 @@ def write_curves(episodes: list[tuple], out: Path) -> tuple[Path, Path]:
         w = csv.writer(f)
         w.writerow(["episode", "env_step", "reward", "steps", "collisions", "success"])
         w.writerows(episodes)
-    from .plots import plot_curves
-
     plot_curves(episodes, png_path)
     return csv_path, png_path
 

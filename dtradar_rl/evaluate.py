@@ -26,8 +26,8 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError
 
 from .data import load_dataset
-from .policy import Policy
 from .mdp import GridMDP
+from .policy import Policy
 
 
 @dataclass

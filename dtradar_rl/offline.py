@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import dataclasses
 import io
 import json
 import logging
@@ -55,10 +54,9 @@ from dtradar_data.core.errors import unknown_name
 from dtradar_data.core.files import write_atomic
 
 from .batched import BatchedNavEnv
-from .data import load_dataset
 from .config import ConfigError, TwinConfig
+from .data import load_dataset
 from .evaluate import evaluate_twins, write_results
-from .mdp import check_reward
 from .observations import Normalizer, build_observations
 from .policy import CheckpointError, Policy
 from .runtime import auto_threads

@@ -6,7 +6,6 @@ import os
 import time
 
 
-
 def idle_cores(interval_s: float = 0.25) -> float:
     """Cores left idle by other processes right now (from ``/proc/stat`` over ``interval_s``; Linux), else from
     the 1-minute load average."""

@@ -25,7 +25,7 @@ from tqdm.auto import tqdm
 
 from dtradar_data.build.coverage import render_coverage_png
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.ids import DatasetId, format_id
+from dtradar_data.core.ids import VARIANTS, DatasetId, format_id
 from dtradar_data.core.layout import work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
 from dtradar_data.geometry.occupancy import occupancy
@@ -33,7 +33,6 @@ from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
 from dtradar_data.scenes import load_scene_spec
-from dtradar_data.core.ids import VARIANTS
 from dtradar_data.store import local, versions
 
 REDUCTION_DOC = (
@@ -63,9 +62,11 @@ class BuildConfig:
     """Show a progress bar."""
 
 
-def build_inputs(spec, settings: RTSettings, *, per_path: bool) -> dict:
-    """Everything that determines a dataset's content; its hash is the dataset version."""
-    return {**versions.build_inputs(spec.to_dict(), settings.hashed(), SCHEMA_VERSION), "per_path": per_path}
+def build_inputs(spec, settings: RTSettings, *, per_path: bool, libraries: dict[str, str] | None = None) -> dict:
+    """Everything that determines a dataset's content; its hash is the dataset version. ``libraries`` (default:
+    the installed versions) lets a check recompute the version of a build made elsewhere."""
+    return {**versions.build_inputs(spec.to_dict(), settings.hashed(), SCHEMA_VERSION, libraries),
+            "per_path": per_path}
 
 
 def _save_npz_atomic(path: Path, **arrays) -> None:

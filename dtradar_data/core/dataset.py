@@ -17,7 +17,6 @@ import pyarrow as pa
 from dtradar_data.core.grid import Grid
 from dtradar_data.core.schema import RADIO_COLUMNS
 
-
 #: The grid of a stored dataset is the scene's receiver grid (``meta["grid"]``); one class for both.
 GridInfo = Grid
 

@@ -24,8 +24,13 @@ from pathlib import Path
 from typing import Any
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import (CorruptDatasetError, DatasetNotFoundError, DtradarError, HubError,
-                                      RevisionNotFoundError)
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    DatasetNotFoundError,
+    DtradarError,
+    HubError,
+    RevisionNotFoundError,
+)
 from dtradar_data.core.ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
 from dtradar_data.store import listing, local
 from dtradar_data.store.card import default_hub_repo, render_version_card
@@ -209,9 +214,8 @@ def _card_tag(readme: Path) -> str | None:
     """The tag the publisher gave this version (``dtradar.tag`` in the card's YAML), to keep it locally."""
     if not readme.is_file():
         return None
-    from huggingface_hub import DatasetCard
-
     import yaml
+    from huggingface_hub import DatasetCard
 
     try:
         tag = (DatasetCard.load(readme).data.to_dict().get("dtradar") or {}).get("tag")

@@ -14,14 +14,12 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-
 import numpy as np
 
 from dtradar_data.core.errors import InvalidCoordinatesError, RayTracerUnavailableError
 from dtradar_data.geometry.meshes import write_mitsuba_scene
 from dtradar_data.rt.llvm import configure as configure_llvm
 from dtradar_data.rt.settings import Device, RTSettings
-
 
 
 @dataclass

@@ -17,6 +17,7 @@ from huggingface_hub import DatasetCard, DatasetCardData
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.files import human_size
+from dtradar_data.core.record import VersionRecord
 from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_COLUMN_DESCRIPTIONS, PATH_SCHEMA
 
 DEFAULT_HUB_NAMESPACE = "dtradar"
@@ -113,65 +114,47 @@ def _columns(schema, descriptions) -> list[dict[str, Any]]:
              "description": descriptions.get(f.name, "").replace("|", "\\|")} for f in schema]
 
 
-def card_data(meta: dict[str, Any], *, tag: str | None, hub_repo: str) -> DatasetCardData:
-    files = meta.get("files") or {}
+def card_data(rec: VersionRecord, *, tag: str | None, hub_repo: str) -> DatasetCardData:
     configs = [{"config_name": "cells", "data_files": [{"split": "train", "path": P.CELLS_FILE}], "default": True}]
-    if P.PATHS_FILE in files:
+    if P.PATHS_FILE in rec.files:
         configs.append({"config_name": "paths", "data_files": [{"split": "train", "path": P.PATHS_FILE}]})
-    spec = meta.get("scene_spec") or {}
-    setting = "outdoor" if "outdoor" in str(spec.get("kind", "")) or _is_odbl(meta) else "indoor"
-    lic = license_id(meta.get("licence") or spec.get("licence"))
+    setting = "outdoor" if "outdoor" in str(rec.scene_spec.get("kind", "")) or _is_odbl(rec) else "indoor"
+    lic = license_id(rec.licence)
     extra: dict[str, Any] = {}
     if lic == "other":
-        extra["license_name"] = str(meta.get("licence") or spec.get("licence") or "unspecified")
+        extra["license_name"] = rec.licence or "unspecified"
     return DatasetCardData(
-        license=lic, pretty_name=_pretty_name(meta), tags=[*TAGS, setting, meta.get("variant", "")],
-        size_categories=[size_category(_num_rows(meta))], task_categories=["robotics", "reinforcement-learning"],
-        configs=configs, dtradar={"name": meta.get("name"), "version": meta.get("version"), "tag": tag,
-                                  "schema_version": meta.get("schema_version"), "hub_repo": hub_repo},
+        license=lic, pretty_name=_pretty_name(rec), tags=[*TAGS, setting, rec.variant],
+        size_categories=[size_category(rec.num_rows)], task_categories=["robotics", "reinforcement-learning"],
+        configs=configs, dtradar={"name": rec.name, "version": rec.version, "tag": tag,
+                                  "schema_version": rec.schema_version, "hub_repo": hub_repo},
         **extra)
 
 
-def _is_odbl(meta: dict[str, Any]) -> bool:
-    spec = meta.get("scene_spec") or {}
-    return license_id(meta.get("licence") or spec.get("licence")) == "odbl"
+def _is_odbl(rec: VersionRecord) -> bool:
+    return license_id(rec.licence) == "odbl"
 
 
-def _pretty_name(meta: dict[str, Any]) -> str:
-    title = meta.get("title") or (meta.get("scene_spec") or {}).get("title") or meta.get("scene", "dataset")
-    variant = meta.get("variant", "?")
-    return f"DT-RaDaR {title}" if variant in title.lower() else f"DT-RaDaR {title} ({variant})"
-
-
-def _num_rows(meta: dict[str, Any]) -> int:
-    stats = meta.get("stats") or {}
-    if "num_cells" in stats:
-        return int(stats["num_cells"])
-    g = meta.get("grid") or {}
-    return int(g.get("nx", 0)) * int(g.get("ny", 0))
+def _pretty_name(rec: VersionRecord) -> str:
+    title = rec.title or rec.scene
+    return f"DT-RaDaR {title}" if rec.variant in title.lower() else f"DT-RaDaR {title} ({rec.variant})"
 
 
 def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str, Any]],
                 hub_repo: str | None = None) -> str:
     """The card text for one version. ``history`` holds :func:`history_entry` dicts, oldest first."""
-    name = meta.get("name", f"{meta.get('scene')}/{meta.get('variant')}")
-    hub_repo = hub_repo or default_hub_repo(name)
-    spec = meta.get("scene_spec") or {}
-    grid = meta.get("grid") or spec.get("grid") or {}
-    rt = meta.get("rt") or {}
-    stats = meta.get("stats") or {}
-    files = meta.get("files") or {}
-    libs = meta.get("library_versions") or {}
-    n = _num_rows(meta)
+    rec = VersionRecord.from_meta(meta)
+    hub_repo = hub_repo or default_hub_repo(rec.name)
+    grid, rt, stats, libs = rec.grid, rec.rt, rec.stats, rec.library_versions
+    n = rec.num_rows
     freq = rt.get("frequency_hz")
-    title = meta.get("title") or spec.get("title") or meta.get("scene", "")
-    summary = (f"Radio features of every cell of a {grid.get('nx')} × {grid.get('ny')} grid over the **{title}** "
-               f"digital twin ({meta.get('variant')}), ray-traced with Sionna RT"
+    summary = (f"Radio features of every cell of a {grid.get('nx')} × {grid.get('ny')} grid over the "
+               f"**{rec.title or rec.scene}** digital twin ({rec.variant}), ray-traced with Sionna RT"
                + (f" at {freq / 1e9:g} GHz" if isinstance(freq, (int, float)) else "")
                + ": complex coefficient, phase, delay and angles of departure and arrival of the strongest path, "
                  "total path gain and delay spread. Built for radio-only robot navigation with reinforcement "
                  "learning, after DT-RaDaR (arXiv 2411.12284).")
-    objects = spec.get("objects") or []
+    objects = rec.scene_spec.get("objects") or []
     counts = Counter((o.get("kind", "?"), o.get("material", "?")) for o in objects)
     ranges = stats.get("columns") or {}
     hist = []
@@ -179,32 +162,29 @@ def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str
         hist.append({**h, "created_utc": h.get("created_utc") or "—",
                      "changes": _changes(history[i - 1] if i else None, h)})
     card = DatasetCard.from_template(
-        card_data(meta, tag=tag, hub_repo=hub_repo),
+        card_data(rec, tag=tag, hub_repo=hub_repo),
         template_path=str(resources.files("dtradar_data.store") / "templates" / "dataset_card.md"),
-        pretty_name=_pretty_name(meta), summary=summary, name=name, version=meta.get("version"), tag=tag,
-        schema_version=meta.get("schema_version"), created_utc=meta.get("created_utc", "—"), num_rows=n,
+        pretty_name=_pretty_name(rec), summary=summary, name=rec.name, version=rec.version, tag=tag,
+        schema_version=rec.schema_version, created_utc=rec.created_utc or "—", num_rows=n,
         nx=grid.get("nx"), ny=grid.get("ny"), cell_m=grid.get("cell_m"), x0_m=grid.get("x0_m"),
-        y0_m=grid.get("y0_m"), rx_height_m=_fmt(meta.get("rx_height_m", spec.get("rx_height_m"))),
-        robot_height_m=meta.get("robot_height_m", spec.get("robot_height_m")),
-        description=meta.get("description") or spec.get("description") or "(no scene description recorded)",
-        variant=meta.get("variant"), variant_text=VARIANT_TEXT.get(meta.get("variant", ""), ""),
-        transmitter_rows=[(k, _fmt(v)) for k, v in _flatten(meta.get("transmitter") or spec.get("tx") or {})],
+        y0_m=grid.get("y0_m"), rx_height_m=_fmt(rec.rx_height_m), robot_height_m=rec.robot_height_m,
+        description=rec.description or "(no scene description recorded)",
+        variant=rec.variant, variant_text=VARIANT_TEXT.get(rec.variant, ""),
+        transmitter_rows=[(k, _fmt(v)) for k, v in _flatten(rec.transmitter)],
         object_rows=[(k, m, c) for (k, m), c in sorted(counts.items())], num_objects=len(objects),
-        source=meta.get("source") or spec.get("source") or "not recorded",
-        licence=meta.get("licence") or spec.get("licence") or "not recorded",
-        attribution=meta.get("attribution") or spec.get("attribution") or "not recorded", odbl=_is_odbl(meta),
+        source=rec.source or "not recorded", licence=rec.licence or "not recorded",
+        attribution=rec.attribution or "not recorded", odbl=_is_odbl(rec),
         sionna_version=f"sionna-rt {libs['sionna-rt']}" if "sionna-rt" in libs else "version not recorded",
         rt_rows=[(k, _fmt(v)) for k, v in _flatten(rt)] or [("(none recorded)", "—")],
         library_text=", ".join(f"{k} {v}" for k, v in sorted(libs.items())) or "not recorded",
         columns=_columns(CELL_SCHEMA, COLUMN_DESCRIPTIONS),
-        path_columns=_columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS) if P.PATHS_FILE in files else [],
+        path_columns=_columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS) if P.PATHS_FILE in rec.files else [],
         num_free=stats.get("num_free", "—"), num_with_paths=stats.get("num_with_paths", "—"),
         num_blocked=(n - stats["num_free"]) if "num_free" in stats else "—",
-        files=[{"name": k, "size": human_size(int(v.get("bytes", 0))), "sha256": str(v.get("sha256", ""))[:16]}
-               for k, v in sorted(files.items())],
+        files=[{"name": k, "size": human_size(f.bytes), "sha256": f.sha256[:16]} for k, f in sorted(rec.files.items())],
         range_rows=[{"name": c, "min": _fmt(r.get("min")), "max": _fmt(r.get("max")), "nulls": r.get("nulls", "—")}
                     for c, r in ranges.items() if isinstance(r, dict)],
-        coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in files else None, hub_repo=hub_repo, history=hist,
+        coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None, hub_repo=hub_repo, history=hist,
     )
     return str(card).rstrip("\n") + "\n"
 

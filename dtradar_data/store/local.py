@@ -33,10 +33,16 @@ import pyarrow.parquet as pq
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import (CorruptDatasetError, DatasetNotFoundError, DtradarError, RevisionNotFoundError,
-                                      SchemaMismatchError)
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    DatasetNotFoundError,
+    DtradarError,
+    RevisionNotFoundError,
+    SchemaMismatchError,
+)
 from dtradar_data.core.files import json_safe, sha256_file
 from dtradar_data.core.ids import HASH_RE, DatasetId
+from dtradar_data.core.record import RECORD_FORMAT, VersionRecord
 from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, SCHEMA_VERSION
 from dtradar_data.store.card import render_version_card
 from dtradar_data.store.catalog import as_id
@@ -191,7 +197,8 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
 
     meta = json_safe(copy.deepcopy(meta))
     meta["stats"] = {**table_stats(cells), **(meta.get("stats") or {})}
-    meta.update(name=did.name, scene=did.scene, variant=did.variant, version=version, schema_version=SCHEMA_VERSION)
+    meta.update(name=did.name, scene=did.scene, variant=did.variant, version=version, schema_version=SCHEMA_VERSION,
+                record_format=RECORD_FORMAT)
     meta.setdefault("created_utc", datetime.now(timezone.utc).isoformat(timespec="seconds"))
     meta.pop("files", None)
     # The Parquet copy of the metadata is the content description only: file hashes cannot include themselves.
@@ -266,14 +273,17 @@ def install_staged(dataset_id: str | DatasetId, stage: Path, *, preferred_tag: s
 # ------------------------------------------------------------------------------------------------------- reading
 
 def read_meta(version_dir: Path) -> dict[str, Any]:
+    """The ``meta.json`` of a version as a dict, checked against :class:`VersionRecord` (and migrated to its
+    current format), so damage shows here as a typed error naming the file."""
     path = version_dir / P.META_FILE
     try:
-        return json.loads(path.read_text())
+        meta = json.loads(path.read_text())
     except FileNotFoundError as exc:
         raise CorruptDatasetError(f"{path} is missing", hint="rebuild the dataset or re-pull it") from exc
     except (ValueError, UnicodeDecodeError) as exc:
         raise CorruptDatasetError(f"{path} is not valid JSON ({exc})", hint="rebuild the dataset or re-pull it"
                                   ) from exc
+    return VersionRecord.from_meta(meta, where=str(path)).to_meta()
 
 
 def read_table(path: Path, schema: pa.Schema) -> pa.Table:

@@ -6,17 +6,16 @@ import sys
 import pytest
 
 from dtradar_data import cli
-from dtradar_data.store import local as store
 from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.store import local as store
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 
 
 @pytest.fixture()
-def root(tmp_path, monkeypatch):
-    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
+def root(root, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    return tmp_path / "root"
+    return root
 
 
 def put(version=V0, name="cubicle/blueprint", **meta):

@@ -10,8 +10,8 @@ import torch
 
 from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.cli import main
-from dtradar_rl.data import load_dataset
 from dtradar_rl.config import ConfigError
+from dtradar_rl.data import load_dataset
 from dtradar_rl.evaluate import evaluate
 from dtradar_rl.mdp import GridMDP, reward_fn
 from dtradar_rl.observations import Normalizer, build_observations

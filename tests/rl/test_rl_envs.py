@@ -6,8 +6,8 @@ import pytest
 import torch
 from gymnasium.utils.env_checker import check_env
 
-from dtradar_data.core.errors import UnknownNameError
 from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.batched import BatchedNavEnv
 from dtradar_rl.data import load_dataset, synthetic_blocked
 from dtradar_rl.envs import DtradarNavEnv, register_dataset_envs

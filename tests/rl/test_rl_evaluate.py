@@ -75,8 +75,8 @@ def test_shield_never_moves_into_a_sensed_obstacle(tmp_path):
                  "--hidden", "16", "--learning-starts", "500", "--out", str(tmp_path), "--no-verbose",
                  "--threads", "1"]) == 0
     from dtradar_rl.data import load_dataset
-    from dtradar_rl.policy import load_policy
     from dtradar_rl.evaluate import evaluate
+    from dtradar_rl.policy import load_policy
 
     policy = load_policy(tmp_path / "model.pt")
     metrics, _ = evaluate(policy, load_dataset("synthetic-6x5/dynamic"), pairs=50, latency=False, shield=True)

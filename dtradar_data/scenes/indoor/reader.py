@@ -29,19 +29,19 @@ raises :class:`~dtradar_data.core.errors.SceneFileError` naming the file, the ob
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
+import tomllib
 from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
 from pydantic_core import PydanticCustomError
 
 from dtradar_data.core.errors import SceneFileError, did_you_mean
 from dtradar_data.core.grid import Grid
 from dtradar_data.scenes.materials import ITU_MATERIALS
-from dtradar_data.scenes.model import POLARIZATIONS, PATTERNS, Box, Room, SceneSpec, TxSpec
+from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS, Box, Room, SceneSpec, TxSpec
 
 FORMAT = 1
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)

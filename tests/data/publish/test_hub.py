@@ -11,23 +11,22 @@ from types import SimpleNamespace
 import pytest
 from huggingface_hub import CommitOperationAdd, CommitOperationDelete, constants
 
+import dtradar_data
+from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.core.errors import CorruptDatasetError, HubError
 from dtradar_data.publish import hub
 from dtradar_data.store import local as store
-import dtradar_data
-from dtradar_data.core.errors import CorruptDatasetError, HubError
-from dtradar_data.build.synthetic import synthetic_dataset
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 
 
 @pytest.fixture()
-def root(tmp_path, monkeypatch):
-    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
+def root(root, tmp_path, monkeypatch):
     for var in ("HF_HUB_OFFLINE", "HF_ENDPOINT", "HF_TOKEN", "HUGGING_FACE_HUB_TOKEN", "HF_OIDC_RESOURCE"):
         monkeypatch.delenv(var, raising=False)
     monkeypatch.setattr(constants, "HF_HUB_OFFLINE", False)
     monkeypatch.setattr(constants, "HF_TOKEN_PATH", str(tmp_path / "no-token"))
-    return tmp_path / "root"
+    return root
 
 
 def put(version=V0, **meta):

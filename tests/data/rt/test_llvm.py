@@ -4,8 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from dtradar_data.rt import llvm
 from dtradar_data.core.errors import RayTracerUnavailableError
+from dtradar_data.rt import llvm
 
 
 def test_an_explicit_drjit_libllvm_path_wins(monkeypatch, tmp_path):

@@ -9,21 +9,16 @@ import pytest
 from huggingface_hub import DatasetCard
 
 from dtradar_data import cli
-from dtradar_data.publish import cards
-from dtradar_data.store import card, local as store
-from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_SCHEMA
 from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_SCHEMA
+from dtradar_data.publish import cards
+from dtradar_data.store import card
+from dtradar_data.store import local as store
 
-REPO_CARDS = Path(__file__).resolve().parents[2] / "cards"
+REPO_CARDS = Path(__file__).resolve().parents[3] / "cards"
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 RT = {"frequency_hz": 2.4e9, "max_depth": 5, "samples_per_src": 100000, "seed": 42, "los": True,
       "reduction": "strongest path by |a|^2 averaged over port pairs"}
-
-
-@pytest.fixture()
-def root(tmp_path, monkeypatch):
-    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
-    return tmp_path / "root"
 
 
 def put(version=V0, rt=RT, licence="CC-BY-4.0", with_paths=True, png=None):

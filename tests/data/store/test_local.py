@@ -9,19 +9,18 @@ import pyarrow.parquet as pq
 import pytest
 
 import dtradar_data
-from dtradar_data.store import local as store
-from dtradar_data.core.errors import (CorruptDatasetError, DatasetNotFoundError, RevisionNotFoundError,
-                                 SchemaMismatchError, UnknownNameError)
-from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, RADIO_COLUMNS
 from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    DatasetNotFoundError,
+    RevisionNotFoundError,
+    SchemaMismatchError,
+    UnknownNameError,
+)
+from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, RADIO_COLUMNS
+from dtradar_data.store import local as store
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
-
-
-@pytest.fixture()
-def root(tmp_path, monkeypatch):
-    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
-    return tmp_path / "root"
 
 
 def blocked_mask(nx=8, ny=6):

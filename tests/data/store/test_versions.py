@@ -4,19 +4,14 @@ import json
 
 import pytest
 
-from dtradar_data.store import local as store, versions
-from dtradar_data.core.errors import RevisionNotFoundError
 from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.core.errors import RevisionNotFoundError
+from dtradar_data.store import local as store
+from dtradar_data.store import versions
 
 SPEC = {"scene": "cubicle", "variant": "blueprint", "objects": [{"kind": "chair", "x_m": 1.0}]}
 RT = {"frequency_hz": 2.4e9, "max_depth": 5, "seed": 42}
 LIBS = {"sionna-rt": "2.2.0", "mitsuba": "3.9.1"}
-
-
-@pytest.fixture()
-def root(tmp_path, monkeypatch):
-    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
-    return tmp_path / "root"
 
 
 def inputs(**changes):

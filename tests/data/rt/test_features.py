@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from dtradar_data.core.schema import CELL_COLUMNS, CELL_SCHEMA, PATH_SCHEMA
 from dtradar_data.rt import features
 from dtradar_data.rt.tracer import PathBatch
-from dtradar_data.core.schema import CELL_COLUMNS, CELL_SCHEMA, PATH_SCHEMA
 
 F = 2.4e9
 

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
-import tomllib
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+import tomllib
 
 from dtradar_data.geometry.meshes import box_mesh, material_meshes, material_thickness, write_mitsuba_scene
-from dtradar_data.geometry.occupancy import (footprints, free_components, largest_free_component,
-                                             largest_free_component_fraction, occupancy)
+from dtradar_data.geometry.occupancy import (
+    footprints,
+    free_components,
+    largest_free_component,
+    largest_free_component_fraction,
+    occupancy,
+)
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.scenes.indoor.reader import parse_room as parse_scene
 from dtradar_data.scenes.model import Box

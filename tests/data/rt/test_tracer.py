@@ -108,8 +108,8 @@ def test_receivers_outside_the_scene_are_rejected_before_tracing(iso_settings):
 
 def test_per_cell_features_follow_the_contract_on_the_paper_arrays():
     from dtradar_data.build.pipeline import trace_grid
-    from dtradar_data.rt.settings import RTSettings
     from dtradar_data.core.schema import CELL_SCHEMA
+    from dtradar_data.rt.settings import RTSettings
 
     settings = RTSettings(max_depth=2, samples_per_src=5_000, device="cpu")  # -> vertical dipole
     paper_tx = TxSpec(position_m=TX, look_at_m=(1.0, 1.0, 0.0))  # 8x2 tr38901 VH, the paper's array
