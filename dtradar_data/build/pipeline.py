@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+from filelock import FileLock
 from tqdm.auto import tqdm
 
 from dtradar_data.build.coverage import render_coverage_png
@@ -127,10 +128,21 @@ def build_one(spec, config: BuildConfig) -> Dataset:
     name = format_id(ds_id)
     inputs = build_inputs(spec, settings, per_path=config.per_path)
     version = versions.version_id(inputs)
-    if local.version_exists(ds_id, version):
-        print(f"{name}: version {version} already built, reusing it")
-        return local.load(name, revision=version)
     work_dir = work_root() / spec.scene / spec.variant / version
+    work_dir.parent.mkdir(parents=True, exist_ok=True)
+    # One build of a version at a time: a second process waits here, then finds the version built and reuses it
+    # (without the lock, the first one's cleanup deleted the shared work folder under the second).
+    with FileLock(work_dir.parent / f"{version}.lock"):
+        if local.version_exists(ds_id, version):
+            print(f"{name}: version {version} already built, reusing it")
+            return local.load(name, revision=version)
+        return _trace_and_store(spec, config, ds_id, version, inputs, work_dir)
+
+
+def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: dict,
+                     work_dir: Path) -> Dataset:
+    settings = config.rt
+    name = format_id(ds_id)
     t0 = time.perf_counter()
     cells, paths, blocked, tracer = trace_grid(spec, settings, work_dir, per_path=config.per_path,
                                                progress=config.progress)

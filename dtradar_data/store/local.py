@@ -15,14 +15,12 @@ than the cell table and most consumers never need it.
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import json
 import logging
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -30,6 +28,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+from filelock import FileLock
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.dataset import Dataset
@@ -136,21 +135,10 @@ def _write_parquet(table: pa.Table, path: Path, meta_json: bytes) -> None:
                    write_page_checksum=True, write_statistics=True)
 
 
-@contextlib.contextmanager
-def _locked(directory: Path) -> Iterator[None]:
-    """An exclusive lock per dataset, so two builds cannot hand out the same tag."""
+def _locked(directory: Path) -> FileLock:
+    """An exclusive lock per dataset (a ``.lock`` file in its folder), so two processes cannot hand out one tag."""
     directory.mkdir(parents=True, exist_ok=True)
-    with open(directory / ".lock", "a+") as f:
-        try:
-            import fcntl
-        except ImportError:  # not POSIX: no cross-process lock, the rename below still never overwrites
-            yield
-            return
-        fcntl.flock(f, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
+    return FileLock(directory / ".lock")
 
 
 # ------------------------------------------------------------------------------------------------------- writing

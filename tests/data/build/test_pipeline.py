@@ -137,3 +137,37 @@ def test_a_users_scene_file_builds_by_path_and_loads_by_its_name(root, tmp_path,
     assert ds.blocked[0, 0] and ds.blocked.sum() == 1
     assert dtradar_data.load("tiny-room/blueprint").version == ds.version
     assert "A user's own 2 m x 1.5 m room" in (ds.path / "README.md").read_text()
+
+
+def test_two_builds_of_one_version_at_once_both_finish_with_one_version_traced_once(root, config, small_cubicle,
+                                                                                  monkeypatch):
+    import threading
+
+    from dtradar_data.build import pipeline
+
+    traced = []
+    real_trace = pipeline.trace_grid
+
+    def counting_trace(*args, **kwargs):
+        traced.append(threading.get_ident())
+        return real_trace(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "trace_grid", counting_trace)
+    cfg = replace(config, coverage_map=False)
+    results, errors = [], []
+
+    def run():
+        try:
+            results.append(pipeline.build_one(small_cubicle, cfg))
+        except BaseException as e:  # noqa: BLE001 - the assertion below reports it
+            errors.append(e)
+
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors and len(results) == 2 and len(traced) == 1
+    assert results[0].version == results[1].version
+    stored = [p for p in (root / "datasets" / "cubicle" / "blueprint").iterdir() if p.is_dir()]
+    assert len(stored) == 1
