@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from dtradar_data.geometry.occupancy import footprints, occupancy
-from dtradar_data.scenes.model import SceneSpec
+from dtradar_data.scenes.model import Prism, SceneSpec
 
 # Colours loosely follow the material's look (Sionna's own palette is for 3-D renders and too dark for a plan view).
 MATERIAL_COLOURS: dict[str, str] = {
@@ -44,6 +44,13 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
     from matplotlib.patches import Polygon
 
     seen: set[str] = set()
+    for prism in sorted(spec.prisms, key=lambda p: (p.top_m, p.name)):  # lots and roads under buildings
+        entry = prism.material if prism.material not in seen else "_nolegend_"
+        seen.add(prism.material)
+        flat = prism.top_m < spec.robot_height_m
+        ax.add_patch(_polygon_patch(prism, facecolor=material_colour(prism.material), edgecolor="black",
+                                    linewidth=0.3, alpha=0.35 if flat else 0.9, label=entry,
+                                    zorder=1.2 if flat else 2))
     for box, corners in footprints(spec):
         above = box.z_m >= spec.robot_height_m
         entry = box.material if box.material not in seen else "_nolegend_"
@@ -77,9 +84,25 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
     return ax
 
 
+def _polygon_patch(prism: Prism, **kwargs):
+    """A filled patch of a prism's footprint, holes left open."""
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path as MplPath
+
+    rings = [prism.exterior, *prism.holes]
+    path = MplPath.make_compound_path(*[MplPath(np.array([*r, r[0]]), closed=True) for r in rings])
+    return PathPatch(path, **kwargs)
+
+
 def _extent(spec: SceneSpec) -> tuple[float, float, float, float]:
-    """Outer bounds of everything drawn (walls included), with a small margin."""
-    pts = np.vstack([c for _, c in footprints(spec)] + [np.array([spec.tx.position_m[:2]])])
+    """Outer bounds of everything drawn (walls included), with a small margin; for a city quadrant, its grid and
+    transmitter (the city's other buildings are clipped away)."""
+    if spec.prisms:
+        gx0, gy0, gx1, gy1 = spec.grid.bounds()
+        corners = [np.array([[gx0, gy0], [gx1, gy1]])]
+    else:
+        corners = [c for _, c in footprints(spec)]
+    pts = np.vstack(corners + [np.array([spec.tx.position_m[:2]])])
     pad = 0.02 * float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 1])))
     return pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad
 

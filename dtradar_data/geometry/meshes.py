@@ -2,23 +2,28 @@
 
 trimesh + numpy only: this module never imports Sionna or Mitsuba, so it tests without them.
 
-- :func:`material_meshes` builds each box as a closed 12-triangle mesh with outward normals and concatenates the
-  boxes of one ITU material into one mesh (vertices are *not* welded across boxes, so every box stays a closed
-  2-manifold even where two boxes touch).
+- :func:`material_meshes` builds each box as a closed 12-triangle mesh with outward normals (or a bundled mesh, such
+  as Sionna's low-poly car, scaled into the box), each prism as its extruded footprint (``trimesh`` with
+  ``mapbox-earcut`` triangulating the caps), and concatenates the parts of one ITU material into one mesh (vertices
+  are *not* welded across parts, so every part stays a closed 2-manifold even where two touch).
 - :func:`write_mitsuba_scene` writes ``meshes/<material>.ply`` (binary little endian, written by hand so the bytes
   depend only on the spec) and ``scene.xml`` in the Sionna RT 2.x format.
 """
 
 from __future__ import annotations
 
+import functools
 import math
+from importlib import metadata
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import trimesh
+from shapely.geometry import Polygon
 
-from dtradar_data.scenes.model import Box, SceneSpec
+from dtradar_data.core.errors import MissingDependencyError, unknown_name
+from dtradar_data.scenes.model import Box, Prism, SceneSpec
 
 # Slab thickness per material for Sionna's transmission model (it treats every surface a ray crosses as a slab of the
 # material's thickness; Sionna's default is 0.1 m). Our obstacles are closed boxes, so a ray through one crosses two
@@ -40,24 +45,68 @@ def material_thickness(material: str) -> float:
     return MATERIAL_THICKNESS_M.get(material, DEFAULT_THICKNESS_M)
 
 
+#: Meshes a box may be drawn with (``Box.mesh``): the file inside an installed distribution. Found through package
+#: metadata, not by importing the package, so this layer never imports Sionna.
+BUNDLED_MESHES: dict[str, tuple[str, str]] = {
+    "sionna:low_poly_car": ("sionna-rt", "sionna/rt/scenes/low_poly_car.ply"),
+}
+
+
 # ---------------------------------------------------------------------------------------------------- meshes
+@functools.lru_cache(maxsize=None)
+def bundled_mesh(name: str) -> trimesh.Trimesh:
+    """A bundled mesh by name, centred on its footprint with its bottom at z = 0."""
+    if name not in BUNDLED_MESHES:
+        raise unknown_name("bundled mesh", name, BUNDLED_MESHES)
+    dist, rel = BUNDLED_MESHES[name]
+    try:
+        path = Path(str(metadata.distribution(dist).locate_file(rel)))
+    except metadata.PackageNotFoundError as e:
+        raise MissingDependencyError(f"the mesh {name!r} comes with {dist}, which is not installed",
+                                     hint="run `make setup`") from e
+    if not path.is_file():
+        raise MissingDependencyError(f"{path} is missing from the installed {dist}",
+                                     hint=f"reinstall it: `pip install --force-reinstall {dist}`")
+    mesh = trimesh.load(str(path), process=False, force="mesh")
+    lo, hi = mesh.bounds
+    mesh.apply_translation((-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]))
+    return mesh
+
+
 def box_mesh(box: Box) -> trimesh.Trimesh:
-    """A closed box mesh (8 vertices, 12 triangles, outward normals) placed and rotated as ``box`` says."""
-    mesh = trimesh.creation.box(extents=(box.width_m, box.length_m, box.height_m))
+    """A closed box mesh (8 vertices, 12 triangles, outward normals) placed and rotated as ``box`` says; with
+    ``box.mesh`` the bundled mesh scaled to the box's size instead."""
+    if box.mesh is None:
+        mesh = trimesh.creation.box(extents=(box.width_m, box.length_m, box.height_m))
+        lift = box.z_m + box.height_m / 2
+    else:
+        mesh = bundled_mesh(box.mesh).copy()
+        mesh.apply_scale(np.array([box.width_m, box.length_m, box.height_m]) / mesh.extents)
+        lift = box.z_m
     transform = trimesh.transformations.rotation_matrix(math.radians(box.yaw_deg), (0.0, 0.0, 1.0))
-    transform[:3, 3] = (box.x_m, box.y_m, box.z_m + box.height_m / 2)
+    transform[:3, 3] = (box.x_m, box.y_m, lift)
     mesh.apply_transform(transform)
     return mesh
 
 
+def prism_mesh(prism: Prism) -> trimesh.Trimesh:
+    """The footprint extruded from ``z_m`` to its top: a closed mesh with outward normals."""
+    polygon = Polygon(prism.exterior, prism.holes)
+    mesh = trimesh.creation.extrude_polygon(polygon, prism.height_m, engine="earcut")
+    mesh.apply_translation((0.0, 0.0, prism.z_m))
+    return mesh
+
+
 def material_meshes(spec: SceneSpec) -> dict[str, trimesh.Trimesh]:
-    """One mesh per ITU material (keys sorted), boxes in the spec's object order."""
-    groups: dict[str, list[Box]] = {}
+    """One mesh per ITU material (keys sorted): boxes in the spec's object order, then prisms in theirs."""
+    groups: dict[str, list[trimesh.Trimesh]] = {}
     for box in spec.objects:
-        groups.setdefault(box.material, []).append(box)
+        groups.setdefault(box.material, []).append(box_mesh(box))
+    for prism in spec.prisms:
+        groups.setdefault(prism.material, []).append(prism_mesh(prism))
     out = {}
     for material in sorted(groups):
-        parts = [box_mesh(b) for b in groups[material]]
+        parts = groups[material]
         vertices, faces, offset = [], [], 0
         for p in parts:
             vertices.append(p.vertices)

@@ -1,6 +1,7 @@
 """Where the robot can be: the occupancy grid of a scene, obstacle footprints, connected free regions.
 
-numpy only (no Sionna): a cell is blocked when an obstacle overlaps it at robot height (:func:`occupancy`);
+numpy and shapely (no Sionna): a cell is blocked when an obstacle or a building overlaps it at robot height
+(:func:`occupancy`);
 :func:`free_components` labels the 4-connected free regions the robot can move in.
 """
 
@@ -9,6 +10,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import shapely
+from shapely.geometry import Polygon
 
 from dtradar_data.scenes.model import Box, SceneSpec
 
@@ -51,6 +54,8 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
     area. The overlap is exact (separating-axis test of the rotated footprint against the square cell), with ``eps``
     (1 micrometre) of slack so that a box flush with a cell edge leaves the neighbour free. Consequences: a wall-
     mounted TV above the robot does not block; a table (0.75 m) does; a cell is blocked if a chair clips its corner.
+    Prisms (buildings) follow the same rule with an exact polygon intersection (shapely); parking-lot and road
+    surfaces lie below 0.05 m and never block.
     """
     g = spec.grid
     blocked = np.zeros(g.shape, dtype=bool)
@@ -69,7 +74,28 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
             continue
         cx, cy = np.meshgrid(xs[ix0:ix1 + 1], ys[iy0:iy1 + 1])
         blocked[iy0:iy1 + 1, ix0:ix1 + 1] |= _overlap_cells(corners, cx, cy, half, eps)
+    for prism in spec.prisms:
+        if prism.z_m < hi and prism.top_m > lo:
+            _block_polygon(blocked, g, Polygon(prism.exterior, prism.holes), eps)
     return blocked
+
+
+def _block_polygon(blocked: np.ndarray, g, polygon: Polygon, eps: float) -> None:
+    """Mark the cells a (possibly concave, holed) polygon covers with more than ``eps`` times a cell's area."""
+    xmin, ymin, xmax, ymax = polygon.bounds
+    ix0 = max(0, math.floor((xmin - g.x0_m) / g.cell_m + 0.5))
+    ix1 = min(g.nx - 1, math.floor((xmax - g.x0_m) / g.cell_m + 0.5))
+    iy0 = max(0, math.floor((ymin - g.y0_m) / g.cell_m + 0.5))
+    iy1 = min(g.ny - 1, math.floor((ymax - g.y0_m) / g.cell_m + 0.5))
+    if ix0 > ix1 or iy0 > iy1:
+        return
+    xs, ys = g.centres()
+    cx, cy = np.meshgrid(xs[ix0:ix1 + 1], ys[iy0:iy1 + 1])
+    h = g.cell_m / 2
+    cells = shapely.box(cx - h, cy - h, cx + h, cy + h)
+    shapely.prepare(polygon)
+    area = shapely.area(shapely.intersection(cells, polygon))
+    blocked[iy0:iy1 + 1, ix0:ix1 + 1] |= area > eps * g.cell_m * g.cell_m
 
 
 def free_components(blocked: np.ndarray) -> np.ndarray:

@@ -1,7 +1,9 @@
 """Scenes: the scene model, its materials, and the catalogue of scenes a user can name.
 
-A scene is named by a built-in name (``cubicle``, ``meeting``: TOML files in :mod:`dtradar_data.scenes.indoor`) or
-by the path of the user's own scene file (``make dataset SCENE=path/to/room.toml``).
+A scene is named by a built-in name (``cubicle``, ``meeting``: TOML files in :mod:`dtradar_data.scenes.indoor`; the
+city quadrants ``dallas-q1`` ... ``houston-q4``: one TOML file per city in :mod:`dtradar_data.scenes.city`) or by the
+path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A build may also name a whole city
+(``dallas``): :func:`build_targets` expands it to its quadrants.
 """
 
 from __future__ import annotations
@@ -11,27 +13,42 @@ from pathlib import Path
 
 from dtradar_data.core.errors import SceneFileError, unknown_name
 from dtradar_data.core.ids import VARIANTS
+from dtradar_data.scenes.city.reader import (
+    city_file,
+    city_names,
+    load_city_spec,
+    quadrant_scenes,
+    read_city_file,
+)
 from dtradar_data.scenes.indoor.reader import load_room_file
 from dtradar_data.scenes.model import SceneSpec
 
-__all__ = ["SceneSpec", "available_scenes", "scene_file", "is_scene_path", "load_scene_spec"]
+__all__ = ["SceneSpec", "available_scenes", "build_targets", "city_names", "scene_file", "is_scene_path",
+           "load_scene_spec"]
 
 
 def _indoor_dir():
     return resources.files("dtradar_data.scenes.indoor")
 
 
-def available_scenes() -> list[str]:
-    """The built-in scene names."""
+def indoor_scenes() -> list[str]:
     return sorted(p.name[:-5] for p in _indoor_dir().iterdir() if p.name.endswith(".toml"))
 
 
+def available_scenes() -> list[str]:
+    """The built-in dataset scene names: indoor rooms and city quadrants."""
+    return sorted(indoor_scenes() + [q for c in city_names() for q in quadrant_scenes(c)])
+
+
 def scene_file(scene: str) -> Path:
-    """Path of a built-in scene's file; :class:`UnknownNameError` (with did-you-mean) for unknown names."""
-    names = available_scenes()
-    if scene not in names:
-        raise unknown_name("scene", scene, names)
-    return Path(str(_indoor_dir() / f"{scene}.toml"))
+    """Path of a built-in scene's file (a city quadrant's is its city's); :class:`UnknownNameError` (with
+    did-you-mean) for unknown names."""
+    if scene in indoor_scenes():
+        return Path(str(_indoor_dir() / f"{scene}.toml"))
+    city = scene.rpartition("-")[0]
+    if scene in available_scenes():
+        return city_file(city)
+    raise unknown_name("scene", scene, available_scenes() + city_names())
 
 
 def is_scene_path(scene: str | Path) -> bool:
@@ -40,8 +57,13 @@ def is_scene_path(scene: str | Path) -> bool:
     return isinstance(scene, Path) or text.endswith(".toml") or "/" in text or "\\" in text
 
 
-def load_scene_spec(scene: str | Path, variant: str) -> SceneSpec:
-    """One variant ("blueprint" or "dynamic") of a built-in scene or of the user's scene file."""
+def load_scene_spec(scene: str | Path, variant: str, *, footprints: str | None = None,
+                    cell_m: float | None = None) -> SceneSpec:
+    """One variant ("blueprint" or "dynamic") of a built-in scene, a city quadrant or the user's scene file.
+
+    ``footprints`` (cities only) replaces the city's footprint source (a GeoJSON or ``.osm`` file, or ``osm``);
+    ``cell_m`` (cities only) replaces its cell size.
+    """
     if variant not in VARIANTS:
         raise unknown_name("variant", variant, VARIANTS)
     if is_scene_path(scene):
@@ -49,5 +71,41 @@ def load_scene_spec(scene: str | Path, variant: str) -> SceneSpec:
         if not path.is_file():
             raise SceneFileError(f"{path}: no such scene file",
                                  hint="check the path, or use a built-in scene: " + ", ".join(available_scenes()))
+        _indoor_only(footprints, cell_m, str(path))
         return load_room_file(path, variant)
-    return load_room_file(scene_file(str(scene)), variant)
+    scene = str(scene)
+    if scene in indoor_scenes():
+        _indoor_only(footprints, cell_m, scene)
+        return load_room_file(scene_file(scene), variant)
+    if scene in available_scenes():
+        return load_city_spec(scene, variant, footprints=footprints, cell_m=cell_m)
+    raise unknown_name("scene", scene, available_scenes() + city_names())
+
+
+def _indoor_only(footprints, cell_m, scene: str) -> None:
+    if footprints is not None or cell_m is not None:
+        raise SceneFileError(f"{scene} is an indoor scene: --osm and --cell-m apply to city scenes only",
+                             hint="edit [grid] in the scene file instead, or drop the option")
+
+
+def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | Path, str]]:
+    """``(scene, variant)`` pairs a build of ``scene`` makes: a city expands to its quadrants (blueprints, plus the
+    dynamic twin of its dynamic quadrant); ``variant`` is ``"all"``, ``"blueprint"`` or ``"dynamic"``."""
+    if variant != "all" and variant not in VARIANTS:
+        raise unknown_name("variant", variant, ("all", *VARIANTS))
+    wanted = VARIANTS if variant == "all" else (variant,)
+    text = str(scene)
+    if not is_scene_path(scene) and text in city_names():
+        doc = read_city_file(city_file(text))
+        pairs = [(f"{text}-{q}", "blueprint") for q in sorted(doc.quadrants)]
+        if doc.dynamic is not None:
+            pairs.append((f"{text}-{doc.dynamic.quadrant}", "dynamic"))
+        return [(s, v) for s, v in pairs if v in wanted]
+    if not is_scene_path(scene) and text not in indoor_scenes():
+        parts = text.rpartition("-")
+        if text in available_scenes():  # one quadrant: its blueprint, and its dynamic twin when it has one
+            doc = read_city_file(city_file(parts[0]))
+            has_dynamic = doc.dynamic is not None and doc.dynamic.quadrant == parts[2]
+            return [(text, v) for v in wanted if v == "blueprint" or has_dynamic or variant == "dynamic"]
+        raise unknown_name("scene", text, available_scenes() + city_names())
+    return [(scene, v) for v in wanted]

@@ -2,8 +2,11 @@
 
 A :class:`SceneSpec` holds the receiver grid, the transmitter, the robot's heights and the objects: boxes as the paper
 describes obstacles, ``(x, y, height, width, length)`` with a yaw about +z, a bottom height ``z`` and an ITU material
-(walls, floor and ceiling slabs of a room are boxes too). Readers (:mod:`dtradar_data.scenes.indoor` for the TOML room
-files) build specs; geometry, ray tracing and the store consume them. Its :meth:`SceneSpec.digest` identifies the
+(walls, floor and ceiling slabs of a room, and a city's ground, are boxes too; a box may be drawn with a bundled mesh,
+such as Sionna's low-poly car, scaled into it), and, for city twins, :class:`Prism` objects: footprint polygons
+extruded vertically (buildings, and thin parking-lot and road surfaces). Readers (:mod:`dtradar_data.scenes.indoor`
+for the TOML room files, :mod:`dtradar_data.scenes.city` for city scene files) build specs; geometry, ray tracing and
+the store consume them. Its :meth:`SceneSpec.digest` identifies the
 scene in dataset versions, so its canonical JSON must not change for an unchanged scene.
 """
 
@@ -12,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -39,10 +42,19 @@ class Box:
     height_m: float
     z_m: float = 0.0
     yaw_deg: float = 0.0
+    mesh: str | None = None
+    """A bundled mesh drawn scaled into the box instead of the box itself (``"sionna:low_poly_car"``); the box stays
+    its footprint for occupancy."""
 
     @property
     def top_m(self) -> float:
         return self.z_m + self.height_m
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        if self.mesh is None:  # keep the canonical JSON (and the digests) of scenes written before meshes existed
+            d.pop("mesh")
+        return d
 
     def corners(self) -> np.ndarray:
         """Footprint corners, float64[4, 2], counter-clockwise."""
@@ -51,6 +63,36 @@ class Box:
         t = math.radians(self.yaw_deg)
         rot = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
         return local @ rot.T + np.array([self.x_m, self.y_m])
+
+
+Ring = tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
+class Prism:
+    """A footprint polygon extruded from ``z_m`` to ``z_m + height_m``: a building, or a thin parking-lot or road
+    surface. Rings are in scene metres and not closed; the exterior is counter-clockwise, holes clockwise."""
+
+    name: str
+    kind: str
+    material: str
+    exterior: Ring
+    height_m: float
+    holes: tuple[Ring, ...] = ()
+    z_m: float = 0.0
+
+    @property
+    def top_m(self) -> float:
+        return self.z_m + self.height_m
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        xs, ys = zip(*self.exterior)
+        return min(xs), min(ys), max(xs), max(ys)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "kind": self.kind, "material": self.material,
+                "exterior": [list(p) for p in self.exterior], "holes": [[list(p) for p in h] for h in self.holes],
+                "height_m": self.height_m, "z_m": self.z_m}
 
 
 @dataclass(frozen=True)
@@ -93,6 +135,10 @@ class SceneSpec:
     robot_height_m: float
     objects: tuple[Box, ...]
     room: Room | None = None
+    prisms: tuple[Prism, ...] = ()
+    provenance: dict[str, Any] = field(default_factory=dict, compare=False)
+    """Where the geometry came from (a city's footprint source, download time, processing report). Recorded in the
+    dataset's metadata, not in the digest: the geometry itself is."""
 
     @property
     def name(self) -> str:
@@ -104,14 +150,20 @@ class SceneSpec:
 
     def count_by_kind(self) -> dict[str, int]:
         counts: dict[str, int] = {}
-        for b in self.objects:
+        for b in (*self.objects, *self.prisms):
             counts[b.kind] = counts.get(b.kind, 0) + 1
         return counts
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able and canonical: tuples become lists, key order is fixed by :meth:`digest`'s ``sort_keys``."""
+        """JSON-able and canonical: tuples become lists, key order is fixed by :meth:`digest`'s ``sort_keys``.
+        Fields added after the indoor twins (prisms) appear only when used, so older digests stay valid."""
         d = asdict(self)
-        d["objects"] = [asdict(b) for b in self.objects]
+        d.pop("provenance")
+        d["objects"] = [b.to_dict() for b in self.objects]
+        if self.prisms:
+            d["prisms"] = [p.to_dict() for p in self.prisms]
+        else:
+            d.pop("prisms")
         d["tx"]["position_m"] = list(self.tx.position_m)
         d["tx"]["look_at_m"] = None if self.tx.look_at_m is None else list(self.tx.look_at_m)
         return d

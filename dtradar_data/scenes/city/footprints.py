@@ -37,12 +37,23 @@ import shapely
 from pyproj import CRS, Transformer
 from pyproj.exceptions import CRSError
 from shapely.errors import GEOSException
-from shapely.geometry import GeometryCollection, LineString, MultiLineString, MultiPolygon, Polygon
+from shapely.geometry import (
+    GeometryCollection,
+    LineString,
+    MultiLineString,
+    MultiPolygon,
+    Polygon,
+)
 from shapely.geometry import box as shapely_box
 from shapely.geometry import shape as shapely_shape
 from shapely.geometry.polygon import orient
 
-from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError, SceneFileError, unknown_name
+from dtradar_data.core.errors import (
+    DtradarError,
+    InvalidCoordinatesError,
+    SceneFileError,
+    unknown_name,
+)
 
 __all__ = [
     "LonLatBox", "Feature", "CityFootprints", "FootprintsUnavailableError", "FootprintsEmptyError",
@@ -715,7 +726,9 @@ def read_geojson(path: str | Path, box: LonLatBox, crs: str, *, source: str | No
 
 def read_osm_xml(path: str | Path, box: LonLatBox, crs: str) -> CityFootprints:
     """Footprints from a local OpenStreetMap XML file (``.osm``/``.xml``) through osmnx; see :mod:`.osm`."""
-    from dtradar_data.scenes.city import osm  # osmnx (geopandas, networkx) is slow to import: only when needed
+    from dtradar_data.scenes.city import (
+        osm,  # osmnx (geopandas, networkx) is slow to import: only when needed
+    )
 
     return osm.read_osm_xml(path, box, crs)
 

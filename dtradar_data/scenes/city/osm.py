@@ -33,7 +33,11 @@ from pathlib import Path
 from typing import Any
 from xml.etree.ElementTree import ParseError
 
-from dtradar_data.core.errors import CorruptDatasetError, MissingDependencyError, SceneFileError
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    MissingDependencyError,
+    SceneFileError,
+)
 from dtradar_data.scenes.city.footprints import (
     CITY_BOXES,
     CityFootprints,

@@ -41,7 +41,14 @@ from pydantic_core import PydanticCustomError
 from dtradar_data.core.errors import SceneFileError, did_you_mean
 from dtradar_data.core.grid import Grid
 from dtradar_data.scenes.materials import ITU_MATERIALS
-from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS, Box, Room, SceneSpec, TxSpec
+from dtradar_data.scenes.model import (
+    PATTERNS,
+    POLARIZATIONS,
+    Box,
+    Room,
+    SceneSpec,
+    TxSpec,
+)
 
 FORMAT = 1
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
