@@ -45,7 +45,9 @@ class ListCmd:
         if self.json:
             print(json.dumps([{"name": r.name, "builtin": r.builtin, "latest": r.latest,
                                "versions": [{"tag": v.tag, "version": v.version, "created_utc": v.created_utc,
-                                             "rows": v.num_rows, "bytes": v.size_bytes} for v in r.versions]}
+                                             "rows": v.num_rows, "bytes": v.size_bytes} for v in r.versions],
+                               "damaged": [{"tag": v.tag, "version": v.version, "path": str(v.path),
+                                            "problem": v.problem} for v in r.damaged]}
                               for r in rows], indent=2))
             return 0
         print(f"data root: {data_root()}")
@@ -56,6 +58,12 @@ class ListCmd:
             shown = f"{latest.tag} {latest.version[:12]}" if latest else "-"
             print(f"{r.name:<24} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
                   f"{human_size(latest.size_bytes) if latest else '-':>10}")
+        damaged = [(r.name, v) for r in rows for v in r.damaged]
+        for name, v in damaged:
+            print(f"DAMAGED {name}@{v.tag or v.version}: {v.problem}")
+        if damaged:  # listed, not fatal: the healthy versions stay usable
+            print(f"{len(damaged)} damaged version(s): `python -m dtradar_data verify NAME` shows every problem; "
+                  "remove or re-pull them", file=sys.stderr)
         return 0
 
 

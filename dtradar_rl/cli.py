@@ -18,9 +18,10 @@ from typing import Annotated
 import numpy as np
 import tyro
 
-from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.errors import DtradarError, unknown_name
+from dtradar_data.core.ids import VARIANTS
 
-from .config import PRESETS, DQNConfig, config_for
+from .config import PRESETS, ConfigError, DQNConfig, check_device, config_for, flag
 from .data import load_dataset
 from .dqn import train
 from .evaluate import cross_matrix, evaluate_twins, write_results
@@ -55,6 +56,17 @@ class EvalConfig:
     device: str = "cpu"
     """torch device"""
 
+    def validate(self) -> EvalConfig:
+        """Every setting, before a policy is loaded or a file written; messages name the --flag."""
+        _check_counts(self, pairs=1, max_steps=0, plot_paths=0)
+        if not self.variants:
+            raise ConfigError("--variants is empty", hint="e.g. --variants blueprint dynamic")
+        for v in self.variants:
+            if v not in VARIANTS:
+                raise unknown_name("variant (--variants)", v, VARIANTS)
+        check_device(self.device)
+        return self
+
 
 @dataclass(frozen=True)
 class CrossConfig:
@@ -72,6 +84,23 @@ class CrossConfig:
     """seed of the pairs"""
     out: str = "runs/cross"
     """output directory"""
+
+    def validate(self) -> CrossConfig:
+        _check_counts(self, pairs=1)
+        if not self.scenes:
+            raise ConfigError("--scenes is empty", hint="name at least one scene with a trained policy")
+        if len(self.scenes) > 1 and "{scene}" not in self.checkpoint_pattern:
+            raise ConfigError(f"--checkpoint-pattern {self.checkpoint_pattern!r} has no {{scene}}: every scene "
+                              "would get the same policy", hint="e.g. runs/{scene}/dqn/model.pt")
+        if self.variant not in VARIANTS:
+            raise unknown_name("variant (--variant)", self.variant, VARIANTS)
+        return self
+
+
+def _check_counts(cfg, **minimum: int) -> None:
+    for name, low in minimum.items():
+        if getattr(cfg, name) < low:
+            raise ConfigError(f"{flag(name)} must be >= {low}, got {getattr(cfg, name)}")
 
 
 OFFLINE_DEFAULT = OfflineConfig()
@@ -141,11 +170,11 @@ def main(argv: list[str] | None = None) -> int:
 
     def eval_cmd(cfg: Annotated[EvalConfig, tyro.conf.arg(name="")] = EvalConfig()) -> None:
         """Evaluate a trained policy on the blueprint and dynamic twins of its scene; prints the table."""
-        run_eval(cfg)
+        run_eval(cfg.validate())
 
     def cross_cmd(cfg: Annotated[CrossConfig, tyro.conf.arg(name="")] = CrossConfig()) -> None:
         """Train-on-i x evaluate-on-j matrix over several datasets (cities: quadrants), as a heatmap."""
-        run_cross(cfg)
+        run_cross(cfg.validate())
 
     def offline_cmd(cfg: Annotated[OfflineConfig, tyro.conf.arg(name="")] = OFFLINE_DEFAULT) -> None:
         """Offline RL with d3rlpy (cql, bcq, bc, dqn): log a behaviour policy's transitions on the blueprint twin,

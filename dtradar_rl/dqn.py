@@ -47,6 +47,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.files import open_atomic
 
 from .batched import BatchedNavEnv
 from .config import PRESETS, DQNConfig, config_for
@@ -267,7 +268,7 @@ def _summary(episodes: list[tuple]) -> dict[str, float]:
 def write_curves(episodes: list[tuple], out: Path) -> tuple[Path, Path]:
     """``curves.csv`` (one row per episode) and ``curves.png`` (reward, steps, collisions; moving averages)."""
     csv_path, png_path = out / "curves.csv", out / "curves.png"
-    with csv_path.open("w", newline="") as f:
+    with open_atomic(csv_path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["episode", "env_step", "reward", "steps", "collisions", "success"])
         w.writerows(episodes)

@@ -7,7 +7,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import InvalidCoordinatesError
+from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError
 from dtradar_data.store.listing import list_datasets
 
 from .data import load_dataset
@@ -15,6 +15,10 @@ from .mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
 from .observations import Normalizer, build_observations, check_preset
 
 SYNTHETIC_ENV_ID = "dtradar/synthetic-blueprint-v0"
+
+
+class InvalidActionError(DtradarError, ValueError):
+    """An action that is not one of the environment's moves (gymnasium raises on invalid actions)."""
 
 
 class DtradarNavEnv(gym.Env):
@@ -118,9 +122,15 @@ class DtradarNavEnv(gym.Env):
         return float(np.sqrt(self.mdp.d2(cell, self._target)))
 
     def step(self, action):
+        # Discrete.contains takes Python and numpy integers and 0-d integer arrays, and refuses 1.5 and '2' that
+        # int() would have turned into moves; a bool is an int to Python but never a meant action.
+        if isinstance(action, (bool, np.bool_)) or not self.action_space.contains(action):
+            raise InvalidActionError(f"action {action!r} ({type(action).__name__}) is not an integer in 0..3 "
+                                     f"({', '.join(f'{i} = {a}' for i, a in enumerate(ACTIONS))})",
+                                     hint="pass an int, a numpy integer or a 0-d integer array")
+        if self._dist is None:
+            raise InvalidActionError("step() called before reset()", hint="call env.reset() first")
         action = int(action)
-        if not self.action_space.contains(action):
-            raise InvalidCoordinatesError(f"action {action} is not one of 0..3 ({', '.join(ACTIONS)})")
         before = self._cell
         self._cell, collision = self.mdp.step(before, action)
         self._steps += 1
@@ -158,6 +168,7 @@ class DtradarNavEnv(gym.Env):
 def built_datasets() -> list[str]:
     """Names ``scene/variant`` of the datasets built in the data root."""
     return [entry.name for entry in list_datasets() if entry.built]
+
 
 
 def env_id(name: str) -> str:

@@ -24,6 +24,7 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError
+from dtradar_data.core.files import write_atomic
 
 from .data import load_dataset
 from .mdp import GridMDP
@@ -190,10 +191,10 @@ def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
 def write_results(rows: list[dict[str, Any]], out: Path, config: dict[str, Any], name: str = "results") -> str:
     """``<name>.json`` (rows + config), ``<name>.md`` and ``config.json`` in ``out``; returns the Markdown table."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"{name}.json").write_text(json.dumps({"config": config, "results": rows}, indent=2) + "\n")
+    write_atomic(out / f"{name}.json", json.dumps({"config": config, "results": rows}, indent=2) + "\n")
     md = markdown_table(rows)
-    (out / f"{name}.md").write_text(md)
-    (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    write_atomic(out / f"{name}.md", md)
+    write_atomic(out / "config.json", json.dumps(config, indent=2) + "\n")
     return md
 
 

@@ -51,7 +51,7 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import unknown_name
-from dtradar_data.core.files import write_atomic
+from dtradar_data.core.files import open_atomic, write_atomic
 
 from .batched import BatchedNavEnv
 from .config import ConfigError, TwinConfig
@@ -192,7 +192,8 @@ class LoggedTransitions:
 
     def save_npz(self, path: Path) -> Path:
         """Everything but the observations (rebuilt from cells and targets by table lookup), compressed."""
-        np.savez_compressed(path, cells=self.cells, targets=self.targets, actions=self.actions, rewards=self.rewards,
+        with open_atomic(Path(path), "wb") as f:
+            np.savez_compressed(f, cells=self.cells, targets=self.targets, actions=self.actions, rewards=self.rewards,
                             terminals=self.terminals, timeouts=self.timeouts, robots=self.robots)
         return Path(path)
 
@@ -375,7 +376,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
             f"(behaviour success {stats['success_rate']:.3f}) in {stats['wall_s']:.1f} s")
         logged_data = logged.to_mdp_dataset()
         if cfg.save_dataset:
-            with open(out / "dataset.h5", "w+b") as f:
+            with open_atomic(out / "dataset.h5", "w+b") as f:
                 logged_data.dump(f)
             logged.save_npz(out / "transitions.npz")
     else:
@@ -426,7 +427,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
 
 def _write_losses(losses: list[dict[str, float]], path: Path) -> None:
     keys = list(dict.fromkeys(k for row in losses for k in row))
-    with path.open("w", newline="") as f:
+    with open_atomic(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         w.writerows(losses)

@@ -12,8 +12,20 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from dtradar_data.core.dataset import Dataset  # noqa: E402
+from dtradar_data.core.files import open_atomic  # noqa: E402
 from dtradar_data.geometry.floorplan import draw_floorplan  # noqa: E402
 from dtradar_data.scenes import available_scenes, load_scene_spec  # noqa: E402
+
+
+def _save(fig, path: Path) -> Path:
+    """Save and close ``fig`` atomically: a killed run leaves the previous figure, not a truncated PNG."""
+    path = Path(path)
+    try:
+        with open_atomic(path, "wb") as f:
+            fig.savefig(f, format=path.suffix.lstrip(".") or "png", dpi=110)
+    finally:
+        plt.close(fig)
+    return path
 
 
 def moving_average(x: np.ndarray, k: int) -> np.ndarray:
@@ -38,9 +50,7 @@ def plot_curves(episodes: Sequence[tuple], path: Path) -> Path:
             ax.set_xlabel("environment steps")
             ax.set_title(f"{label} per episode (mean of {k})")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path)
 
 
 def _draw_obstacles(ax, ds: Dataset, extent) -> str:
@@ -81,9 +91,7 @@ def plot_paths(ds: Dataset, paths: Sequence[Sequence[int]], path: Path, *, title
     ax.set_ylabel("y (m)")
     ax.set_title(title or f"{ds.name}: navigation paths (o start, * reached, x failed; obstacles: {how})")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path)
 
 
 def plot_matrix(matrix: np.ndarray, rows: Sequence[str], cols: Sequence[str], path: Path, *,
@@ -102,6 +110,4 @@ def plot_matrix(matrix: np.ndarray, rows: Sequence[str], cols: Sequence[str], pa
     fig.colorbar(im, ax=ax, fraction=0.05)
     ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return _save(fig, path)

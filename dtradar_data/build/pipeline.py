@@ -26,6 +26,7 @@ from tqdm.auto import tqdm
 
 from dtradar_data.build.coverage import render_coverage_png
 from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.core.ids import VARIANTS, DatasetId, format_id
 from dtradar_data.core.layout import work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
@@ -61,6 +62,15 @@ class BuildConfig:
     """Rays for the coverage map."""
     progress: bool = True
     """Show a progress bar."""
+
+    def __post_init__(self) -> None:
+        if self.coverage_samples < 1:
+            raise InvalidSettingError(f"--coverage-samples {self.coverage_samples} must be positive",
+                                      hint="the default is 2000000; use --no-coverage-map to skip the map")
+
+    def check_scene(self, spec) -> None:
+        """The checks that need the scene, run before anything is traced (see :meth:`RTSettings.check_scene`)."""
+        self.rt.check_scene(spec)
 
 
 def build_inputs(spec, settings: RTSettings, *, per_path: bool, libraries: dict[str, str] | None = None) -> dict:
@@ -123,11 +133,13 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
 
 def build_one(spec, config: BuildConfig) -> Dataset:
     """Build (or reuse) one variant of one scene."""
+    config.check_scene(spec)
     settings = config.rt
     ds_id = DatasetId(spec.scene, spec.variant, None)
     name = format_id(ds_id)
     inputs = build_inputs(spec, settings, per_path=config.per_path)
     version = versions.version_id(inputs)
+    local.check_can_store(ds_id, version)  # a damaged version folder would otherwise fail only after tracing
     work_dir = work_root() / spec.scene / spec.variant / version
     work_dir.parent.mkdir(parents=True, exist_ok=True)
     # One build of a version at a time: a second process waits here, then finds the version built and reuses it
@@ -196,4 +208,7 @@ def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, 
 def build(config: BuildConfig) -> list[Dataset]:
     """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
     variants = VARIANTS if config.variant == "all" else (config.variant,)
-    return [build_one(load_scene_spec(config.scene, v), config) for v in variants]
+    specs = [load_scene_spec(config.scene, v) for v in variants]
+    for spec in specs:  # every variant before the first is traced, so `all` does not fail after the blueprint
+        config.check_scene(spec)
+    return [build_one(spec, config) for spec in specs]

@@ -58,6 +58,14 @@ class MissingDependencyError(DtradarError, ImportError):
     """An optional dependency is not installed."""
 
 
+class InvalidSettingError(DtradarError, ValueError):
+    """A setting that is out of range or does not fit the scene; the message names its command-line flag."""
+
+
+class DataRootError(DtradarError, OSError):
+    """The data root (``$DTRADAR_DATA_ROOT``) is not a usable folder: a file, or not writable."""
+
+
 class HubError(DtradarError, RuntimeError):
     """The Hugging Face Hub could not be reached, or refused the request."""
 

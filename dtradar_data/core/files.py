@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -35,19 +37,29 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write via a temp file in the same directory + ``os.replace``: readers see the old or the new file, never half."""
+@contextlib.contextmanager
+def open_atomic(path: Path, mode: str = "w", **kwargs) -> Iterator[IO]:
+    """A new file that replaces ``path`` only when the block ends without an error (a temp file in the same
+    directory, fsynced, then ``os.replace``): readers and a killed writer leave the old file or the new, never half.
+    ``mode`` is ``"w"`` or ``"wb"`` (``"w+b"`` for writers that seek back); ``kwargs`` go to :func:`open`."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
+        with os.fdopen(fd, mode, **kwargs) as f:
+            yield f
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def write_atomic(path: Path, data: str | bytes) -> None:
+    """Write ``data`` (text or bytes) through :func:`open_atomic`."""
+    with open_atomic(path, "wb" if isinstance(data, bytes) else "w") as f:
+        f.write(data)
 
 
 def human_size(n: int | None) -> str:

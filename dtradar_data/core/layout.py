@@ -15,6 +15,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from dtradar_data.core.errors import DataRootError
+
 ENV_DATA_ROOT = "DTRADAR_DATA_ROOT"
 DEFAULT_DATA_ROOT = Path("~/.cache/dtradar")
 
@@ -26,10 +28,37 @@ CARD_FILE = "README.md"
 REFS_FILE = "refs.json"
 
 
+def _fix() -> str:
+    return f"set {ENV_DATA_ROOT} to a folder you can write to (unset, it is {DEFAULT_DATA_ROOT})"
+
+
 def data_root() -> Path:
-    """The data root: ``$DTRADAR_DATA_ROOT`` if set (read on every call, so tests can monkeypatch it)."""
+    """The data root: ``$DTRADAR_DATA_ROOT`` if set (read on every call, so tests can monkeypatch it).
+
+    :class:`DataRootError` when it, or a folder above it, is a file: every read below it would otherwise look like
+    an empty store, and every write would fail deep inside with ``NotADirectoryError``.
+    """
     value = os.environ.get(ENV_DATA_ROOT, "").strip()
-    return Path(value).expanduser() if value else DEFAULT_DATA_ROOT.expanduser()
+    root = Path(value).expanduser() if value else DEFAULT_DATA_ROOT.expanduser()
+    existing = _nearest_existing(root)
+    if not existing.is_dir():
+        raise DataRootError(f"data root {root} is not a folder: {existing} is a file",
+                            hint=f"move {existing} away, or {_fix()}")
+    return root
+
+
+def _nearest_existing(path: Path) -> Path:
+    return next(p for p in (path, *path.parents) if p.exists())
+
+
+def writable_data_root() -> Path:
+    """The data root, checked to be writable (or creatable) before a build or a pull starts its expensive work."""
+    root = data_root()
+    existing = _nearest_existing(root)
+    if not os.access(existing, os.W_OK | os.X_OK):
+        what = f"data root {root}" + ("" if existing == root else f" cannot be created: {existing}")
+        raise DataRootError(f"{what} is read-only", hint=f"make it writable, or {_fix()}")
+    return root
 
 
 def datasets_root() -> Path:
@@ -37,8 +66,9 @@ def datasets_root() -> Path:
 
 
 def work_root() -> Path:
-    """Scratch space for builds and staging; anything here may be deleted when no build is running."""
-    return data_root() / "work"
+    """Scratch space for builds and staging; anything here may be deleted when no build is running. Only writers
+    ask for it, so it is where a read-only data root is refused."""
+    return writable_data_root() / "work"
 
 
 def dataset_dir(scene: str, variant: str) -> Path:

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import DatasetNotFoundError
+from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError, DtradarError
 from dtradar_data.store import listing, local
 from dtradar_data.store.card import history_entry, render_card
 
@@ -58,15 +58,43 @@ def write_builtin_cards(out_dir: Path, names: list[str] | None = None) -> tuple[
     return written, skipped
 
 
+class CardsNotFoundError(DtradarError, FileNotFoundError):
+    """A cards folder that does not exist or holds no committed card."""
+
+
 def committed_cards(cards_dir: Path) -> list[Path]:
     return sorted(p.parent for p in cards_dir.glob(f"*/*/{CARD_INPUTS}"))
+
+
+def _require_cards(cards_dir: Path) -> list[Path]:
+    """The committed cards, or :class:`CardsNotFoundError`: checking nothing must not pass as "up to date"."""
+    found = committed_cards(cards_dir) if cards_dir.is_dir() else []
+    if not found:
+        why = "no such folder" if not cards_dir.exists() else (
+            "not a folder" if not cards_dir.is_dir() else f"no <scene>/<variant>/{CARD_INPUTS} in it")
+        raise CardsNotFoundError(f"--out {cards_dir}: no committed cards ({why})",
+                                 hint="pass the folder that holds <scene>/<variant>/card.json (default: cards), "
+                                      "or write the cards first with `make cards`")
+    return found
+
+
+def _read_inputs(card_dir: Path) -> dict[str, Any]:
+    path = card_dir / CARD_INPUTS
+    try:
+        inputs = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise CorruptDatasetError(f"{path} is not valid JSON ({exc})",
+                                  hint="restore it from git, or rewrite it with `make cards`") from exc
+    if not isinstance(inputs, dict) or not isinstance(inputs.get("meta"), dict):
+        raise CorruptDatasetError(f"{path} has no 'meta' record", hint="restore it from git, or `make cards`")
+    return inputs
 
 
 def stale_cards(cards_dir: Path) -> list[Path]:
     """Card directories whose ``README.md`` differs from what their ``card.json`` renders to now."""
     stale = []
-    for d in committed_cards(cards_dir):
-        inputs = json.loads((d / CARD_INPUTS).read_text())
+    for d in _require_cards(cards_dir):
+        inputs = _read_inputs(d)
         readme = d / P.CARD_FILE
         if not readme.is_file() or readme.read_text() != render_inputs(inputs):
             stale.append(d)
@@ -76,7 +104,7 @@ def stale_cards(cards_dir: Path) -> list[Path]:
 def rerender(cards_dir: Path) -> list[Path]:
     """Re-render every committed card from its ``card.json`` (after a template change, no datasets needed)."""
     out = []
-    for d in committed_cards(cards_dir):
-        (d / P.CARD_FILE).write_text(render_inputs(json.loads((d / CARD_INPUTS).read_text())))
+    for d in _require_cards(cards_dir):
+        (d / P.CARD_FILE).write_text(render_inputs(_read_inputs(d)))
         out.append(d)
     return out

@@ -29,6 +29,7 @@ from dtradar_data.core.errors import (
     DatasetNotFoundError,
     DtradarError,
     HubError,
+    InvalidSettingError,
     RevisionNotFoundError,
 )
 from dtradar_data.core.ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
@@ -42,6 +43,19 @@ DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, P.COVERAGE_FILE, P.META_FILE)
 
 def default_repo(did: DatasetId) -> str:
     return default_hub_repo(did.name)
+
+
+def check_repo_id(repo_id: str) -> str:
+    """``repo_id`` if the Hub accepts it as a repo id, else :class:`InvalidSettingError` naming ``--repo``; checked
+    before anything is verified, uploaded or downloaded."""
+    from huggingface_hub.utils import HFValidationError, validate_repo_id
+
+    try:
+        validate_repo_id(repo_id)
+    except HFValidationError as exc:
+        raise InvalidSettingError(f"--repo {repo_id!r} is not a Hub repo id: {exc}",
+                                  hint="use OWNER/NAME, e.g. dtradar/dtradar-cubicle-blueprint") from exc
+    return repo_id
 
 
 def offline() -> bool:
@@ -139,6 +153,8 @@ def publish_operations(vdir: Path, card_text: str) -> list[Any]:
 def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None,
             private: bool = False, api: Any = None) -> PublishResult:
     """Upload one stored version (verified first) as one tagged commit; ``api`` replaces ``HfApi`` in tests."""
+    if repo_id is not None:
+        check_repo_id(repo_id)
     did, version, vdir = local.resolve(name, revision)
     repo_id = repo_id or default_repo(did)
     problems = local.verify_dir(vdir)
@@ -226,6 +242,8 @@ def _card_tag(readme: Path) -> str | None:
 
 def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
     """Make ``name@revision`` available locally: return it if present, else download, verify and install it."""
+    if repo_id is not None:
+        check_repo_id(repo_id)
     # With an explicit repo any well-formed name may be pulled (e.g. a scene this checkout has no file for).
     did = name if isinstance(name, DatasetId) else as_id(name, check_known=repo_id is None)
     revision = revision or did.revision

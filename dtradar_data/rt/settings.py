@@ -9,7 +9,16 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from dtradar_data.core.errors import InvalidSettingError
+from dtradar_data.scenes.materials import ITU_VALID_GHZ, material_valid_at
+from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS
+
 Device = Literal["auto", "cpu", "cuda"]
+
+
+def flag(name: str) -> str:
+    """The ``build`` flag of a settings field (tyro nests them under ``--rt.``)."""
+    return "--rt." + name.replace("_", "-")
 
 
 @dataclass(frozen=True)
@@ -55,17 +64,42 @@ class RTSettings:
     """"auto" uses CUDA when Dr.Jit finds a GPU, else the CPU (LLVM)."""
 
     def __post_init__(self) -> None:
+        # Checked here, before the first trace; messages name the command-line flag (`build --rt.<name>`).
         problems = []
         if not 1e8 <= self.frequency_hz <= 1e11:
-            problems.append(f"frequency_hz={self.frequency_hz:g} is outside 100 MHz .. 100 GHz")
+            problems.append(f"{flag('frequency_hz')} {self.frequency_hz:g} is outside 100 MHz .. 100 GHz")
         if not 0 <= self.max_depth <= 10:
-            problems.append(f"max_depth={self.max_depth} must be in 0..10")
-        if self.samples_per_src < 1 or self.batch_size < 1 or self.max_num_paths_per_src < 1:
-            problems.append("samples_per_src, batch_size and max_num_paths_per_src must be positive")
+            problems.append(f"{flag('max_depth')} {self.max_depth} must be in 0..10")
+        for name in ("samples_per_src", "batch_size", "max_num_paths_per_src"):
+            if getattr(self, name) < 1:
+                problems.append(f"{flag(name)} {getattr(self, name)} must be positive")
+        if not 0 <= self.seed < 2**32:  # Sionna's samplers take an unsigned 32-bit seed
+            problems.append(f"{flag('seed')} {self.seed} must be in 0 .. 2**32-1")
+        if self.rx_pattern not in PATTERNS:
+            problems.append(f"{flag('rx_pattern')} {self.rx_pattern!r} is not an antenna pattern "
+                            f"({', '.join(PATTERNS)})")
+        if self.rx_polarization not in POLARIZATIONS:
+            problems.append(f"{flag('rx_polarization')} {self.rx_polarization!r} is not a polarization "
+                            f"({', '.join(POLARIZATIONS)})")
         if self.device not in ("auto", "cpu", "cuda"):
-            problems.append(f"device={self.device!r} must be 'auto', 'cpu' or 'cuda'")
+            problems.append(f"{flag('device')} {self.device!r} must be 'auto', 'cpu' or 'cuda'")
         if problems:
-            raise ValueError("invalid RTSettings: " + "; ".join(problems))
+            raise InvalidSettingError("invalid ray-tracing settings: " + "; ".join(problems),
+                                      hint="see `python -m dtradar_data build --help` for the accepted values")
+
+    def check_scene(self, spec) -> None:
+        """Settings that are in range but that ``spec`` cannot be traced with: Sionna would fail (or, for an
+        undefined material, raise deep inside) only after the scene was loaded."""
+        # getattr: city specs also carry prisms (buildings, roads), indoor ones only boxes
+        materials = {o.material for o in (*spec.objects, *getattr(spec, "prisms", ()))}
+        undefined = sorted(m for m in materials
+                           if m in ITU_VALID_GHZ and not material_valid_at(m, self.frequency_hz))
+        if undefined:
+            ranges = ", ".join(f"{m} {ITU_VALID_GHZ[m][0]:g}-{ITU_VALID_GHZ[m][1]:g} GHz" for m in undefined)
+            raise InvalidSettingError(
+                f"{flag('frequency_hz')} {self.frequency_hz:g}: ITU-R P.2040 does not define the material(s) of "
+                f"{spec.name} at {self.frequency_hz / 1e9:g} GHz ({ranges})",
+                hint="pick a frequency inside every material's range (the paper: 2.4e9)")
 
     def hashed(self) -> dict[str, Any]:
         """The settings that determine the result (and so the dataset version)."""

@@ -7,9 +7,16 @@ from pathlib import Path
 from typing import Any
 
 from dtradar_data.core import layout as P
+from dtradar_data.core.errors import CorruptDatasetError
 from dtradar_data.core.ids import VARIANTS, DatasetId, names_of
 from dtradar_data.store.catalog import as_id, builtin_scenes
-from dtradar_data.store.local import history_metas, local_versions, read_meta, resolve, verify_dir
+from dtradar_data.store.local import (
+    history_metas,
+    local_versions,
+    read_meta,
+    resolve,
+    verify_dir,
+)
 from dtradar_data.store.versions import read_refs
 
 
@@ -21,6 +28,8 @@ class VersionInfo:
     num_rows: int | None
     size_bytes: int
     path: Path
+    problem: str | None = None
+    """Why the version is damaged (its ``meta.json`` missing or unreadable); None for a healthy one."""
 
 
 @dataclass(frozen=True)
@@ -33,6 +42,8 @@ class DatasetEntry:
     builtin: bool
     versions: tuple[VersionInfo, ...]
     latest: str | None
+    damaged: tuple[VersionInfo, ...] = ()
+    """Version folders that cannot be read (see :func:`~dtradar_data.store.local.damaged_versions`)."""
 
     @property
     def built(self) -> bool:
@@ -40,11 +51,23 @@ class DatasetEntry:
 
 
 def version_infos(did: DatasetId) -> list[VersionInfo]:
+    """The readable versions of ``did``, oldest first (:func:`all_version_infos` adds the damaged ones)."""
+    return [v for v in all_version_infos(did) if v.problem is None]
+
+
+def all_version_infos(did: DatasetId) -> list[VersionInfo]:
+    """Every version folder of ``did``, oldest first; a damaged one has ``problem`` set instead of failing."""
     refs = read_refs(P.refs_path(did.scene, did.variant))
     out = []
-    for v in local_versions(did):
+    for v in local_versions(did, damaged=True):
         vdir = P.version_dir(did.scene, did.variant, v)
-        meta = read_meta(vdir)
+        try:
+            meta = read_meta(vdir)
+        except CorruptDatasetError as exc:
+            out.append(VersionInfo(tag=refs.tag_of(v), version=v, created_utc=None, num_rows=None,
+                                   size_bytes=sum(f.stat().st_size for f in vdir.iterdir() if f.is_file()),
+                                   path=vdir, problem=exc.message))
+            continue
         files = meta.get("files") or {}
         out.append(VersionInfo(tag=refs.tag_of(v), version=v, created_utc=meta.get("created_utc"),
                                num_rows=(meta.get("stats") or {}).get("num_cells", _grid_cells(meta)),
@@ -69,21 +92,24 @@ def list_datasets() -> list[DatasetEntry]:
     for name in sorted(names):
         scene, variant = name.split("/")
         did = DatasetId(scene, variant)
-        infos = version_infos(did)
+        every = all_version_infos(did)
+        infos = [v for v in every if v.problem is None]
         refs = read_refs(P.refs_path(scene, variant))
         latest = refs.latest if refs.latest in {i.version for i in infos} else (infos[-1].version if infos else None)
-        rows.append(DatasetEntry(name, scene, variant, scene in builtin, tuple(infos), latest))
+        rows.append(DatasetEntry(name, scene, variant, scene in builtin, tuple(infos), latest,
+                                 tuple(v for v in every if v.problem is not None)))
     return rows
 
 
 def verify(name: str | DatasetId, revision: str | None = None) -> dict[str, list[str]]:
     """``{version: problems}`` for one version (``revision`` or ``@rev`` in ``name``) or, without one, all."""
     did = as_id(name)
+    # damaged=True: a version folder without meta.json is reported as damaged, not as "not built"
     if revision or did.revision:
-        _, version, vdir = resolve(did, revision)
+        _, version, vdir = resolve(did, revision, damaged=True)
         return {version: verify_dir(vdir)}
-    resolve(did)  # raises DatasetNotFoundError with the build hint when there is nothing
-    return {v: verify_dir(P.version_dir(did.scene, did.variant, v)) for v in local_versions(did)}
+    resolve(did, damaged=True)  # raises DatasetNotFoundError with the build hint when there is nothing
+    return {v: verify_dir(P.version_dir(did.scene, did.variant, v)) for v in local_versions(did, damaged=True)}
 
 
 def history(name: str | DatasetId) -> list[tuple[str, dict[str, Any]]]:

@@ -167,6 +167,7 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
     if version_exists(did, version):
         log.info("%s: version %s exists, reusing it", did.name, version)
         return final
+    check_can_store(did, version)
 
     if int(meta.get("schema_version", SCHEMA_VERSION)) != SCHEMA_VERSION:
         raise SchemaMismatchError(f"meta says schema_version {meta['schema_version']}, this library writes "
@@ -304,25 +305,66 @@ def _check_hash(version_dir: Path, fname: str, meta: dict[str, Any]) -> None:
                                        "checks every file")
 
 
-def local_versions(did: DatasetId) -> list[str]:
-    """Version directories on disk, oldest first (tag order, then creation time for untagged ones)."""
+def local_versions(did: DatasetId, *, damaged: bool = False) -> list[str]:
+    """Version directories on disk, oldest first (tag order, then creation time for untagged ones).
+
+    Only those with a ``meta.json``, unless ``damaged``: then also folders without one, for ``verify`` to report.
+    """
     ddir = P.dataset_dir(did.scene, did.variant)
     if not ddir.is_dir():
         return []
-    found = [p.name for p in ddir.iterdir() if HASH_RE.fullmatch(p.name) and (p / P.META_FILE).is_file()]
+    found = [p.name for p in ddir.iterdir() if HASH_RE.fullmatch(p.name) and p.is_dir()
+             and (damaged or (p / P.META_FILE).is_file())]
     refs = read_refs(ddir / P.REFS_FILE)
     order = {v: i for i, (_, v) in enumerate(refs.ordered())}
-    return sorted(found, key=lambda v: (order.get(v, len(order)), (ddir / v / P.META_FILE).stat().st_mtime, v))
+
+    def created(v: str) -> float:
+        meta = ddir / v / P.META_FILE
+        return (meta if meta.is_file() else ddir / v).stat().st_mtime
+
+    return sorted(found, key=lambda v: (order.get(v, len(order)), created(v), v))
 
 
-def resolve(name: str | DatasetId, revision: str | None = None) -> tuple[DatasetId, str, Path]:
-    """``(id, version, directory)`` of a stored version; typed errors say how to get a missing one."""
+def damaged_versions(did: DatasetId) -> dict[str, str]:
+    """``{version: problem}`` of the version folders whose ``meta.json`` is missing or unreadable: listed as
+    damaged rather than hidden (a missing one) or failing every listing (an unreadable one)."""
+    out = {}
+    for version in local_versions(did, damaged=True):
+        try:
+            read_meta(P.version_dir(did.scene, did.variant, version))
+        except CorruptDatasetError as exc:
+            out[version] = exc.message
+    return out
+
+
+def check_can_store(dataset_id: str | DatasetId, version: str) -> None:
+    """Refuse, before a build traces anything, what would make storing ``version`` fail at the end: a leftover
+    folder of that version without ``meta.json``, or a stored version whose ``meta.json`` the card history cannot
+    read."""
+    did = as_id(dataset_id, check_known=False)
+    folder = P.version_dir(did.scene, did.variant, version)
+    damaged = damaged_versions(did)
+    if version in damaged:
+        raise CorruptDatasetError(f"{folder} exists but is damaged ({damaged[version]})",
+                                  hint=f"remove that folder (`rm -r {folder}`) and build again")
+    unreadable = [v for v in damaged if (P.version_dir(did.scene, did.variant, v) / P.META_FILE).is_file()]
+    if unreadable:
+        paths = ", ".join(str(P.version_dir(did.scene, did.variant, v) / P.META_FILE) for v in unreadable)
+        raise CorruptDatasetError(f"{did.name} has stored versions with an unreadable {P.META_FILE}: {paths}",
+                                  hint=f"re-pull or remove those versions; `python -m dtradar_data verify {did.name}` "
+                                       "lists every problem")
+
+
+def resolve(name: str | DatasetId, revision: str | None = None, *, damaged: bool = False
+            ) -> tuple[DatasetId, str, Path]:
+    """``(id, version, directory)`` of a stored version; typed errors say how to get a missing one. ``damaged``:
+    also versions without ``meta.json`` (see :func:`local_versions`)."""
     did = as_id(name)
     if revision and did.revision and revision != did.revision:
         raise RevisionNotFoundError(f"two revisions given: {did.revision!r} in the name and {revision!r}",
                                     hint="give the revision once")
     revision = revision or did.revision
-    versions = local_versions(did)
+    versions = local_versions(did, damaged=damaged)
     if not versions:
         raise DatasetNotFoundError(
             f"{did.name} has not been built or pulled into {P.data_root()}",
