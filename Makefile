@@ -4,6 +4,7 @@ SCENE   ?= cubicle
 VARIANT ?= all
 NAME    ?= $(SCENE)/blueprint
 ARGS    ?=
+OSM     ?=
 
 .PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval offline bench bench-rt bench-rl clean-venv
 
@@ -23,7 +24,7 @@ test-all:
 
 # Ray-trace both variants (blueprint and dynamic) of a scene into the data root.
 dataset:
-	$(PY) -m dtradar_data build --scene $(SCENE) --variant $(VARIANT) $(ARGS)
+	$(PY) -m dtradar_data build --scene $(SCENE) --variant $(VARIANT) $(if $(OSM),--osm $(OSM)) $(ARGS)
 
 datasets:
 	$(MAKE) dataset SCENE=cubicle

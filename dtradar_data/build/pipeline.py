@@ -26,15 +26,16 @@ from tqdm.auto import tqdm
 
 from dtradar_data.build.coverage import render_coverage_png
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import InvalidSettingError
-from dtradar_data.core.ids import VARIANTS, DatasetId, format_id
+from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
+from dtradar_data.core.ids import DatasetId, format_id
 from dtradar_data.core.layout import work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
+from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
-from dtradar_data.scenes import load_scene_spec
+from dtradar_data.scenes import build_targets, load_scene_spec
 from dtradar_data.store import local, versions
 
 REDUCTION_DOC = (
@@ -49,7 +50,8 @@ class BuildConfig:
     """Ray-trace a scene into the data root (both variants unless one is named)."""
 
     scene: str = "cubicle"
-    """A built-in scene (cubicle, meeting) or the path of your own scene file (.toml)."""
+    """A built-in scene (cubicle, meeting), a city (dallas, houston: its four quadrants and its dynamic twin), one
+    city quadrant (dallas-q3), or the path of your own scene file (.toml)."""
     variant: Literal["blueprint", "dynamic", "all"] = "all"
     """Which twin to build: blueprint (static objects), dynamic (blueprint + movable objects), or all."""
     rt: RTSettings = field(default_factory=RTSettings)
@@ -62,6 +64,11 @@ class BuildConfig:
     """Rays for the coverage map."""
     progress: bool = True
     """Show a progress bar."""
+    osm: str | None = None
+    """City scenes: where the footprints come from instead of the scene file's source: a GeoJSON or OpenStreetMap
+    XML (.osm) file, or "osm" to download from OpenStreetMap (cached in the data root)."""
+    cell_m: float | None = None
+    """City scenes: the grid's cell size in metres instead of the scene file's (smaller = finer, slower)."""
 
     def __post_init__(self) -> None:
         if self.coverage_samples < 1:
@@ -98,6 +105,9 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
     xs, ys = spec.grid.centres()
     iy, ix = np.nonzero(~blocked)  # row-major order of the free cells
     points = np.stack([xs[ix], ys[iy], np.full(ix.shape, spec.rx_height_m)], axis=1)
+    if len(points) == 0:
+        raise InvalidCoordinatesError(f"all {blocked.size} cells of {spec.name} are blocked: nothing to trace",
+                                      hint="use smaller cells (--cell-m for a city) or fix the grid in the scene file")
     n_batches = max(1, -(-len(points) // settings.batch_size))
     if work_dir is not None:
         work_dir.mkdir(parents=True, exist_ok=True)
@@ -166,6 +176,9 @@ def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, 
                 tracer = RayTracer(spec, settings)
             extra["coverage.png"] = render_coverage_png(spec, tracer, Path(tmp) / "coverage.png",
                                                         samples=config.coverage_samples)
+        if spec.prisms and "city" in spec.provenance:
+            extra["city.png"] = save_city_overview_png(city_quadrant_specs(spec, config), Path(tmp) / "city.png",
+                                                       highlight=spec.scene)
         num_free = int((~blocked).sum())
         meta = {
             "name": name,
@@ -188,6 +201,7 @@ def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, 
             "licence": spec.licence,
             "attribution": spec.attribution,
             "source": spec.source,
+            **({"city": spec.provenance} if spec.provenance else {}),
             "build_inputs_hash": version,
             "stats": {
                 "num_cells": int(blocked.size),
@@ -205,10 +219,17 @@ def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, 
     return local.load(name, revision=version)
 
 
+def city_quadrant_specs(spec, config: BuildConfig) -> list:
+    """The blueprint specs of every quadrant of ``spec``'s city (for the overview plot)."""
+    city = spec.provenance["city"]
+    return [load_scene_spec(s, "blueprint", footprints=config.osm, cell_m=config.cell_m)
+            for s, _ in build_targets(city, "blueprint")]
+
+
 def build(config: BuildConfig) -> list[Dataset]:
     """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
-    variants = VARIANTS if config.variant == "all" else (config.variant,)
-    specs = [load_scene_spec(config.scene, v) for v in variants]
+    specs = [load_scene_spec(scene, v, footprints=config.osm, cell_m=config.cell_m)
+             for scene, v in build_targets(config.scene, config.variant)]
     for spec in specs:  # every variant before the first is traced, so `all` does not fail after the blueprint
         config.check_scene(spec)
     return [build_one(spec, config) for spec in specs]

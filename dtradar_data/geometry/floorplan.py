@@ -126,3 +126,48 @@ def save_floorplan_png(spec: SceneSpec, path: str | Path, *, with_grid: bool = T
     path = Path(path)
     fig.savefig(path, dpi=dpi)
     return path
+
+
+def save_city_overview_png(specs: list[SceneSpec], path: str | Path, *, highlight: str | None = None,
+                           dpi: int = 120) -> Path:
+    """One city's overview: every building, lot and road, each quadrant's grid outline and transmitter (paper
+    Fig. 6). ``specs`` are the quadrants' specs (they share the city geometry); ``highlight`` names one to emphasise."""
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    first = specs[0]
+    ground = next(b for b in first.objects if b.kind == "floor")
+    hx, hy = ground.width_m / 2, ground.length_m / 2
+    width = 8.0
+    fig = Figure(figsize=(width + 2.2, width * hy / hx + 0.8))
+    ax = fig.add_subplot()
+    seen: set[str] = set()
+    for prism in sorted(first.prisms, key=lambda p: (p.top_m, p.name)):
+        entry = prism.material if prism.material not in seen else "_nolegend_"
+        seen.add(prism.material)
+        ax.add_patch(_polygon_patch(prism, facecolor=material_colour(prism.material), edgecolor="black",
+                                    linewidth=0.3, alpha=0.9, label=entry))
+    for spec in specs:
+        x0, y0, x1, y1 = spec.grid.bounds()
+        mine = spec.scene == highlight
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor="red" if mine else "black",
+                               linewidth=2.0 if mine else 0.8, linestyle="-" if mine else "--", zorder=5))
+        ax.annotate(spec.scene.rpartition("-")[2].upper(), ((x0 + x1) / 2, (y0 + y1) / 2), ha="center",
+                    va="center", fontsize=18, color="red" if mine else "black", alpha=0.6, zorder=6)
+        tx = spec.tx.position_m
+        ax.plot([tx[0]], [tx[1]], marker="*", markersize=14, color="gold", markeredgecolor="black",
+                linestyle="none", zorder=20, label="TX" if spec is specs[0] else "_nolegend_")
+    ax.set_xlim(-hx, hx)
+    ax.set_ylim(-hy, hy)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (east)")
+    ax.set_ylabel("y [m] (north)")
+    counts = first.count_by_kind()
+    city = first.provenance.get("city", first.scene)
+    ax.set_title(f"{city}: {counts.get('building', 0)} buildings, {counts.get('parking', 0)} parking lots, "
+                 f"{counts.get('road', 0)} road surfaces; quadrants and transmitters", fontsize=9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=dpi)
+    return path

@@ -16,6 +16,10 @@ from shapely.geometry import Polygon
 from dtradar_data.scenes.model import Box, SceneSpec
 
 OCCUPANCY_FLOOR_CLEARANCE_M = 0.05  # ignore objects wholly below this (rugs, cables): the robot drives over them
+#: A city cell is blocked when buildings cover at least this share of it. City cells are metres wide (the robot is
+#: not): the indoor rule (any overlap blocks) would close most streets at 4 m cells; half keeps a building's cells
+#: blocked and the street in front of it open. Vehicles and other boxes keep the indoor rule.
+BUILDING_BLOCK_FRACTION = 0.5
 
 
 def footprints(spec: SceneSpec, include_structure: bool = False) -> list[tuple[Box, np.ndarray]]:
@@ -54,8 +58,8 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
     area. The overlap is exact (separating-axis test of the rotated footprint against the square cell), with ``eps``
     (1 micrometre) of slack so that a box flush with a cell edge leaves the neighbour free. Consequences: a wall-
     mounted TV above the robot does not block; a table (0.75 m) does; a cell is blocked if a chair clips its corner.
-    Prisms (buildings) follow the same rule with an exact polygon intersection (shapely); parking-lot and road
-    surfaces lie below 0.05 m and never block.
+    Prisms (buildings) block a cell when together they cover at least half of it (:data:`BUILDING_BLOCK_FRACTION`,
+    exact polygon intersection with shapely); parking-lot and road surfaces lie below 0.05 m and never block.
     """
     g = spec.grid
     blocked = np.zeros(g.shape, dtype=bool)
@@ -74,14 +78,16 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
             continue
         cx, cy = np.meshgrid(xs[ix0:ix1 + 1], ys[iy0:iy1 + 1])
         blocked[iy0:iy1 + 1, ix0:ix1 + 1] |= _overlap_cells(corners, cx, cy, half, eps)
+    covered = np.zeros(g.shape)
     for prism in spec.prisms:
         if prism.z_m < hi and prism.top_m > lo:
-            _block_polygon(blocked, g, Polygon(prism.exterior, prism.holes), eps)
+            _add_cover(covered, g, Polygon(prism.exterior, prism.holes))
+    blocked |= covered >= BUILDING_BLOCK_FRACTION * g.cell_m * g.cell_m - eps
     return blocked
 
 
-def _block_polygon(blocked: np.ndarray, g, polygon: Polygon, eps: float) -> None:
-    """Mark the cells a (possibly concave, holed) polygon covers with more than ``eps`` times a cell's area."""
+def _add_cover(covered: np.ndarray, g, polygon: Polygon) -> None:
+    """Add to ``covered`` the area of each cell that a (possibly concave, holed) polygon covers."""
     xmin, ymin, xmax, ymax = polygon.bounds
     ix0 = max(0, math.floor((xmin - g.x0_m) / g.cell_m + 0.5))
     ix1 = min(g.nx - 1, math.floor((xmax - g.x0_m) / g.cell_m + 0.5))
@@ -94,8 +100,7 @@ def _block_polygon(blocked: np.ndarray, g, polygon: Polygon, eps: float) -> None
     h = g.cell_m / 2
     cells = shapely.box(cx - h, cy - h, cx + h, cy + h)
     shapely.prepare(polygon)
-    area = shapely.area(shapely.intersection(cells, polygon))
-    blocked[iy0:iy1 + 1, ix0:ix1 + 1] |= area > eps * g.cell_m * g.cell_m
+    covered[iy0:iy1 + 1, ix0:ix1 + 1] += shapely.area(shapely.intersection(cells, polygon))
 
 
 def free_components(blocked: np.ndarray) -> np.ndarray:

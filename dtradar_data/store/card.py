@@ -154,7 +154,7 @@ def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str
                + ": complex coefficient, phase, delay and angles of departure and arrival of the strongest path, "
                  "total path gain and delay spread. Built for radio-only robot navigation with reinforcement "
                  "learning, after DT-RaDaR (arXiv 2411.12284).")
-    objects = rec.scene_spec.get("objects") or []
+    objects = [*(rec.scene_spec.get("objects") or []), *(rec.scene_spec.get("prisms") or [])]
     counts = Counter((o.get("kind", "?"), o.get("material", "?")) for o in objects)
     ranges = stats.get("columns") or {}
     hist = []
@@ -185,8 +185,42 @@ def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str
         range_rows=[{"name": c, "min": _fmt(r.get("min")), "max": _fmt(r.get("max")), "nulls": r.get("nulls", "—")}
                     for c, r in ranges.items() if isinstance(r, dict)],
         coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None, hub_repo=hub_repo, history=hist,
+        city=_city_section(rec), city_png=CITY_FILE if CITY_FILE in rec.files else None,
     )
     return str(card).rstrip("\n") + "\n"
+
+
+CITY_FILE = "city.png"
+_PLURALS = {"building": "buildings", "parking": "parking lots", "road": "roads"}
+
+
+def _city_section(rec: VersionRecord) -> dict[str, Any] | None:
+    """What the card says about a city quadrant (``meta["city"]``, written by the pipeline from the scene)."""
+    city = (rec.model_extra or {}).get("city")
+    if not city:
+        return None
+    fp, tx, dyn = city.get("footprints", {}), city.get("tx", {}), city.get("dynamic")
+    report = fp.get("report") or {}
+    skipped = report.get("skipped") or {}
+    dynamic = None
+    if dyn:
+        roads = "; ".join(f"{r['name']} from {r['from_m']} to {r['to_m']}" for r in dyn.get("roads", []))
+        vehicles = ", ".join(f"{n} {k}{'es' if k == 'bus' and n != 1 else 's' if n != 1 else ''}"
+                             for k, n in (dyn.get("vehicles") or {}).items())
+        dynamic = (f"{vehicles} placed with seed {dyn.get('seed')} on {len(dyn.get('roads', []))} roads "
+                   f"({dyn.get('roads_from')}): {roads}")
+    return {
+        "city": city.get("city"), "quadrant": city.get("quadrant", ""), "crs": fp.get("crs"),
+        "rect": ", ".join(_fmt(v) for v in city.get("quadrant_rect_m", [])),
+        "box": _fmt(fp.get("box", {})), "source": fp.get("source"), "retrieved_utc": fp.get("retrieved_utc"),
+        "content_hash": str(fp.get("content_hash", ""))[:16],
+        "counts": ", ".join(f"{n} {_PLURALS.get(k, k) if n != 1 else k}" for k, n in (fp.get("counts") or {}).items()),
+        "report": "; ".join(f"{k} {_fmt(v)}" for k, v in sorted(report.items())
+                            if k not in ("skipped", "skipped_ids") and v not in ({}, [], None))
+                  + (f"; skipped {_fmt(skipped)}" if skipped else ""),
+        "tx_paper": tx.get("paper_m"), "tx_placed": tx.get("placed_m"), "tx_moved": tx.get("moved_m", 0),
+        "clearance": tx.get("clearance_m"), "dynamic": dynamic,
+    }
 
 
 def render_version_card(meta: dict[str, Any], *, tag: str | None, history: list[tuple[str, dict[str, Any]]],

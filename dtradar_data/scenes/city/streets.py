@@ -3,7 +3,8 @@
 Everything here is deterministic: the same buildings, roads and seed give the same placements, bit for bit.
 
 - :func:`place_transmitter`: the paper's transmitter coordinates fall inside buildings in our frame; move each to
-  the nearest point at least ``clearance_m`` from every building (inside its quadrant), keeping its height.
+  the nearest point of the quadrant's largest open region (its streets, not a courtyard) at least ``clearance_m``
+  from every building, keeping its height.
 - :func:`find_roads`: the widest straight corridors free of buildings, along the street grid's direction (the
   length-weighted dominant direction of the building edges). Used when a city's roads are not known in advance.
 - :func:`place_vehicles`: cars and buses on the roads' two lanes, at seeded positions, never overlapping each other
@@ -59,6 +60,8 @@ def place_transmitter(paper_xy: tuple[float, float], buildings: list[Polygon], a
                       clearance_m: float) -> tuple[float, float]:
     """The point of ``area`` nearest ``paper_xy`` that is at least ``clearance_m`` from every building."""
     free = area.difference(unary_union(buildings).buffer(clearance_m)) if buildings else area
+    # the street network, not a courtyard: the largest open region of the quadrant
+    free = max(getattr(free, "geoms", [free]), key=lambda g: g.area)
     if free.is_empty:
         raise SceneFileError(f"no point of the quadrant is {clearance_m} m from every building",
                              hint="lower [tx] clearance_m in the city scene file")
