@@ -59,7 +59,8 @@ class Road:
 def place_transmitter(paper_xy: tuple[float, float], buildings: list[Polygon], area: Polygon,
                       clearance_m: float) -> tuple[float, float]:
     """The point of ``area`` nearest ``paper_xy`` that is at least ``clearance_m`` from every building."""
-    free = area.difference(unary_union(buildings).buffer(clearance_m)) if buildings else area
+    # a buffer is a polygon inside the true offset curve: pad it by a centimetre so the clearance holds exactly
+    free = area.difference(unary_union(buildings).buffer(clearance_m + 0.01, quad_segs=16)) if buildings else area
     # the street network, not a courtyard: the largest open region of the quadrant
     free = max(getattr(free, "geoms", [free]), key=lambda g: g.area)
     if free.is_empty:
