@@ -294,3 +294,13 @@ def test_an_unreachable_server_without_a_cache_fails_fast_with_the_same_error(tm
     assert time.monotonic() - started < 5
     assert "OSM=path/to/houston.osm" in str(err.value)
     assert list(tmp_path.rglob("*")) == []
+
+
+def test_the_houston_scene_downloads_its_footprints_and_records_the_download(overpass, data_root):
+    from dtradar_data.scenes import load_scene_spec
+
+    spec = load_scene_spec("houston-q2", "blueprint")  # the scene file says footprints = "osm"
+    fp = spec.provenance["footprints"]
+    assert fp["counts"] == {"building": 7, "parking": 1, "road": 3} and overpass.url in fp["source"]
+    assert fp["retrieved_utc"] and spec.licence == "ODbL-1.0"
+    assert spec.count_by_kind()["parking"] == 1 and (data_root / "osm").is_dir()
