@@ -2,7 +2,8 @@
 
 Generated with tyro from frozen dataclasses (the field docstrings are the ``--help`` text), one subcommand each.
 Typed errors (:class:`~dtradar_data.core.errors.DtradarError`) print as one ``error: ...`` line plus how to fix it and
-exit with status 2; a failed ``verify`` or ``cards --check`` exits with status 1.
+exit with status 2; a failed ``verify`` or ``cards --check`` exits with status 1; anything unexpected prints one line
+and exits with status 3 (``--debug`` shows its traceback): see :mod:`dtradar_data.core.boundary`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import tyro
 
 from dtradar_data.build import pipeline
 from dtradar_data.build.pipeline import BuildConfig
-from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.boundary import DEBUG_HELP, EXIT_FAILED_CHECK, run_cli
 from dtradar_data.core.files import human_size
 from dtradar_data.core.layout import data_root
 from dtradar_data.publish import cards, hub
@@ -29,8 +30,6 @@ from dtradar_data.store import listing, local
 Name = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="NAME")]
 Revision = Annotated["str | None", tyro.conf.arg(metavar="TAG|HASH")]
 
-EXIT_ERROR = 2
-EXIT_FAILED_CHECK = 1
 
 
 @dataclass(frozen=True)
@@ -211,18 +210,16 @@ def run_build(cfg: BuildConfig) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit status (console scripts and ``__main__`` pass it to ``sys.exit``)."""
+    """Entry point; returns the exit status (console scripts and ``__main__`` pass it to ``sys.exit``); the exit
+    codes and ``--debug`` are :mod:`dtradar_data.core.boundary`'s."""
+    return run_cli(_parse_and_run, argv)
+
+
+def _parse_and_run(argv: list[str]) -> int:
     commands = {"build": BuildConfig, "list": ListCmd, "info": InfoCmd, "verify": VerifyCmd, "cards": CardsCmd,
                 "publish": PublishCmd, "pull": PullCmd, "check": CheckCmd}
     cfg = tyro.extras.subcommand_cli_from_dict(
         commands, prog="python -m dtradar_data", args=argv,
-        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull.")
-    try:
-        return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()
-    except DtradarError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-
+        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull. "
+                    + DEBUG_HELP)
+    return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()

@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 import dataclasses
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
@@ -18,7 +17,8 @@ from typing import Annotated
 import numpy as np
 import tyro
 
-from dtradar_data.core.errors import DtradarError, unknown_name
+from dtradar_data.core.boundary import DEBUG_HELP, run_cli
+from dtradar_data.core.errors import unknown_name
 from dtradar_data.core.ids import VARIANTS
 
 from .config import PRESETS, ConfigError, DQNConfig, check_device, config_for, flag
@@ -160,8 +160,13 @@ def _train_default(argv: list[str]) -> DQNConfig:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit status: 0 ok, 2 a bad input (a typed ``DtradarError``), 3 an unexpected error
+    (one line; ``--debug`` or ``DTRADAR_DEBUG=1`` shows the traceback), 130 interrupted (see
+    :mod:`dtradar_data.core.boundary`)."""
+    return run_cli(_parse_and_run, argv)
 
-    argv = list(sys.argv[1:] if argv is None else argv)
+
+def _parse_and_run(argv: list[str]) -> int:
     train_default = _train_default(argv)
 
     def train_cmd(cfg: Annotated[DQNConfig, tyro.conf.arg(name="")] = train_default) -> None:
@@ -188,12 +193,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"model: {result.model}\nlogged {result.logged['steps']} steps ({result.logged['transitions']} "
               f"transitions), {result.n_steps} d3rlpy steps in {result.train_s:.1f} s; total {result.wall_s:.1f} s")
 
-    try:
-        tyro.extras.subcommand_cli_from_dict({"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd,
-                                              "offline": offline_cmd},
-                                             args=argv, prog="python -m dtradar_rl",
-                                             description="Navigation agents on dtradar datasets.")
-    except DtradarError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    tyro.extras.subcommand_cli_from_dict({"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd,
+                                          "offline": offline_cmd},
+                                         args=argv, prog="python -m dtradar_rl",
+                                         description="Navigation agents on dtradar datasets. " + DEBUG_HELP)
     return 0

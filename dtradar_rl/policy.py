@@ -8,9 +8,7 @@ them; evaluation (:mod:`dtradar_rl.evaluate`) and the offline baselines (:mod:`d
 from __future__ import annotations
 
 import json
-import os
 import pickle
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,7 +18,7 @@ from torch import nn
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError
-from dtradar_data.core.files import write_atomic
+from dtradar_data.core.files import open_atomic, write_atomic
 
 from .batched import BatchedNavEnv
 from .config import ConfigError, DQNConfig, TwinConfig
@@ -51,17 +49,11 @@ class QNetwork(nn.Module):
 
 # -- files: every write goes to a temporary file first, so a kill leaves the old file or the new one --------------
 def save_torch_atomic(obj: Any, path: Path) -> Path:
-    """``torch.save`` through a temporary file in the same folder and a rename."""
+    """``torch.save`` through :func:`~dtradar_data.core.files.open_atomic` (a hidden ``.NAME.*.tmp`` file in the same
+    folder, fsynced, then a rename): a writer killed at any moment leaves the previous file or the new one, whole."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        torch.save(obj, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with open_atomic(path, "wb") as f:
+        torch.save(obj, f)
     return path
 
 

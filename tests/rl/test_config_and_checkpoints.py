@@ -64,7 +64,7 @@ def test_an_interrupted_checkpoint_write_keeps_the_previous_file(tmp_path, monke
     path = save_torch_atomic({"format": "dtradar-dqn/1", "n": 1}, tmp_path / "last.pt")
 
     def dies(obj, f):
-        open(f, "wb").write(b"half")
+        f.write(b"half")
         raise KeyboardInterrupt
 
     monkeypatch.setattr(torch, "save", dies)
