@@ -31,6 +31,7 @@ from dtradar_data.core.ids import DatasetId, format_id
 from dtradar_data.core.layout import work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
 from dtradar_data.geometry.floorplan import save_city_overview_png
+from dtradar_data.geometry.meshscene import ground_height
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
@@ -51,7 +52,9 @@ class BuildConfig:
 
     scene: str = "cubicle"
     """A built-in scene (cubicle, meeting), a city (dallas, houston: its four quadrants and its dynamic twin), one
-    city quadrant (dallas-q3), or the path of your own scene file (.toml)."""
+    city quadrant (dallas-q3), a scene bundled with Sionna (sionna:munich, sionna:etoile, sionna:florence,
+    sionna:san_francisco, sionna:simple_street_canyon), or the path of your own scene file (.toml) or Mitsuba/Sionna
+    XML (.xml, with --grid and --tx)."""
     variant: Literal["blueprint", "dynamic", "all"] = "all"
     """Which twin to build: blueprint (static objects), dynamic (blueprint + movable objects), or all."""
     rt: RTSettings = field(default_factory=RTSettings)
@@ -68,7 +71,11 @@ class BuildConfig:
     """City scenes: where the footprints come from instead of the scene file's source: a GeoJSON or OpenStreetMap
     XML (.osm) file, or "osm" to download from OpenStreetMap (cached in the data root)."""
     cell_m: float | None = None
-    """City scenes: the grid's cell size in metres instead of the scene file's (smaller = finer, slower)."""
+    """City and XML scenes: the grid's cell size in metres instead of the scene file's (smaller = finer, slower)."""
+    grid: tuple[float, float, float, int, int] | None = None
+    """XML scenes (sionna:munich, a .xml file): the grid as X0 Y0 CELL_M NX NY (centre of cell 0, 0; metres)."""
+    tx: tuple[float, float, float] | None = None
+    """XML scenes: the transmitter position X Y Z in metres."""
 
     def __post_init__(self) -> None:
         if self.coverage_samples < 1:
@@ -104,7 +111,8 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
     blocked = occupancy(spec)
     xs, ys = spec.grid.centres()
     iy, ix = np.nonzero(~blocked)  # row-major order of the free cells
-    points = np.stack([xs[ix], ys[iy], np.full(ix.shape, spec.rx_height_m)], axis=1)
+    # rx_height_m above the ground: 0 indoors and on flat cities, the terrain under an XML scene's cells
+    points = np.stack([xs[ix], ys[iy], spec.rx_height_m + ground_height(spec, xs[ix], ys[iy])], axis=1)
     if len(points) == 0:
         raise InvalidCoordinatesError(f"all {blocked.size} cells of {spec.name} are blocked: nothing to trace",
                                       hint="use smaller cells (--cell-m for a city) or fix the grid in the scene file")
@@ -228,7 +236,7 @@ def city_quadrant_specs(spec, config: BuildConfig) -> list:
 
 def build(config: BuildConfig) -> list[Dataset]:
     """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
-    specs = [load_scene_spec(scene, v, footprints=config.osm, cell_m=config.cell_m)
+    specs = [load_scene_spec(scene, v, footprints=config.osm, cell_m=config.cell_m, grid=config.grid, tx=config.tx)
              for scene, v in build_targets(config.scene, config.variant)]
     for spec in specs:  # every variant before the first is traced, so `all` does not fail after the blueprint
         config.check_scene(spec)

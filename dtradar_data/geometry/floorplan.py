@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dtradar_data.geometry.meshscene import base_footprints
 from dtradar_data.geometry.occupancy import footprints, occupancy
 from dtradar_data.scenes.model import Prism, SceneSpec
 
@@ -28,6 +29,7 @@ MATERIAL_COLOURS: dict[str, str] = {
     "wet_ground": "#d17b88",  # people
 }
 FALLBACK_COLOUR = "#888888"
+BASE_COLOUR = "#b8a58c"  # an XML scene's buildings: one colour, their materials are the XML's business
 
 
 def material_colour(material: str) -> str:
@@ -44,6 +46,9 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
     from matplotlib.patches import Polygon
 
     seen: set[str] = set()
+    for i, polygon in enumerate(base_footprints(spec)):  # an XML scene's buildings: their sections at robot height
+        ax.add_patch(_shapely_patch(polygon, facecolor=BASE_COLOUR, edgecolor="black", linewidth=0.3, alpha=0.9,
+                                    label="_nolegend_" if i else "buildings (XML)", zorder=2))
     for prism in sorted(spec.prisms, key=lambda p: (p.top_m, p.name)):  # lots and roads under buildings
         entry = prism.material if prism.material not in seen else "_nolegend_"
         seen.add(prism.material)
@@ -86,10 +91,17 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
 
 def _polygon_patch(prism: Prism, **kwargs):
     """A filled patch of a prism's footprint, holes left open."""
+    return _rings_patch([prism.exterior, *prism.holes], **kwargs)
+
+
+def _shapely_patch(polygon, **kwargs):
+    return _rings_patch([polygon.exterior.coords[:-1], *(h.coords[:-1] for h in polygon.interiors)], **kwargs)
+
+
+def _rings_patch(rings, **kwargs):
     from matplotlib.patches import PathPatch
     from matplotlib.path import Path as MplPath
 
-    rings = [prism.exterior, *prism.holes]
     path = MplPath.make_compound_path(*[MplPath(np.array([*r, r[0]]), closed=True) for r in rings])
     return PathPatch(path, **kwargs)
 
@@ -97,7 +109,7 @@ def _polygon_patch(prism: Prism, **kwargs):
 def _extent(spec: SceneSpec) -> tuple[float, float, float, float]:
     """Outer bounds of everything drawn (walls included), with a small margin; for a city quadrant, its grid and
     transmitter (the city's other buildings are clipped away)."""
-    if spec.prisms:
+    if spec.prisms or spec.base is not None:
         gx0, gy0, gx1, gy1 = spec.grid.bounds()
         corners = [np.array([[gx0, gy0], [gx1, gy1]])]
     else:

@@ -7,7 +7,8 @@ trimesh + numpy only: this module never imports Sionna or Mitsuba, so it tests w
   ``mapbox-earcut`` triangulating the caps), and concatenates the parts of one ITU material into one mesh (vertices
   are *not* welded across parts, so every part stays a closed 2-manifold even where two touch).
 - :func:`write_mitsuba_scene` writes ``meshes/<material>.ply`` (binary little endian, written by hand so the bytes
-  depend only on the spec) and ``scene.xml`` in the Sionna RT 2.x format.
+  depend only on the spec) and ``scene.xml`` in the Sionna RT 2.x format (for a spec built on an external XML, that
+  scene with the spec's objects added: :mod:`.meshscene`).
 """
 
 from __future__ import annotations
@@ -165,6 +166,11 @@ def write_mitsuba_scene(spec: SceneSpec, out_dir: Path) -> Path:
                   f'\t\t<ref id={quoteattr("itu_" + material)} name="bsdf"/>',
                   "\t</shape>"]
     lines += ["</scene>", ""]
+    text = "\n".join(lines)
+    if spec.base is not None:  # built on an external XML: its shapes as they are, our objects added
+        from dtradar_data.geometry.meshscene import merged_scene_xml
+
+        text = merged_scene_xml(spec.base, text)
     xml_path = out_dir / "scene.xml"
-    _write_if_changed(xml_path, "\n".join(lines).encode("utf-8"))
+    _write_if_changed(xml_path, text.encode("utf-8"))
     return xml_path

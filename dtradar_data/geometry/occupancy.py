@@ -13,6 +13,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
+from dtradar_data.geometry.meshscene import base_footprints
 from dtradar_data.scenes.model import Box, SceneSpec
 
 OCCUPANCY_FLOOR_CLEARANCE_M = 0.05  # ignore objects wholly below this (rugs, cables): the robot drives over them
@@ -59,7 +60,9 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
     (1 micrometre) of slack so that a box flush with a cell edge leaves the neighbour free. Consequences: a wall-
     mounted TV above the robot does not block; a table (0.75 m) does; a cell is blocked if a chair clips its corner.
     Prisms (buildings) block a cell when together they cover at least half of it (:data:`BUILDING_BLOCK_FRACTION`,
-    exact polygon intersection with shapely); parking-lot and road surfaces lie below 0.05 m and never block.
+    exact polygon intersection with shapely); parking-lot and road surfaces lie below 0.05 m and never block. A
+    scene built on an XML file adds its footprints at robot height (:func:`.meshscene.base_footprints`) under the
+    same half-cover rule; its ground never blocks.
     """
     g = spec.grid
     blocked = np.zeros(g.shape, dtype=bool)
@@ -82,6 +85,8 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
     for prism in spec.prisms:
         if prism.z_m < hi and prism.top_m > lo:
             _add_cover(covered, g, Polygon(prism.exterior, prism.holes))
+    for polygon in base_footprints(spec):  # an XML scene's buildings, sectioned at robot height
+        _add_cover(covered, g, polygon)
     blocked |= covered >= BUILDING_BLOCK_FRACTION * g.cell_m * g.cell_m - eps
     return blocked
 

@@ -32,6 +32,8 @@ CELL_RADIO_KEYS = ("num_paths", "los", "path_gain_db", "a_re", "a_im", "phase_ra
 
 def reduce_cells(batch) -> dict[str, np.ndarray]:
     """Per-receiver features of a :class:`~dtradar_data.raytrace.PathBatch` (NaN where a receiver has no path)."""
+    if batch.valid.shape[1] == 0:  # no receiver of the batch has a path (a far city corner): Sionna gives P = 0
+        batch = _one_empty_path(batch)
     valid = batch.valid
     n = valid.shape[0]
     gain = np.where(valid, batch.gain, 0.0)
@@ -66,6 +68,15 @@ def reduce_cells(batch) -> dict[str, np.ndarray]:
         "aoa_az_rad": pick(batch.phi_r),
         "delay_spread_s": delay_spread,
     }
+
+
+def _one_empty_path(batch):
+    """The batch padded to one invalid path per receiver, so that per-receiver reductions have a slot to look at."""
+    import dataclasses
+
+    pad = {f.name: np.zeros((*getattr(batch, f.name).shape[:-1], 1), dtype=getattr(batch, f.name).dtype)
+           for f in dataclasses.fields(batch) if isinstance(getattr(batch, f.name), np.ndarray)}
+    return dataclasses.replace(batch, **pad)
 
 
 def path_rows(batch, ix: np.ndarray, iy: np.ndarray) -> dict[str, np.ndarray]:

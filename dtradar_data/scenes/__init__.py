@@ -3,7 +3,9 @@
 A scene is named by a built-in name (``cubicle``, ``meeting``: TOML files in :mod:`dtradar_data.scenes.indoor`; the
 city quadrants ``dallas-q1`` ... ``houston-q4``: one TOML file per city in :mod:`dtradar_data.scenes.city`) or by the
 path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A build may also name a whole city
-(``dallas``): :func:`build_targets` expands it to its quadrants.
+(``dallas``): :func:`build_targets` expands it to its quadrants. Scenes built on a Mitsuba/Sionna XML
+(:mod:`dtradar_data.scenes.meshscene`): Sionna's bundled cities (``sionna:munich``, dataset ``sionna-munich``), a
+user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section.
 """
 
 from __future__ import annotations
@@ -21,9 +23,18 @@ from dtradar_data.scenes.city.reader import (
     read_city_file,
 )
 from dtradar_data.scenes.indoor.reader import load_room_file
+from dtradar_data.scenes.meshscene import (
+    is_mesh_scene_file,
+    is_sionna_name,
+    load_mesh_scene_file,
+    load_sionna_spec,
+    load_xml_spec,
+    sionna_dataset_scenes,
+    sionna_scene_names,
+)
 from dtradar_data.scenes.model import SceneSpec
 
-__all__ = ["SceneSpec", "available_scenes", "build_targets", "city_names", "scene_file", "is_scene_path",
+__all__ = ["SceneSpec", "available_scenes", "sionna_scene_names", "build_targets", "city_names", "scene_file", "is_scene_path",
            "load_scene_spec"]
 
 
@@ -36,8 +47,9 @@ def indoor_scenes() -> list[str]:
 
 
 def available_scenes() -> list[str]:
-    """The built-in dataset scene names: indoor rooms and city quadrants."""
-    return sorted(indoor_scenes() + [q for c in city_names() for q in quadrant_scenes(c)])
+    """The built-in dataset scene names: indoor rooms, city quadrants and Sionna's bundled scenes
+    (``sionna-munich``; a build may also say ``sionna:munich``)."""
+    return sorted(indoor_scenes() + [q for c in city_names() for q in quadrant_scenes(c)] + sionna_dataset_scenes())
 
 
 def scene_file(scene: str) -> Path:
@@ -54,26 +66,39 @@ def scene_file(scene: str) -> Path:
 def is_scene_path(scene: str | Path) -> bool:
     """Whether ``scene`` names a file rather than a built-in scene (it has a suffix or a directory part)."""
     text = str(scene)
-    return isinstance(scene, Path) or text.endswith(".toml") or "/" in text or "\\" in text
+    if not isinstance(scene, Path) and is_sionna_name(text):
+        return False
+    return isinstance(scene, Path) or text.endswith((".toml", ".xml")) or "/" in text or "\\" in text
 
 
 def load_scene_spec(scene: str | Path, variant: str, *, footprints: str | None = None,
-                    cell_m: float | None = None) -> SceneSpec:
+                    cell_m: float | None = None, grid: tuple | None = None, tx: tuple | None = None) -> SceneSpec:
     """One variant ("blueprint" or "dynamic") of a built-in scene, a city quadrant or the user's scene file.
 
     ``footprints`` (cities only) replaces the city's footprint source (a GeoJSON or ``.osm`` file, or ``osm``);
-    ``cell_m`` (cities only) replaces its cell size.
+    ``cell_m`` (cities and XML scenes) replaces its cell size; ``grid`` (``X0, Y0, CELL_M, NX, NY``) and ``tx``
+    (``X, Y, Z``) replace an XML scene's grid and transmitter (required for a bare ``.xml``).
     """
     if variant not in VARIANTS:
         raise unknown_name("variant", variant, VARIANTS)
+    mesh_options = {"grid": grid, "tx": tx, "cell_m": cell_m}
     if is_scene_path(scene):
         path = Path(scene).expanduser()
         if not path.is_file():
             raise SceneFileError(f"{path}: no such scene file",
                                  hint="check the path, or use a built-in scene: " + ", ".join(available_scenes()))
-        _indoor_only(footprints, cell_m, str(path))
+        _no_footprints(footprints, str(path))
+        if path.suffix.lower() == ".xml":
+            return load_xml_spec(path, variant, **mesh_options)
+        if is_mesh_scene_file(path):
+            return load_mesh_scene_file(path, variant, **mesh_options)
+        _indoor_only(footprints, cell_m, str(path), grid, tx)
         return load_room_file(path, variant)
     scene = str(scene)
+    if is_sionna_name(scene):
+        _no_footprints(footprints, scene)
+        return load_sionna_spec(scene, variant, **mesh_options)
+    _indoor_only(None, None, scene, grid, tx, what="an indoor or city scene")
     if scene in indoor_scenes():
         _indoor_only(footprints, cell_m, scene)
         return load_room_file(scene_file(scene), variant)
@@ -82,10 +107,18 @@ def load_scene_spec(scene: str | Path, variant: str, *, footprints: str | None =
     raise unknown_name("scene", scene, available_scenes() + city_names())
 
 
-def _indoor_only(footprints, cell_m, scene: str) -> None:
+def _indoor_only(footprints, cell_m, scene: str, grid=None, tx=None, what: str = "an indoor scene") -> None:
     if footprints is not None or cell_m is not None:
         raise SceneFileError(f"{scene} is an indoor scene: --osm and --cell-m apply to city scenes only",
                              hint="edit [grid] in the scene file instead, or drop the option")
+    if grid is not None or tx is not None:
+        raise SceneFileError(f"{scene} is {what}: --grid and --tx apply to XML scenes (sionna:munich, a .xml) only",
+                             hint="edit [grid] / [tx] in the scene file instead, or drop the option")
+
+
+def _no_footprints(footprints, scene: str) -> None:
+    if footprints is not None:
+        raise SceneFileError(f"{scene} is an XML scene: --osm applies to city scenes only", hint="drop --osm")
 
 
 def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | Path, str]]:
@@ -95,6 +128,8 @@ def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | P
         raise unknown_name("variant", variant, ("all", *VARIANTS))
     wanted = VARIANTS if variant == "all" else (variant,)
     text = str(scene)
+    if not is_scene_path(scene) and is_sionna_name(text) or is_scene_path(scene) and _is_xml_scene(Path(scene)):
+        return [(scene, "blueprint")] if "blueprint" in wanted else [(scene, "dynamic")]  # no dynamic twin: says so
     if not is_scene_path(scene) and text in city_names():
         doc = read_city_file(city_file(text))
         pairs = [(f"{text}-{q}", "blueprint") for q in sorted(doc.quadrants)]
@@ -109,3 +144,8 @@ def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | P
             return [(text, v) for v in wanted if v == "blueprint" or has_dynamic or variant == "dynamic"]
         raise unknown_name("scene", text, available_scenes() + city_names())
     return [(scene, v) for v in wanted]
+
+
+def _is_xml_scene(path: Path) -> bool:
+    path = path.expanduser()
+    return path.suffix.lower() == ".xml" or (path.is_file() and is_mesh_scene_file(path))

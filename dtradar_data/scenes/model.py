@@ -96,6 +96,24 @@ class Prism:
 
 
 @dataclass(frozen=True)
+class MeshScene:
+    """A Mitsuba/Sionna XML scene a spec is built on (Sionna's bundled Munich, or a user's file): its shapes are
+    traced as they are, the spec's own boxes and prisms are added on top. Identified by content, not by location."""
+
+    xml: str
+    """``"sionna:munich"`` for a scene bundled with sionna-rt, else the XML file's name."""
+    sha256: str
+    """sha256 of the XML and of every mesh file it references, in order: a changed file changes the digest."""
+    ground: tuple[str, ...] = ()
+    """Ids of the shapes that are the ground (or terrain): they carry the robot and never block it."""
+    path: str = field(default="", compare=False)
+    """Where the XML is on this machine; not in the digest, so a moved file keeps its dataset version."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"xml": self.xml, "sha256": self.sha256, "ground": list(self.ground)}
+
+
+@dataclass(frozen=True)
 class TxSpec:
     """The transmitter: an ``num_rows`` x ``num_cols`` planar array (paper: 8 x 2, tr38901, dual-polarised)."""
 
@@ -136,9 +154,14 @@ class SceneSpec:
     objects: tuple[Box, ...]
     room: Room | None = None
     prisms: tuple[Prism, ...] = ()
+    base: MeshScene | None = None
+    """An external Mitsuba/Sionna XML scene the objects are added to (:mod:`dtradar_data.scenes.meshscene`)."""
     provenance: dict[str, Any] = field(default_factory=dict, compare=False)
     """Where the geometry came from (a city's footprint source, download time, processing report). Recorded in the
     dataset's metadata, not in the digest: the geometry itself is."""
+    rt_defaults: dict[str, Any] = field(default_factory=dict, compare=False)
+    """Ray-tracing settings this scene needs instead of the indoor defaults (a city's ``[rt]`` section: outdoor paths
+    are 20x longer). Not in the digest: the settings used are hashed into the version anyway."""
 
     @property
     def name(self) -> str:
@@ -156,14 +179,19 @@ class SceneSpec:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able and canonical: tuples become lists, key order is fixed by :meth:`digest`'s ``sort_keys``.
-        Fields added after the indoor twins (prisms) appear only when used, so older digests stay valid."""
+        Fields added after the indoor twins (prisms, base) appear only when used, so older digests stay valid."""
         d = asdict(self)
         d.pop("provenance")
+        d.pop("rt_defaults")
         d["objects"] = [b.to_dict() for b in self.objects]
         if self.prisms:
             d["prisms"] = [p.to_dict() for p in self.prisms]
         else:
             d.pop("prisms")
+        if self.base is not None:
+            d["base"] = self.base.to_dict()
+        else:
+            d.pop("base")
         d["tx"]["position_m"] = list(self.tx.position_m)
         d["tx"]["look_at_m"] = None if self.tx.look_at_m is None else list(self.tx.look_at_m)
         return d
