@@ -7,6 +7,9 @@ all four angles within 1° (azimuths ignored where the zenith is within 1° of a
 traces agree. Results go to ``results/bench_rt.json``, ``results/bench_rt.md`` and ``results/bench_rt.png``.
 
     python bench/bench_rt.py [--scene cubicle] [--variant blueprint] [--samples 1000 3000 ...] [--reference 1000000]
+    python bench/bench_rt.py --scene dallas-q3 --cell-m 8 --reference 300000    # a city quadrant (outdoor default)
+
+Results of a scene other than the cubicle go to ``results/bench_rt_<scene>.*``.
 """
 
 from __future__ import annotations
@@ -81,19 +84,25 @@ def main() -> None:
     ap.add_argument("--reference", type=int, default=1_000_000)
     ap.add_argument("--reference-buffer", type=int, default=10_000_000,
                     help="max_num_paths_per_src of the reference (Sionna's 1e6 default drops paths at 1e6 samples)")
+    ap.add_argument("--buffer", type=int, default=RTSettings().max_num_paths_per_src,
+                    help="max_num_paths_per_src of the compared rows (default: the RTSettings default)")
     ap.add_argument("--batch-size", type=int, default=RTSettings().batch_size)
     ap.add_argument("--repeats", type=int, default=2, help="timed repeats per setting (best is reported)")
+    ap.add_argument("--cell-m", type=float, default=None, help="city scenes: cell size instead of the scene's")
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
+    stem = "bench_rt" if args.scene == "cubicle" else f"bench_rt_{args.scene}"
+    if args.buffer != RTSettings().max_num_paths_per_src:
+        stem += f"_buffer{args.buffer:.0e}".replace("+", "")
 
-    spec = load_scene_spec(args.scene, args.variant)
+    spec = load_scene_spec(args.scene, args.variant, cell_m=args.cell_m)
     blocked = occupancy(spec)
     xs, ys = spec.grid.centres()
     iy, ix = np.nonzero(~blocked)
     points = np.stack([xs[ix], ys[iy], np.full(ix.shape, spec.rx_height_m)], axis=1)
     print(f"{spec.name}: {len(points)} free cells of {blocked.size}")
 
-    base = RTSettings(device="cpu", batch_size=args.batch_size)
+    base = RTSettings(device="cpu", batch_size=args.batch_size, max_num_paths_per_src=args.buffer)
     tracer = RayTracer(spec, base)
     t0 = time.perf_counter()
     tracer.trace(points[: min(len(points), args.batch_size)])
@@ -123,7 +132,7 @@ def main() -> None:
         print(rows[-1])
     ok = [r for r in rows if r["agreement"] >= 0.95 and r["cells_per_s"] >= 300]
     result = {
-        "scene": spec.name, "free_cells": int(len(points)), "reference_samples": args.reference,
+        "scene": spec.name, "cell_m": spec.grid.cell_m, "free_cells": int(len(points)), "reference_samples": args.reference,
         "reference_path_buffer": args.reference_buffer, "path_buffer": base.max_num_paths_per_src,
         "reference_seconds": round(ref_s, 3), "reference_cells_per_s": round(len(points) / ref_s, 1),
         "first_call_seconds_incl_jit": round(first_call_s, 2), "batch_size": args.batch_size,
@@ -134,7 +143,7 @@ def main() -> None:
         "library_versions": library_versions(),
     }
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "bench_rt.json").write_text(json.dumps(result, indent=2) + "\n")
+    (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
     lines = [f"# Ray-tracing benchmark: {spec.name} ({len(points)} free cells, max_depth {base.max_depth}, "
              f"{result['machine']})", "",
              f"Reference: {args.reference:.0e} samples (path buffer {args.reference_buffer:.0e}), {ref_s:.1f} s "
@@ -146,7 +155,7 @@ def main() -> None:
     lines += [f"| {r['samples_per_src']:,} | {r['seconds']} | {r['cells_per_s']} | {100 * r['agreement']:.1f} % | "
               f"{100 * r['found_path_share']:.1f} % | {100 * r['paths_found_vs_reference']:.0f} % | "
               f"{r['median_abs_gain_error_db']} dB | {r['speedup_vs_reference']}× |" for r in rows]
-    (args.out / "bench_rt.md").write_text("\n".join(lines) + "\n")
+    (args.out / f"{stem}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
     import matplotlib
@@ -166,7 +175,7 @@ def main() -> None:
     ax2.set_ylabel("cells / s", color="tab:red")
     ax1.set_title(f"{spec.name}: agreement with {args.reference:.0e}-sample reference vs throughput")
     fig.tight_layout()
-    fig.savefig(args.out / "bench_rt.png", dpi=120)
+    fig.savefig(args.out / f"{stem}.png", dpi=120)
 
 
 if __name__ == "__main__":

@@ -151,11 +151,11 @@ def _train_default(argv: list[str]) -> DQNConfig:
     """The train subcommand's defaults come from ``--preset`` (read before tyro parses the rest)."""
     preset, scene = "tuned", DQNConfig.scene
     for i, a in enumerate(argv):
-        for flag in ("--preset", "--scene"):
-            value = a.split("=", 1)[1] if a.startswith(flag + "=") else (
-                argv[i + 1] if a == flag and i + 1 < len(argv) else None)
+        for option in ("--preset", "--scene"):
+            value = a.split("=", 1)[1] if a.startswith(option + "=") else (
+                argv[i + 1] if a == option and i + 1 < len(argv) else None)
             if value is not None:
-                preset, scene = (value, scene) if flag == "--preset" else (preset, value)
+                preset, scene = (value, scene) if option == "--preset" else (preset, value)
     return config_for(preset if preset in PRESETS else "tuned", scene=scene)
 
 

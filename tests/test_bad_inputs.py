@@ -297,7 +297,7 @@ def test_the_listing_api_keeps_damaged_versions_apart(root):
 def test_a_rebuild_into_a_damaged_version_folder_fails_before_tracing(root, no_tracing, capsys, how):
     config = BuildConfig(scene="cubicle", variant="blueprint")
     spec = load_scene_spec("cubicle", "blueprint")
-    version = version_id(build_inputs(spec, config.rt, per_path=config.per_path))
+    version = version_id(build_inputs(spec, config))
     folder = put(version)
     damage(folder, how)
     assert data_cli.main(["build", "--scene", "cubicle", "--variant", "blueprint"]) == 2

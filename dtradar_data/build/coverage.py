@@ -8,6 +8,8 @@ import numpy as np
 
 from dtradar_data.geometry.floorplan import draw_floorplan
 
+COVERAGE_SUBCELLS = 4  # radio-map cells per grid cell side: the map is finer than the table
+
 
 def render_coverage_png(spec, tracer, path: Path, *, samples: int) -> Path:
     """RadioMapSolver path gain over the grid (4 sub-cells per cell side), obstacles drawn on top (paper Fig. 4)."""
@@ -20,7 +22,8 @@ def render_coverage_png(spec, tracer, path: Path, *, samples: int) -> Path:
     width, height = g.nx * g.cell_m, g.ny * g.cell_m
     x_lo, y_lo = g.x0_m - g.cell_m / 2, g.y0_m - g.cell_m / 2
     centre = (x_lo + width / 2, y_lo + height / 2, spec.rx_height_m)
-    gain = tracer.radio_map(centre_m=centre, size_m=(width, height), cell_m=g.cell_m / 4, samples_per_tx=samples)
+    gain = tracer.radio_map(centre_m=centre, size_m=(width, height), cell_m=g.cell_m / COVERAGE_SUBCELLS,
+                           samples_per_tx=samples)
     with np.errstate(divide="ignore"):
         db = 10 * np.log10(gain)
     db[~np.isfinite(db)] = np.nan

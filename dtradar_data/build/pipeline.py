@@ -24,7 +24,7 @@ import numpy as np
 from filelock import FileLock
 from tqdm.auto import tqdm
 
-from dtradar_data.build.coverage import render_coverage_png
+from dtradar_data.build.coverage import COVERAGE_SUBCELLS, render_coverage_png
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_data.core.ids import DatasetId, format_id
@@ -87,11 +87,19 @@ class BuildConfig:
         self.rt.check_scene(spec)
 
 
-def build_inputs(spec, settings: RTSettings, *, per_path: bool, libraries: dict[str, str] | None = None) -> dict:
-    """Everything that determines a dataset's content; its hash is the dataset version. ``libraries`` (default:
-    the installed versions) lets a check recompute the version of a build made elsewhere."""
-    return {**versions.build_inputs(spec.to_dict(), settings.hashed(), SCHEMA_VERSION, libraries),
-            "per_path": per_path}
+def build_inputs(spec, config: BuildConfig, *, libraries: dict[str, str] | None = None) -> dict:
+    """Everything that determines a dataset version's files; its hash is the version. ``libraries`` (default: the
+    installed versions) lets a check recompute the version of a build made elsewhere.
+
+    Besides the scene and the RT settings: whether the per-path table is stored, the coverage map's settings (it is
+    one of the version's files), and for a city quadrant the specs its overview plot draws (the other quadrants)."""
+    inputs = {**versions.build_inputs(spec.to_dict(), config.rt.hashed(), SCHEMA_VERSION, libraries),
+              "per_path": config.per_path,
+              "coverage": ({"solver": "sionna.rt.RadioMapSolver", "samples_per_tx": config.coverage_samples,
+                            "cells_per_grid_cell_side": COVERAGE_SUBCELLS} if config.coverage_map else None)}
+    if spec.prisms and "city" in spec.provenance:
+        inputs["city_overview"] = [s.digest() for s in city_quadrant_specs(spec, config)]
+    return inputs
 
 
 def _save_npz_atomic(path: Path, **arrays) -> None:
@@ -149,13 +157,21 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
     return cells_tbl, paths_tbl, blocked, tracer
 
 
+def scene_config(config: BuildConfig, spec) -> BuildConfig:
+    """``config`` with the scene's own RT defaults (a city's ``[rt]``) for every setting the user left at the
+    RTSettings default; a value the user changed wins."""
+    default = RTSettings()
+    changes = {k: v for k, v in spec.rt_defaults.items() if getattr(config.rt, k) == getattr(default, k)}
+    return dataclasses.replace(config, rt=dataclasses.replace(config.rt, **changes)) if changes else config
+
+
 def build_one(spec, config: BuildConfig) -> Dataset:
     """Build (or reuse) one variant of one scene."""
+    config = scene_config(config, spec)
     config.check_scene(spec)
-    settings = config.rt
     ds_id = DatasetId(spec.scene, spec.variant, None)
     name = format_id(ds_id)
-    inputs = build_inputs(spec, settings, per_path=config.per_path)
+    inputs = build_inputs(spec, config)
     version = versions.version_id(inputs)
     local.check_can_store(ds_id, version)  # a damaged version folder would otherwise fail only after tracing
     work_dir = work_root() / spec.scene / spec.variant / version

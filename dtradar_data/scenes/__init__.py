@@ -34,7 +34,7 @@ from dtradar_data.scenes.meshscene import (
 )
 from dtradar_data.scenes.model import SceneSpec
 
-__all__ = ["SceneSpec", "available_scenes", "sionna_scene_names", "build_targets", "city_names", "scene_file", "is_scene_path",
+__all__ = ["SceneSpec", "available_scenes", "sionna_scene_names", "build_targets", "builtin_names", "city_names", "scene_file", "is_scene_path",
            "load_scene_spec"]
 
 
@@ -119,6 +119,15 @@ def _indoor_only(footprints, cell_m, scene: str, grid=None, tx=None, what: str =
 def _no_footprints(footprints, scene: str) -> None:
     if footprints is not None:
         raise SceneFileError(f"{scene} is an XML scene: --osm applies to city scenes only", hint="drop --osm")
+
+
+def builtin_names() -> list[str]:
+    """Every built-in ``scene/variant`` dataset name: both twins of each room, each city quadrant's blueprint and
+    the dynamic twin of its dynamic quadrant, the blueprint of each of Sionna's bundled scenes."""
+    names = [f"{s}/{v}" for s in indoor_scenes() for v in VARIANTS]
+    names += [f"{s}/{v}" for c in city_names() for s, v in build_targets(c)]
+    names += [f"{s}/blueprint" for s in sionna_dataset_scenes()]
+    return sorted(names)
 
 
 def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | Path, str]]:

@@ -39,7 +39,7 @@ from dtradar_data.core.errors import MissingDependencyError, SceneFileError, did
 from dtradar_data.core.grid import Grid
 from dtradar_data.core.ids import SCENE_RE
 from dtradar_data.scenes.indoor.reader import Num, Pos, PosInt, SceneName, Text
-from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS, MeshScene, SceneSpec, TxSpec
+from dtradar_data.scenes.model import OUTDOOR_RT_DEFAULTS, PATTERNS, POLARIZATIONS, MeshScene, SceneSpec, TxSpec
 
 FORMAT = 1
 SIONNA_PREFIX = "sionna:"
@@ -320,6 +320,7 @@ def _spec(doc: MeshSceneDocument, base: MeshScene, variant: str, *, grid: tuple 
                   pattern=t.pattern, polarization=t.polarization, power_dbm=t.power_dbm),
         rx_height_m=doc.robot.rx_height_m, robot_height_m=doc.robot.robot_height_m, objects=(), base=base,
         provenance={"xml": base.xml, "xml_path": base.path},
+        rt_defaults=dict(OUTDOOR_RT_DEFAULTS) if base.xml.startswith("sionna:") else {},
     )
 
 

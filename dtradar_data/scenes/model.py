@@ -25,6 +25,10 @@ from dtradar_data.core.grid import Grid
 STRUCTURE_KINDS = ("wall", "floor", "ceiling")  # generated from [room]; walls also obstruct the robot
 PATTERNS = ("iso", "dipole", "hw_dipole", "tr38901")
 POLARIZATIONS = ("V", "H", "VH", "cross")
+#: Ray-tracing settings of outdoor scenes instead of the (indoor) RTSettings defaults: paths are ~20x longer and the
+#: default 1e6 path buffer loses half of them (measured on Dallas Q3, README "Benchmarks"). City scene files repeat
+#: them in their [rt] section; Sionna's bundled cities use them.
+OUTDOOR_RT_DEFAULTS: dict[str, int] = {"samples_per_src": 100_000, "max_num_paths_per_src": 10_000_000}
 
 
 @dataclass(frozen=True)

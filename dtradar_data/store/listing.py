@@ -8,7 +8,8 @@ from typing import Any
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import CorruptDatasetError
-from dtradar_data.core.ids import VARIANTS, DatasetId, names_of
+from dtradar_data.core.ids import VARIANTS, DatasetId
+from dtradar_data.scenes import builtin_names
 from dtradar_data.store.catalog import as_id, builtin_scenes
 from dtradar_data.store.local import (
     history_metas,
@@ -83,7 +84,7 @@ def _grid_cells(meta: dict[str, Any]) -> int | None:
 def list_datasets() -> list[DatasetEntry]:
     """Every built-in ``scene/variant`` (built or not) and every stored one, sorted by name."""
     builtin = set(builtin_scenes())
-    names = set(names_of(builtin))
+    names = set(builtin_names())
     root = P.datasets_root()
     if root.is_dir():
         names |= {f"{s.name}/{v.name}" for s in root.iterdir() if s.is_dir()

@@ -8,6 +8,7 @@ A city is one file (``dallas.toml``, ``houston.toml`` beside this module are com
     [grid]         cell_m
     [robot]        rx_height_m, robot_height_m
     [tx]           [num_rows, num_cols, pattern, polarization, power_dbm, clearance_m]
+    [rt]           [samples_per_src, max_num_paths_per_src]      (instead of the indoor RTSettings defaults)
     [quadrants.qN] tx_m = [x, y, z]                      (N = 1..4; the paper's Tables III and IV)
     [dynamic]      quadrant, seed, cars, buses, roads = [{name, from_m, to_m}, ...] or "auto"
 
@@ -131,6 +132,13 @@ class CityTx(_Model):
     clearance_m: Num = Field(default=3.0, ge=0)
 
 
+class CityRt(_Model):
+    """Ray-tracing settings the city needs instead of the (indoor) RTSettings defaults."""
+
+    samples_per_src: PosInt | None = None
+    max_num_paths_per_src: PosInt | None = None
+
+
 class Quadrant(_Model):
     tx_m: Vec3
 
@@ -156,6 +164,7 @@ class CityDocument(_Model):
     grid: CityGrid
     robot: CityRobot = CityRobot()
     tx: CityTx = CityTx()
+    rt: CityRt = CityRt()
     quadrants: dict[Literal["q1", "q2", "q3", "q4"], Quadrant]
     dynamic: CityDynamic | None = None
 
@@ -328,7 +337,8 @@ def city_spec(doc: CityDocument, quadrant: str, variant: str, *, footprints: str
                      description=description, source=f"{fp.source}; scene file {doc.scene.name}.toml",
                      licence=fp.licence, attribution=fp.attribution, grid=grid, tx=tx,
                      rx_height_m=doc.robot.rx_height_m, robot_height_m=doc.robot.robot_height_m,
-                     objects=tuple(objects), room=None, prisms=tuple(prisms), provenance=provenance)
+                     objects=tuple(objects), room=None, prisms=tuple(prisms), provenance=provenance,
+                     rt_defaults=doc.rt.model_dump(exclude_none=True))
 
 
 def load_city_spec(scene: str, variant: str, *, footprints: str | None = None,

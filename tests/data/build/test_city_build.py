@@ -23,3 +23,5 @@ def test_a_dallas_quadrant_builds_and_loads_by_name_with_its_city_card_and_overv
     assert "license: odbl" in card and "Quadrant Q3 of dallas" in card and "city.png" in card
     assert (ds.path / "city.png").stat().st_size > 10_000
     assert ds.meta["city"]["tx"]["paper_m"] == [205.0, 159.0, 18.0]
+    # the city's [rt] buffer replaces the indoor default; the samples the test asked for are kept
+    assert ds.meta["rt"]["max_num_paths_per_src"] == 10_000_000 and ds.meta["rt"]["samples_per_src"] == 1_000

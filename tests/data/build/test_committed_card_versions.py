@@ -19,7 +19,7 @@ def test_building_a_scene_gives_the_version_of_its_committed_card(card_dir):
     meta = json.loads((card_dir / "card.json").read_text())["meta"]
     spec = load_scene_spec(meta["scene"], meta["variant"])
     cfg = BuildConfig(scene=meta["scene"])
-    inputs = build_inputs(spec, cfg.rt, per_path=cfg.per_path, libraries=meta["library_versions"])
+    inputs = build_inputs(spec, cfg, libraries=meta["library_versions"])
     assert version_id(inputs) == meta["version"]
 
 
