@@ -25,6 +25,7 @@ from filelock import FileLock
 from tqdm.auto import tqdm
 
 from dtradar_data.build.coverage import COVERAGE_SUBCELLS, render_coverage_png
+from dtradar_data.build.resources import check_resources
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_data.core.ids import DatasetId, format_id
@@ -255,5 +256,7 @@ def build(config: BuildConfig) -> list[Dataset]:
     specs = [load_scene_spec(scene, v, footprints=config.osm, cell_m=config.cell_m, grid=config.grid, tx=config.tx)
              for scene, v in build_targets(config.scene, config.variant)]
     for spec in specs:  # every variant before the first is traced, so `all` does not fail after the blueprint
-        config.check_scene(spec)
+        scene_config(config, spec).check_scene(spec)
+        cfg = scene_config(config, spec)
+        check_resources(spec.name, int((~occupancy(spec)).sum()), cfg.rt, work_root(), per_path=cfg.per_path)
     return [build_one(spec, config) for spec in specs]

@@ -17,7 +17,7 @@ from typing import Any
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError, DtradarError
 from dtradar_data.store import listing, local
-from dtradar_data.store.card import history_entry, render_card
+from dtradar_data.store.card import CITY_FILE, history_entry, render_card
 
 CARD_INPUTS = "card.json"
 
@@ -27,7 +27,8 @@ def render_inputs(inputs: dict[str, Any]) -> str:
 
 
 def snapshot(name: str, out_dir: Path) -> Path:
-    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png}`` from the newest stored version."""
+    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png[, city.png]}`` from the newest stored
+    version."""
     _, version, vdir = local.resolve(name)
     entries = listing.history(name)
     meta = local.read_meta(vdir)
@@ -40,8 +41,9 @@ def snapshot(name: str, out_dir: Path) -> Path:
     target.mkdir(parents=True, exist_ok=True)
     (target / CARD_INPUTS).write_text(json.dumps(inputs, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
     (target / P.CARD_FILE).write_text(render_inputs(inputs))
-    if (vdir / P.COVERAGE_FILE).is_file():
-        shutil.copyfile(vdir / P.COVERAGE_FILE, target / P.COVERAGE_FILE)
+    for picture in (P.COVERAGE_FILE, CITY_FILE):  # the images the card shows
+        if (vdir / picture).is_file():
+            shutil.copyfile(vdir / picture, target / picture)
     return target
 
 
