@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from dtradar_data.build.pipeline import BuildConfig, build_inputs
+from dtradar_data.build.pipeline import BuildConfig, build_inputs, scene_config
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.store.versions import version_id
 
@@ -18,11 +18,12 @@ COMMITTED = sorted(p.parent for p in CARDS.glob("*/*/card.json"))
 def test_building_a_scene_gives_the_version_of_its_committed_card(card_dir):
     meta = json.loads((card_dir / "card.json").read_text())["meta"]
     spec = load_scene_spec(meta["scene"], meta["variant"])
-    cfg = BuildConfig(scene=meta["scene"])
+    cfg = scene_config(BuildConfig(scene=meta["scene"]), spec)  # a city's [rt] defaults, as a build applies them
     inputs = build_inputs(spec, cfg, libraries=meta["library_versions"])
     assert version_id(inputs) == meta["version"]
 
 
-def test_there_is_a_committed_card_for_each_indoor_twin():
+def test_there_is_a_committed_card_for_each_indoor_twin_and_each_dallas_dataset():
     assert {f"{p.parent.name}/{p.name}" for p in COMMITTED} >= {
-        "cubicle/blueprint", "cubicle/dynamic", "meeting/blueprint", "meeting/dynamic"}
+        "cubicle/blueprint", "cubicle/dynamic", "meeting/blueprint", "meeting/dynamic", "dallas-q1/blueprint",
+        "dallas-q2/blueprint", "dallas-q3/blueprint", "dallas-q4/blueprint", "dallas-q3/dynamic"}
