@@ -10,8 +10,6 @@ version is stored.
 from __future__ import annotations
 
 import dataclasses
-import io
-import os
 import shutil
 import tempfile
 import time
@@ -24,7 +22,9 @@ import numpy as np
 from filelock import FileLock
 from tqdm.auto import tqdm
 
+from dtradar_data.build.batches import batch_path, load_batch, save_batch, trace_batch
 from dtradar_data.build.coverage import COVERAGE_SUBCELLS, render_coverage_png
+from dtradar_data.build.executors import import_ray, trace_on_ray
 from dtradar_data.build.resources import check_resources
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
@@ -77,11 +77,26 @@ class BuildConfig:
     """XML scenes (sionna:munich, a .xml file): the grid as X0 Y0 CELL_M NX NY (centre of cell 0, 0; metres)."""
     tx: tuple[float, float, float] | None = None
     """XML scenes: the transmitter position X Y Z in metres."""
+    executor: Literal["serial", "ray"] = "serial"
+    """Where trace batches run: serial (this process, the default) or ray (Ray workers; `pip install 'dtradar[ray]'`).
+    Both give the same table and version."""
+    ray_address: str | None = None
+    """With --executor ray: an existing Ray cluster (e.g. ray://head:10001 or auto); default: a local Ray started
+    for this build."""
+    workers: int = 0
+    """With --executor ray: Ray workers (one scene each); 0 = one per CPU of the cluster."""
 
     def __post_init__(self) -> None:
         if self.coverage_samples < 1:
             raise InvalidSettingError(f"--coverage-samples {self.coverage_samples} must be positive",
                                       hint="the default is 2000000; use --no-coverage-map to skip the map")
+        if self.workers < 0:
+            raise InvalidSettingError(f"--workers {self.workers} must be >= 0 (0 = one per CPU)")
+        if self.executor == "ray":
+            import_ray()  # a missing Ray is a setup error, reported before anything is traced
+        elif self.ray_address or self.workers:
+            raise InvalidSettingError("--ray-address and --workers apply to --executor ray only",
+                                      hint="add --executor ray, or drop them")
 
     def check_scene(self, spec) -> None:
         """The checks that need the scene, run before anything is traced (see :meth:`RTSettings.check_scene`)."""
@@ -103,19 +118,14 @@ def build_inputs(spec, config: BuildConfig, *, libraries: dict[str, str] | None 
     return inputs
 
 
-def _save_npz_atomic(path: Path, **arrays) -> None:
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_bytes(buf.getvalue())
-    os.replace(tmp, path)
-
-
 def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_path: bool = True,
-               progress: bool = True, tracer=None):
-    """Trace every free cell of ``spec``'s grid. Returns ``(cells, paths, blocked)``.
+               progress: bool = True, tracer=None, executor: str = "serial", ray_address: str | None = None,
+               workers: int = 0):
+    """Trace every free cell of ``spec``'s grid. Returns ``(cells, paths, blocked, tracer)``.
 
-    With ``work_dir``, each finished batch is saved there and reused on the next call (resumable).
+    With ``work_dir``, each finished batch is saved there and reused on the next call (resumable). ``executor="ray"``
+    traces the missing batches as Ray tasks first (:mod:`dtradar_data.build.executors`; needs ``work_dir``), then
+    assembles the table from the work folder exactly as a serial build does.
     """
     blocked = occupancy(spec)
     xs, ys = spec.grid.centres()
@@ -130,27 +140,32 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
         work_dir.mkdir(parents=True, exist_ok=True)
     cell_parts, path_parts = [], []
     bar = tqdm(total=len(points), unit="cell", desc=f"ray tracing {spec.name}", disable=not progress)
+    on_ray: set[int] = set()
+    if executor == "ray":
+        if work_dir is None:
+            raise InvalidSettingError("--executor ray needs a work folder", hint="build through build()/build_one()")
+        on_ray = {b for b in range(n_batches) if not batch_path(work_dir, b).exists()}
+        trace_on_ray(spec, settings, points, ix, iy, work_dir, sorted(on_ray), per_path=per_path,
+                     address=ray_address, workers=workers, bar=bar)
+    elif executor != "serial":
+        raise InvalidSettingError(f"--executor {executor!r} is not an executor", hint="use serial or ray")
     for b in range(n_batches):
         sl = slice(b * settings.batch_size, (b + 1) * settings.batch_size)
-        cache = work_dir / f"batch_{b:05d}.npz" if work_dir is not None else None
+        cache = batch_path(work_dir, b) if work_dir is not None else None
         if cache is not None and cache.exists():
-            with np.load(cache, allow_pickle=True) as z:
-                cells = {k[2:]: z[k] for k in z.files if k.startswith("c_")}
-                paths = {k[2:]: z[k] for k in z.files if k.startswith("p_")}
+            cells, paths = load_batch(cache)
         else:
             if tracer is None:
                 tracer = RayTracer(spec, settings)
                 tracer.check_points(points)  # the cheap check, once, before the first expensive trace
-            batch = tracer.trace(points[sl])
-            cells = features.reduce_cells(batch)
-            paths = features.path_rows(batch, ix[sl], iy[sl]) if per_path else {}
+            cells, paths = trace_batch(tracer, points[sl], ix[sl], iy[sl], per_path=per_path)
             if cache is not None:
-                _save_npz_atomic(cache, **{f"c_{k}": v for k, v in cells.items()},
-                                 **{f"p_{k}": v for k, v in paths.items()})
+                save_batch(cache, cells, paths)
         cell_parts.append(cells)
         if per_path:
             path_parts.append(paths)
-        bar.update(len(points[sl]))
+        if b not in on_ray:  # the Ray executor advanced the bar as its batches finished
+            bar.update(len(points[sl]))
     bar.close()
     merged = {k: np.concatenate([c[k] for c in cell_parts]) for k in features.CELL_RADIO_KEYS}
     cells_tbl = features.cells_table(xs, ys, blocked, merged)
@@ -192,7 +207,8 @@ def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, 
     name = format_id(ds_id)
     t0 = time.perf_counter()
     cells, paths, blocked, tracer = trace_grid(spec, settings, work_dir, per_path=config.per_path,
-                                               progress=config.progress)
+                                               progress=config.progress, executor=config.executor,
+                                               ray_address=config.ray_address, workers=config.workers)
     trace_s = time.perf_counter() - t0
     with tempfile.TemporaryDirectory(prefix="dtradar-build-") as tmp:
         extra = {}

@@ -1,0 +1,92 @@
+"""Trace batches on Ray: a local Ray started on demand (one worker per core) or an existing cluster.
+
+Each worker is a Ray actor that builds the scene once (:class:`~dtradar_data.rt.tracer.RayTracer`) and traces many
+batches with the same :func:`~dtradar_data.build.batches.trace_batch` as a serial build; it returns the batch's
+arrays to the driver, which writes them to the build's work folder (:func:`~dtradar_data.build.batches.save_batch`,
+atomic). So nodes of a cluster need the package, not a shared disk; a batch is written once, whole, by one process;
+and the table is assembled from the work folder exactly as after a serial build (same bytes, same version).
+
+A worker that dies (a crash, ``kill -9``, a lost node) is restarted by Ray and its batch retried
+(``max_restarts``/``max_task_retries``); if the build stops anyway, its finished batches stay in the work folder and
+the next build resumes from them. Ray is optional: ``pip install 'dtradar[ray]'``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from dtradar_data.build.batches import batch_path, save_batch, trace_batch
+from dtradar_data.core.errors import MissingDependencyError
+
+RAY_INSTALL = "pip install 'dtradar[ray]'  (or: pip install 'ray>=2.40')"
+TASK_RETRIES = 3
+
+
+def import_ray():
+    try:
+        import ray
+    except ImportError as e:
+        raise MissingDependencyError("--executor ray needs Ray, which is not installed", hint=RAY_INSTALL) from e
+    return ray
+
+
+class TraceWorker:
+    """One Ray actor: the scene built once, then batch after batch (pinned to one tracing thread, as serial)."""
+
+    def __init__(self, spec, settings, per_path: bool):
+        from dtradar_data.rt.tracer import RayTracer
+
+        self.tracer = RayTracer(spec, settings)
+        self.per_path = per_path
+
+    def trace(self, b: int, points: np.ndarray, ix: np.ndarray, iy: np.ndarray):
+        cells, paths = trace_batch(self.tracer, points, ix, iy, per_path=self.per_path)
+        return b, cells, paths
+
+    def pid(self) -> int:
+        return os.getpid()
+
+
+def start_ray(ray, address: str | None, workers: int) -> bool:
+    """Connect to ``address`` or start a local Ray with ``workers`` CPUs (0 = all); True when we started it."""
+    if ray.is_initialized():
+        return False
+    kwargs = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+    if address:
+        ray.init(address=address, **kwargs)
+    else:
+        ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
+    return True
+
+
+def trace_on_ray(spec, settings, points: np.ndarray, ix: np.ndarray, iy: np.ndarray, work_dir: Path,
+                 todo: list[int], *, per_path: bool, address: str | None = None, workers: int = 0, bar=None) -> None:
+    """Trace the batches ``todo`` of ``points`` on Ray actors, writing each to ``work_dir`` as it finishes."""
+    if not todo:
+        return
+    ray = import_ray()
+    started = start_ray(ray, address, workers)
+    try:
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        n_actors = max(1, min(len(todo), workers or cpus))
+        actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=TASK_RETRIES)(TraceWorker)
+        actors = [actor.remote(spec, settings, per_path) for _ in range(n_actors)]
+        size = settings.batch_size
+        pool = ray.util.ActorPool(actors)
+
+        def submit(a, b):
+            sl = slice(b * size, (b + 1) * size)
+            return a.trace.remote(b, points[sl], ix[sl], iy[sl])
+
+        for b, cells, paths in pool.map_unordered(submit, todo):
+            save_batch(batch_path(work_dir, b), cells, paths)
+            if bar is not None:
+                bar.update(len(points[b * size:(b + 1) * size]))
+        for a in actors:
+            ray.kill(a)
+    finally:
+        if started:
+            ray.shutdown()
