@@ -6,7 +6,7 @@ NAME    ?= $(SCENE)/blueprint
 ARGS    ?=
 OSM     ?=
 
-.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval offline bench bench-rt bench-rl clean-venv
+.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval offline sweep bench bench-rt bench-rl bench-ray clean-venv
 
 # One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
 setup:
@@ -58,6 +58,12 @@ eval:
 offline:
 	$(PY) -m dtradar_rl offline --scene $(SCENE) $(ARGS)
 
+# Train + evaluate several scenes x seeds as Ray tasks (one per core), gathered into one table with mean and spread.
+SWEEP_SCENES ?= cubicle
+SEEDS        ?= 0 1 2
+sweep:
+	$(PY) -m dtradar_rl sweep --scenes $(SWEEP_SCENES) --seeds $(SEEDS) $(ARGS)
+
 bench: bench-rt bench-rl
 
 bench-rt:
@@ -65,3 +71,7 @@ bench-rt:
 
 bench-rl:
 	$(PY) bench/bench_rl.py $(ARGS)
+
+# Serial vs Ray tracing, side by side in one run (cells/s and the speed-up on this machine's cores).
+bench-ray:
+	$(PY) bench/bench_ray.py $(ARGS)

@@ -28,6 +28,7 @@ from .evaluate import cross_matrix, evaluate_twins, write_results
 from .offline import OfflineConfig
 from .plots import plot_matrix, plot_paths
 from .policy import load_policy
+from .sweep import SweepConfig, sweep
 
 
 @dataclass(frozen=True)
@@ -193,8 +194,15 @@ def _parse_and_run(argv: list[str]) -> int:
         print(f"model: {result.model}\nlogged {result.logged['steps']} steps ({result.logged['transitions']} "
               f"transitions), {result.n_steps} d3rlpy steps in {result.train_s:.1f} s; total {result.wall_s:.1f} s")
 
+    def sweep_cmd(cfg: Annotated[SweepConfig, tyro.conf.arg(name="")] = SweepConfig()) -> None:
+        """Train and evaluate several scenes x seeds (on Ray workers by default); one table with mean and spread."""
+        sweep(cfg.validate())
+        out = Path(cfg.out)
+        print((out / "sweep.md").read_text(), end="")
+        print(f"results: {out / 'sweep.json'}, {out / 'sweep.md'}, {out / 'sweep.png'}")
+
     tyro.extras.subcommand_cli_from_dict({"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd,
-                                          "offline": offline_cmd},
+                                          "offline": offline_cmd, "sweep": sweep_cmd},
                                          args=argv, prog="python -m dtradar_rl",
                                          description="Navigation agents on dtradar datasets. " + DEBUG_HELP)
     return 0
