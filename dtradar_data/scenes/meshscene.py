@@ -316,12 +316,20 @@ def _spec(doc: MeshSceneDocument, base: MeshScene, variant: str, *, grid: tuple 
     return SceneSpec(
         scene=doc.scene.name, variant=variant, title=doc.scene.title, description=doc.scene.description,
         source=doc.scene.source, licence=doc.scene.licence, attribution=doc.scene.attribution, grid=the_grid,
-        tx=TxSpec(position_m=tuple(position), look_at_m=t.look_at_m, num_rows=t.num_rows, num_cols=t.num_cols,
+        tx=TxSpec(position_m=tuple(position), look_at_m=t.look_at_m or _grid_centre(the_grid, doc.robot.rx_height_m),
+                  num_rows=t.num_rows, num_cols=t.num_cols,
                   pattern=t.pattern, polarization=t.polarization, power_dbm=t.power_dbm),
         rx_height_m=doc.robot.rx_height_m, robot_height_m=doc.robot.robot_height_m, objects=(), base=base,
         provenance={"xml": base.xml, "xml_path": base.path},
         rt_defaults=dict(OUTDOOR_RT_DEFAULTS) if base.xml.startswith("sionna:") else {},
     )
+
+
+def _grid_centre(grid: Grid, height_m: float) -> tuple[float, float, float]:
+    """Where a transmitter without ``look_at_m`` points: the grid's centre at receiver height (a tr38901 array
+    otherwise faces +x and leaves the cells behind it in its back lobe), as for the city quadrants."""
+    x0, y0, x1, y1 = grid.bounds()
+    return (round((x0 + x1) / 2, 3), round((y0 + y1) / 2, 3), float(height_m))
 
 
 def grid_from_option(grid: tuple) -> Grid:
