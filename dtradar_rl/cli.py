@@ -5,6 +5,7 @@
     python -m dtradar_rl eval --scene cubicle                  # blueprint -> blueprint and blueprint -> dynamic
     python -m dtradar_rl cross --scenes dallas-q1 dallas-q2 dallas-q3 dallas-q4   # train-on-Qi x eval-on-Qj
     python -m dtradar_rl offline --scene cubicle --algorithm cql   # d3rlpy on logged transitions -> runs/cubicle/offline/cql
+    python -m dtradar_rl paper --scenes cubicle meeting        # the paper's tables and figures -> runs/paper/report.md
 """
 
 from __future__ import annotations
@@ -18,14 +19,17 @@ import numpy as np
 import tyro
 
 from dtradar_data.core.boundary import DEBUG_HELP, run_cli
-from dtradar_data.core.errors import unknown_name
+from dtradar_data.core.errors import DatasetNotFoundError, unknown_name
 from dtradar_data.core.ids import VARIANTS
 
 from .config import PRESETS, ConfigError, DQNConfig, check_device, config_for, flag
 from .data import load_dataset
 from .dqn import train
 from .evaluate import cross_matrix, evaluate_twins, write_results
+from .figures import plot_bars
+from .inference import evaluate_pair
 from .offline import OfflineConfig
+from .paper import PaperConfig, run_paper
 from .plots import plot_matrix, plot_paths
 from .policy import load_policy
 from .sweep import SweepConfig, sweep
@@ -118,6 +122,8 @@ def run_eval(cfg: EvalConfig) -> str:
     ckpt = Path(cfg.checkpoint or f"runs/{cfg.scene}/dqn/model.pt")
     out = Path(cfg.out or f"runs/{cfg.scene}/eval")
     policy = load_policy(ckpt, cfg.device)
+    if getattr(policy.config, "fixed_pair", False):
+        return _eval_pair(cfg, policy, ckpt, out)
     rows = []
     for row, ds, roll in evaluate_twins(policy, cfg.scene, cfg.variants, pairs=cfg.pairs, seed=cfg.seed,
                                         max_steps=cfg.max_steps or None, device=cfg.device, shield=cfg.shield):
@@ -135,6 +141,28 @@ def run_eval(cfg: EvalConfig) -> str:
     return md
 
 
+def _eval_pair(cfg: EvalConfig, policy, ckpt: Path, out: Path) -> str:
+    """A fixed-pair agent (the paper's protocol) is evaluated on its own pair on each twin, not on random pairs."""
+    rows = []
+    for variant in cfg.variants:
+        try:
+            ds = load_dataset(f"{cfg.scene}/{variant}")
+        except DatasetNotFoundError as e:
+            print(f"skipping {cfg.scene}/{variant}: {e.message}")
+            continue
+        row, pair, roll = evaluate_pair(policy, ds, max_steps=cfg.max_steps or None, device=cfg.device)
+        rows.append(row)
+        out.mkdir(parents=True, exist_ok=True)
+        verdict = f"reached in {int(row['steps'])} steps" if row["success_rate"] else "not reached"
+        plot_paths(ds, roll.paths, out / f"paths_{variant}.png", successes=list(roll.success),
+                   title=f"{ds.name}: pair {pair.start} -> {pair.target} {verdict}, shortest {pair.shortest}")
+    config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
+    md = write_results(rows, out, config)
+    print(md, end="")
+    print(f"results: {out / 'results.json'}, {out / 'results.md'}")
+    return md
+
+
 def run_cross(cfg: CrossConfig) -> None:
     policies = {s: load_policy(cfg.checkpoint_pattern.format(scene=s)) for s in cfg.scenes}
     datasets = {s: load_dataset(f"{s}/{cfg.variant}") for s in cfg.scenes}
@@ -143,6 +171,7 @@ def run_cross(cfg: CrossConfig) -> None:
     out.mkdir(parents=True, exist_ok=True)
     for key in ("success", "spl"):
         plot_matrix(np.array(m[key]), m["rows"], m["cols"], out / f"cross_{key}.png", title=f"{key} (train x eval)")
+        plot_bars(m[key], m["rows"], m["cols"], out / f"cross_{key}_bars.png", ylabel=key)
     rows = [{"case": f"{r} -> {c}", "pairs": cfg.pairs, "success_rate": m["success"][i][j], "spl": m["spl"][i][j]}
             for i, r in enumerate(m["rows"]) for j, c in enumerate(m["cols"])]
     print(write_results(rows, out, {"cross": dataclasses.asdict(cfg), "matrix": m}, name="cross"), end="")
@@ -201,8 +230,13 @@ def _parse_and_run(argv: list[str]) -> int:
         print((out / "sweep.md").read_text(), end="")
         print(f"results: {out / 'sweep.json'}, {out / 'sweep.md'}, {out / 'sweep.png'}")
 
+    def paper_cmd(cfg: Annotated[PaperConfig, tyro.conf.arg(name="")] = PaperConfig()) -> None:
+        """Regenerate the paper's tables and figures from the built datasets into one report folder (Markdown
+        and PNGs): Tables II, V, VI, VII, coverage maps, training curves, inference paths, cross-quadrant bars."""
+        run_paper(cfg.validate())
+
     tyro.extras.subcommand_cli_from_dict({"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd,
-                                          "offline": offline_cmd, "sweep": sweep_cmd},
+                                          "offline": offline_cmd, "sweep": sweep_cmd, "paper": paper_cmd},
                                          args=argv, prog="python -m dtradar_rl",
                                          description="Navigation agents on dtradar datasets. " + DEBUG_HELP)
     return 0

@@ -22,6 +22,7 @@ from .mdp import check_reward
 from .observations import check_preset
 
 INDOOR_SCENES = ("cubicle", "meeting")
+PAIR_MODES = ("random", "paper")
 
 
 class ConfigError(DtradarError, ValueError):
@@ -136,6 +137,14 @@ class DQNConfig(TwinConfig):
     """training budget in environment steps (all robots together); the paper's is 600K"""
     episodes: int = 0
     """also stop after this many finished episodes (0 = no limit; the paper: 500 indoor, 80 outdoor)"""
+    pair: str = "random"
+    """start/target pairs: random (a new connected pair every episode: goal-conditioned agents) or paper (one fixed
+    pair per run, the paper's protocol: the scene's Table VI pair on the grid, see dtradar_rl.pairs; episodes then
+    run until the target, capped at 10x the pair's shortest path unless --max-steps is set)"""
+    start: tuple[int, int] | None = None
+    """fixed start cell (ix iy), with --target: one pair per run as with --pair paper, instead of Table VI's"""
+    target: tuple[int, int] | None = None
+    """fixed target cell (ix iy), with --start"""
     lr: float = 1e-3
     """Adam learning rate"""
     lr_end: float = 1e-4
@@ -174,6 +183,11 @@ class DQNConfig(TwinConfig):
     def out_dir(self) -> Path:
         return Path(self.out or f"runs/{self.scene}/dqn")
 
+    @property
+    def fixed_pair(self) -> bool:
+        """One (start, target) pair for the whole run (the paper's protocol) rather than a new one per episode."""
+        return self.pair == "paper" or self.start is not None
+
     def validate(self) -> DQNConfig:
         super().validate()
         if self.preset not in PRESETS:
@@ -181,6 +195,13 @@ class DQNConfig(TwinConfig):
         self.check_at_least(1, "total_env_steps", "batch_size", "buffer_size", "env_steps_per_update",
                             "target_update_every", "aug_obstacle_size")
         self.check_at_least(0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every")
+        if self.pair not in PAIR_MODES:
+            raise unknown_name("pair mode (--pair)", self.pair, PAIR_MODES)
+        if (self.start is None) != (self.target is None):
+            raise ConfigError("--start and --target go together", hint="give both cells (ix iy), or neither")
+        if self.fixed_pair and self.aug_obstacles:
+            raise ConfigError("obstacle augmentation draws a new pair at every reset; it does not combine with a "
+                              "fixed pair", hint="use --pair random, or --aug-obstacles 0")
         if self.aug_potential not in AUG_POTENTIALS:
             raise unknown_name("augmentation potential", self.aug_potential, AUG_POTENTIALS)
         if not self.lr > 0:
@@ -198,7 +219,9 @@ class DQNConfig(TwinConfig):
 PRESETS: dict[str, dict[str, Any]] = {
     "tuned": {},
     "robust": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan"},
-    "paper": dict(obs="paper", reward="paper", num_envs=1, episodes=500, hidden=(256,) * 5, lr=1e-3, lr_end=-1.0,
+    # The episodes decide the paper's budget; total_env_steps is only a backstop far above what they use.
+    "paper": dict(obs="paper", reward="paper", pair="paper", num_envs=1, episodes=500, total_env_steps=10_000_000,
+                  hidden=(256,) * 5, lr=1e-3, lr_end=-1.0,
                   gamma=0.9,
                   batch_size=64, buffer_size=100_000, learning_starts=1_000, env_steps_per_update=1,
                   target_update_every=500, double_dqn=False, eps_start=0.1, eps_end=0.1),
