@@ -39,7 +39,7 @@ BUILDER = textwrap.dedent("""
     # 8 cells a batch: 3 batch files, so "mid-trace" is a moment with a batch written and more to come
     config = BuildConfig(scene="cubicle", rt=RTSettings(max_depth=1, samples_per_src=2_000, batch_size=8,
                                                         device="cpu"), coverage_map=False, progress=False)
-    real_trace_grid, real_save = pipeline.trace_grid, pipeline._save_npz_atomic
+    real_trace_grid, real_save = pipeline.trace_grid, pipeline.save_batch
 
 
     def counting_trace_grid(*args, **kwargs):
@@ -48,8 +48,8 @@ BUILDER = textwrap.dedent("""
         return real_trace_grid(*args, **kwargs)
 
 
-    def save_then_let_the_second_in(path, **arrays):
-        real_save(path, **arrays)
+    def save_then_let_the_second_in(path, cells, paths):
+        real_save(path, cells, paths)
         if path.name == "batch_00000.npz":  # mid-trace: start the second build, give it time to reach the lock
             (signals / "first-batch-written").touch()
             wait_for("second-building")
@@ -58,7 +58,7 @@ BUILDER = textwrap.dedent("""
 
     pipeline.trace_grid = counting_trace_grid
     if role == "first":
-        pipeline._save_npz_atomic = save_then_let_the_second_in
+        pipeline.save_batch = save_then_let_the_second_in
     else:
         wait_for("first-batch-written")
         (signals / "second-building").touch()
