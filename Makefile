@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval offline sweep paper bench bench-rt bench-rl bench-ray clean-venv
+.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval adapt offline sweep paper bench bench-rt bench-rl bench-ray clean-venv
 
 # One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
 setup:
@@ -64,6 +64,10 @@ SWEEP_SCENES ?= cubicle
 SEEDS        ?= 0 1 2
 sweep:
 	$(PY) -m dtradar_rl sweep --scenes $(SWEEP_SCENES) --seeds $(SEEDS) $(ARGS)
+
+# Twin update: fine-tune runs/$(SCENE)/dqn/model.pt on the dynamic twin, beside training from scratch (curve.png).
+adapt:
+	$(PY) -m dtradar_rl adapt --scene $(SCENE) $(ARGS)
 
 # The paper's tables and figures from the built datasets into runs/paper/ (report.md + PNGs),
 # e.g. make paper SCENES="cubicle meeting"; every option: python -m dtradar_rl paper --help

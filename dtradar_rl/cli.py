@@ -5,6 +5,7 @@
     python -m dtradar_rl eval --scene cubicle                  # blueprint -> blueprint and blueprint -> dynamic
     python -m dtradar_rl cross --scenes dallas-q1 dallas-q2 dallas-q3 dallas-q4   # train-on-Qi x eval-on-Qj
     python -m dtradar_rl offline --scene cubicle --algorithm cql   # d3rlpy on logged transitions -> runs/cubicle/offline/cql
+    python -m dtradar_rl adapt --scene cubicle                 # fine-tune the blueprint agent on cubicle/dynamic
     python -m dtradar_rl paper --scenes cubicle meeting        # the paper's tables and figures -> runs/paper/report.md
 """
 
@@ -28,8 +29,10 @@ from .dqn import train
 from .evaluate import cross_matrix, evaluate_twins, write_results
 from .figures import plot_bars
 from .inference import evaluate_pair
+from .adapt import AdaptConfig, adapt
 from .offline import OfflineConfig
 from .paper import PaperConfig, run_paper
+from .planner import planner_for_scene
 from .plots import plot_matrix, plot_paths
 from .policy import load_policy
 from .sweep import SweepConfig, sweep
@@ -54,6 +57,9 @@ class EvalConfig:
     shield: bool = True
     """also report the policy with the obstacle shield (moves into neighbours sensed as occupied are masked;
     neighbors preset only)"""
+    planner: bool = True
+    """also report the classical baseline (fingerprint localisation + breadth-first replanning on the blueprint;
+    see dtradar_rl.planner)"""
     plot_paths: int = 6
     """navigation paths drawn over the coverage map per twin"""
     out: str = ""
@@ -134,6 +140,10 @@ def run_eval(cfg: EvalConfig) -> str:
         plot_paths(ds, roll.paths[:k], out / png,
                    successes=list(roll.success[:k]),
                    title=f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}")
+    if cfg.planner:
+        rows += [row for row, _, _ in evaluate_twins(planner_for_scene(cfg.scene, cfg.device), cfg.scene, cfg.variants,
+                                                     label="planner: ", pairs=cfg.pairs, seed=cfg.seed,
+                                                     max_steps=cfg.max_steps or None, device=cfg.device, shield=False)]
     config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
     md = write_results(rows, out, config)
     print(md, end="")
@@ -211,6 +221,13 @@ def _parse_and_run(argv: list[str]) -> int:
         """Train-on-i x evaluate-on-j matrix over several datasets (cities: quadrants), as a heatmap."""
         run_cross(cfg.validate())
 
+    def adapt_cmd(cfg: Annotated[AdaptConfig, tyro.conf.arg(name="")] = AdaptConfig()) -> None:
+        """Twin update: fine-tune the blueprint agent on the changed (dynamic) twin; success against training
+        seconds, beside training from scratch for the same time (curve.png, adapt.md)."""
+        result = adapt(cfg.validate())
+        print(result.markdown, end="")
+        print(f"curves: {result.out_dir / 'curve.png'}, {result.out_dir / 'curve.csv'}")
+
     def offline_cmd(cfg: Annotated[OfflineConfig, tyro.conf.arg(name="")] = OFFLINE_DEFAULT) -> None:
         """Offline RL with d3rlpy (cql, bcq, bc, dqn): log a behaviour policy's transitions on the blueprint twin,
         train on them, evaluate on the blueprint and dynamic twins; prints the table."""
@@ -236,7 +253,7 @@ def _parse_and_run(argv: list[str]) -> int:
         run_paper(cfg.validate())
 
     tyro.extras.subcommand_cli_from_dict({"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd,
-                                          "offline": offline_cmd, "sweep": sweep_cmd, "paper": paper_cmd},
+                                          "offline": offline_cmd, "adapt": adapt_cmd, "sweep": sweep_cmd, "paper": paper_cmd},
                                          args=argv, prog="python -m dtradar_rl",
                                          description="Navigation agents on dtradar datasets. " + DEBUG_HELP)
     return 0

@@ -133,6 +133,9 @@ class DQNConfig(TwinConfig):
     """largest side of an extra obstacle in cells (each is a 1..size x 1..size rectangle; 2 = 1 m at 0.5 m cells)"""
     aug_potential: str = "replan"
     """geodesic shaping with extra obstacles: replan (BFS per robot on its augmented grid) or blueprint"""
+    memory_radius: int = 0
+    """memory agent: append a (2R+1)^2 window of the cells sensed as occupied and visited so far this episode
+    (0 = off; needs --obs neighbors; see dtradar_rl.memory)"""
     total_env_steps: int = 600_000
     """training budget in environment steps (all robots together); the paper's is 600K"""
     episodes: int = 0
@@ -194,7 +197,10 @@ class DQNConfig(TwinConfig):
             raise unknown_name("training preset", self.preset, PRESETS)
         self.check_at_least(1, "total_env_steps", "batch_size", "buffer_size", "env_steps_per_update",
                             "target_update_every", "aug_obstacle_size")
-        self.check_at_least(0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every")
+        self.check_at_least(0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every", "memory_radius")
+        if self.memory_radius and self.obs != "neighbors":
+            raise ConfigError(f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
+                              f"radio features), got --obs {self.obs}")
         if self.pair not in PAIR_MODES:
             raise unknown_name("pair mode (--pair)", self.pair, PAIR_MODES)
         if (self.start is None) != (self.target is None):
@@ -219,6 +225,7 @@ class DQNConfig(TwinConfig):
 PRESETS: dict[str, dict[str, Any]] = {
     "tuned": {},
     "robust": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan"},
+    "memory": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan", "memory_radius": 5},
     # The episodes decide the paper's budget; total_env_steps is only a backstop far above what they use.
     "paper": dict(obs="paper", reward="paper", pair="paper", num_envs=1, episodes=500, total_env_steps=10_000_000,
                   hidden=(256,) * 5, lr=1e-3, lr_end=-1.0,

@@ -37,6 +37,7 @@ import copy
 import csv
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,10 +50,10 @@ from torch import nn
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import open_atomic
 
-from .batched import BatchedNavEnv
 from .config import PRESETS, DQNConfig, config_for
 from .data import load_dataset
 from .mdp import GridMDP
+from .memory import batched_env
 from .observations import Normalizer
 from .pairs import ResolvedPair, resolve
 from .plots import plot_curves
@@ -134,10 +135,16 @@ def training_pair(cfg: DQNConfig, ds: Dataset) -> ResolvedPair | None:
     return resolve(GridMDP.from_dataset(ds), ds.grid_info, cfg.scene, cfg.start, cfg.target)
 
 
-def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
-    """Train a DQN agent on ``dataset`` (default: load ``config.dataset_name``); write checkpoints and curves."""
+def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, Any] | None = None,
+          normalizer: Normalizer | None = None, callback: Callable[..., bool] | None = None) -> TrainResult:
+    """Train a DQN agent on ``dataset`` (default: load ``config.dataset_name``); write checkpoints and curves.
+
+    Fine-tuning (:mod:`dtradar_rl.adapt`): ``init`` is a Q-network state dict to start from and ``normalizer`` the
+    one it was trained with; ``callback(q, env_steps, train_s)`` runs after every batch of steps, its own time
+    is not counted in ``train_s`` or ``wall_s``, and it stops training by returning True."""
     cfg = config.validate()
     t_start = time.perf_counter()
+    callback_s = 0.0
     torch.set_num_threads(cfg.threads or auto_threads())
     torch.set_flush_denormal(True)  # tiny Adam moments otherwise slow every CPU update down several-fold
     torch.manual_seed(cfg.seed)
@@ -145,14 +152,16 @@ def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
     out = cfg.out_dir
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
     write_config(cfg, out)  # only once the dataset loaded: a failed start leaves an earlier run's config alone
-    normalizer = Normalizer.fit(ds)
+    normalizer = normalizer or Normalizer.fit(ds)
     pair = training_pair(cfg, ds)
-    env = BatchedNavEnv.from_dataset(ds, cfg.num_envs, obs=cfg.obs, normalizer=normalizer, reward=cfg.reward,
-                                     max_steps=cfg.max_steps or (pair.cap if pair else None), device=device,
-                                     seed=cfg.seed,
-                                     aug_obstacles=cfg.aug_obstacles, aug_obstacle_size=cfg.aug_obstacle_size,
-                                     aug_potential=cfg.aug_potential)
+    env = batched_env(ds, cfg.num_envs, memory_radius=cfg.memory_radius, obs=cfg.obs, normalizer=normalizer,
+                      reward=cfg.reward, max_steps=cfg.max_steps or (pair.cap if pair else None), device=device,
+                      seed=cfg.seed,
+                      aug_obstacles=cfg.aug_obstacles, aug_obstacle_size=cfg.aug_obstacle_size,
+                      aug_potential=cfg.aug_potential)
     q = QNetwork(env.obs_dim, cfg.hidden).to(device)
+    if init is not None:
+        q.load_state_dict(init)
     q_target = copy.deepcopy(q)
     optimizer = torch.optim.Adam(q.parameters(), lr=cfg.lr, foreach=True)
     buffer = ReplayBuffer(min(cfg.buffer_size, max(cfg.total_env_steps, cfg.batch_size)), env.obs_dim, device)
@@ -210,7 +219,7 @@ def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
     next_checkpoint = (env_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every if cfg.checkpoint_every else None
     next_log = env_steps + cfg.total_env_steps // 10
     # With an episode budget (the paper's protocol) the step backstop says nothing about progress: log by episodes.
-    log_every_ep = max(1, cfg.episodes // 10) if cfg.episodes else 0
+    log_every_ep = max(1, cfg.episodes // 25) if cfg.episodes else 0
     next_log_ep = log_every_ep
     while env_steps < cfg.total_env_steps and not (cfg.episodes and len(episodes) >= cfg.episodes):
         # 1. act epsilon-greedily
@@ -263,6 +272,12 @@ def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
             if updates % cfg.target_update_every == 0:
                 q_target.load_state_dict(q.state_dict())
 
+        if callback is not None:
+            t_cb = time.perf_counter()
+            stop = callback(q, env_steps, t_cb - t_start - callback_s)
+            callback_s += time.perf_counter() - t_cb
+            if stop:
+                break
         if next_checkpoint is not None and env_steps >= next_checkpoint:
             save_last()
             next_checkpoint += cfg.checkpoint_every
@@ -274,10 +289,10 @@ def train(config: DQNConfig, dataset: Dataset | None = None) -> TrainResult:
             next_log += cfg.total_env_steps // 10
             next_log_ep += log_every_ep
 
-    wall = time.perf_counter() - t_start
+    wall = time.perf_counter() - t_start - callback_s
     save_last()
     ckpt = out / "model.pt"
-    save_checkpoint(ckpt, q, cfg, normalizer, env.obs_table.names, ds,
+    save_checkpoint(ckpt, q, cfg, normalizer, getattr(env, "obs_names", env.obs_table.names), ds,
                     stats={"env_steps": env_steps, "updates": updates, "episodes": len(episodes), "wall_s": wall,
                            **({"pair": pair.to_dict()} if pair else {})})
     write_curves(episodes, out)

@@ -123,17 +123,14 @@ def rollout(policy: Policy, ds: Dataset, pairs: np.ndarray, *, max_steps: int | 
 
 def decision_latency_ms(policy: Policy, ds: Dataset, repeats: int = 300) -> float:
     """Median time of one greedy decision for one robot: observation lookup + forward pass + argmax."""
-    table = policy.observations(ds)
-    cell_part, target_part = torch.from_numpy(table.cell_part), torch.from_numpy(table.target_part)
-    free = np.flatnonzero(~np.asarray(ds.blocked).ravel())
-    rng = np.random.default_rng(0)
+    env = policy.env_for(ds, 1)  # the policy's own env, so memory agents and the planner observe as they act
+    env.reset()
     times = []
     for _ in range(repeats):
-        c, t = (int(v) for v in rng.choice(free, 2))
         t0 = time.perf_counter()
-        obs = torch.cat([cell_part[c], target_part[t]])[None]
-        policy.act(obs)
+        action = policy.act(env.observe())
         times.append(time.perf_counter() - t0)
+        env.step(action)
     return float(np.median(times) * 1e3)
 
 

@@ -111,3 +111,18 @@ def plot_matrix(matrix: np.ndarray, rows: Sequence[str], cols: Sequence[str], pa
     ax.set_title(title)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_adapt_curves(curves: dict[str, Sequence[dict]], path: Path, *, title: str = "") -> Path:
+    """Success (solid) and SPL (dashed) against training seconds, one colour per run (fine-tune, scratch)."""
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    for k, (run, rows) in enumerate(curves.items()):
+        t = [r["train_s"] for r in rows]
+        ax.plot(t, [r["success_rate"] for r in rows], "-o", ms=3, color=f"C{k}", label=f"{run}: success")
+        ax.plot(t, [r["spl"] for r in rows], "--", color=f"C{k}", alpha=0.6, label=f"{run}: SPL")
+    ax.axhline(0.99, color="grey", lw=0.8, ls=":")
+    ax.set(xlabel="training seconds", ylabel="on the changed twin", ylim=(0, 1.02), title=title)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)

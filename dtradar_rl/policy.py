@@ -22,6 +22,7 @@ from dtradar_data.core.files import open_atomic, write_atomic
 
 from .batched import BatchedNavEnv
 from .config import ConfigError, DQNConfig, TwinConfig
+from .memory import batched_env
 from .observations import PAPER_COLUMNS, RADIO_FEATURES, Normalizer, build_observations
 
 CHECKPOINT_FORMAT = "dtradar-dqn/1"
@@ -124,7 +125,8 @@ class Policy:
 
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
         """A batched env over ``ds`` that observes with this policy's preset and training normaliser."""
-        return BatchedNavEnv.from_dataset(ds, num_envs, obs=self.obs_preset, normalizer=self.normalizer, **kwargs)
+        return batched_env(ds, num_envs, memory_radius=getattr(self.config, "memory_radius", 0), obs=self.obs_preset,
+                           normalizer=self.normalizer, **kwargs)
 
     def observations(self, ds: Dataset):
         return build_observations(ds, self.obs_preset, self.normalizer)

@@ -1,0 +1,176 @@
+"""Twin update: when a twin changes, fine-tune the blueprint agent on the new table, and show the time it takes.
+
+    python -m dtradar_rl adapt --scene cubicle      # runs/<scene>/dqn/model.pt fine-tuned on cubicle/dynamic
+
+The blueprint checkpoint's network and normaliser are the starting point; DQN (:func:`dtradar_rl.dqn.train`) then
+trains on the changed twin with its own breadth-first shaping (the changed map is known: it was just built), little
+exploration and no obstacle augmentation. Every ``eval_every_s`` seconds of training the greedy policy is evaluated
+on seeded pairs of the changed twin (evaluation time is not counted), giving success and SPL against seconds of
+fine-tuning. The same budget of seconds then trains the checkpoint's preset from scratch on the changed twin, for
+comparison. Writes ``adapt.{json,md}``, ``curve.csv`` and ``curve.png`` to ``runs/<scene>/adapt``.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from dtradar_data.core.files import open_atomic, write_atomic
+
+from .config import ConfigError, config_for, flag
+from .data import load_dataset
+from .dqn import train
+from .evaluate import evaluate
+from .observations import Normalizer
+from .plots import plot_adapt_curves
+from .policy import Policy, load_policy
+
+
+@dataclass(frozen=True)
+class AdaptConfig:
+    """Fine-tune a blueprint agent on a changed twin; success against seconds, beside training from scratch."""
+
+    scene: str = "cubicle"
+    """scene whose changed twin the agent adapts to"""
+    variant: str = "dynamic"
+    """the changed twin"""
+    checkpoint: str = ""
+    """blueprint agent to start from (default runs/<scene>/dqn/model.pt)"""
+    seconds: float = 20.0
+    """training seconds for the fine-tuning and for the from-scratch comparison (evaluation not counted)"""
+    eval_every_s: float = 2.0
+    """evaluate the greedy policy every this many seconds of training"""
+    pairs: int = 500
+    """seeded (start, target) pairs of each evaluation"""
+    pair_seed: int = 2024
+    """seed of the pairs (the same as make eval)"""
+    seed: int = 0
+    """seed of the network updates, the environment and exploration"""
+    eps: float = 0.1
+    """exploration rate while fine-tuning (the start is already a good policy)"""
+    lr: float = 3e-4
+    """Adam learning rate while fine-tuning (constant)"""
+    learning_starts: int = 2_048
+    """environment steps collected before the first fine-tuning update"""
+    scratch: bool = True
+    """also train the checkpoint's preset from scratch on the changed twin for the same seconds"""
+    threads: int = 0
+    """torch CPU threads (0 = auto)"""
+    out: str = ""
+    """output directory (default runs/<scene>/adapt)"""
+    verbose: bool = True
+    """print each evaluation"""
+
+    def validate(self) -> AdaptConfig:
+        for name in ("seconds", "eval_every_s", "lr"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{flag(name)} must be > 0, got {getattr(self, name)}")
+        if self.pairs < 1 or self.learning_starts < 0:
+            raise ConfigError("--pairs must be >= 1 and --learning-starts >= 0")
+        if not 0 <= self.eps <= 1:
+            raise ConfigError(f"--eps must be in [0, 1], got {self.eps}")
+        return self
+
+
+@dataclass
+class AdaptResult:
+    out_dir: Path
+    #: per run ("finetune", "scratch"): rows ``{"train_s", "env_steps", "success_rate", "spl", "collisions"}``
+    curves: dict[str, list[dict[str, float]]]
+    markdown: str
+
+
+def _curve(cfg: AdaptConfig, label: str, train_cfg, ds, init: Policy | None, out: Path) -> list[dict[str, float]]:
+    """Train ``train_cfg`` on ``ds`` (from ``init``'s weights if given) for ``cfg.seconds``, evaluating as it goes."""
+    rows: list[dict[str, float]] = []
+    holder: dict[str, Any] = {}
+
+    def record(q, env_steps: int, train_s: float) -> None:
+        policy = Policy(q, train_cfg, holder["normalizer"], train_cfg.obs, {"dataset": {"name": ds.name}})
+        was_training = q.training
+        q.eval()
+        m, _ = evaluate(policy, ds, pairs=cfg.pairs, seed=cfg.pair_seed, latency=False)
+        q.train(was_training)
+        rows.append({"train_s": round(train_s, 3), "env_steps": env_steps, "success_rate": m.success_rate,
+                     "spl": m.spl, "collisions": m.collisions})
+        if cfg.verbose:
+            print(f"{label:>9s} {train_s:6.1f} s  {env_steps:>8d} steps  success {m.success_rate:.3f}  "
+                  f"SPL {m.spl:.3f}")
+
+    def callback(q, env_steps: int, train_s: float) -> bool:
+        if train_s >= holder["next"] or train_s >= cfg.seconds:
+            record(q, env_steps, train_s)
+            holder["next"] += cfg.eval_every_s
+        return train_s >= cfg.seconds
+
+    holder["next"] = cfg.eval_every_s
+    if init is not None:
+        holder["normalizer"] = init.normalizer
+        record(init.q, 0, 0.0)  # zero-shot: the blueprint agent before any update
+        train(train_cfg, ds, init=init.q.state_dict(), normalizer=init.normalizer, callback=callback)
+    else:
+        holder["normalizer"] = Normalizer.fit(ds)
+        train(train_cfg, ds, callback=callback)
+    write_atomic(out / label / "curve.json", json.dumps(rows, indent=2) + "\n")
+    return rows
+
+
+def adapt(cfg: AdaptConfig) -> AdaptResult:
+    """Fine-tune (and, with ``scratch``, train from scratch) on ``<scene>/<variant>``; write the curves."""
+    cfg = cfg.validate()
+    ckpt = Path(cfg.checkpoint or f"runs/{cfg.scene}/dqn/model.pt")
+    out = Path(cfg.out or f"runs/{cfg.scene}/adapt")
+    start = load_policy(ckpt)
+    ds = load_dataset(f"{cfg.scene}/{cfg.variant}")
+    base = start.config
+    # the clock, not the step budget, ends both runs: exploration and learning rate stay at the fine-tuning values
+    common = {"scene": cfg.scene, "variant": cfg.variant, "seed": cfg.seed, "threads": cfg.threads,
+              "verbose": False, "checkpoint_every": 0, "save_replay": False, "total_env_steps": 50_000_000}
+    finetune_cfg = dataclasses.replace(base, **common, aug_obstacles=0, eps_start=cfg.eps, eps_end=cfg.eps,
+                                       lr=cfg.lr, lr_end=-1.0, learning_starts=cfg.learning_starts,
+                                       out=str(out / "finetune"), resume=False).validate()
+    curves = {"finetune": _curve(cfg, "finetune", finetune_cfg, ds, start, out)}
+    if cfg.scratch:
+        # from scratch: the preset, with its exploration decay fitted to the steps the seconds allow (a constant
+        # learning rate, since the clock ends the run)
+        steps_per_s = curves["finetune"][-1]["env_steps"] / max(curves["finetune"][-1]["train_s"], 1e-9)
+        expected = steps_per_s * cfg.seconds
+        preset = config_for(getattr(base, "preset", "tuned"))
+        scratch_cfg = config_for(preset.preset, **{**common, "aug_obstacles": 0, "out": str(out / "scratch"),
+                                 "eps_decay_fraction": min(1.0, preset.eps_decay_fraction * expected
+                                                           / common["total_env_steps"]),
+                                 "lr_end": -1.0, "learning_starts": min(preset.learning_starts, int(expected / 4))})
+        curves["scratch"] = _curve(cfg, "scratch", scratch_cfg, ds, None, out)
+    md = _report(cfg, ckpt, curves, out)
+    return AdaptResult(out, curves, md)
+
+
+def first_time_at(rows: list[dict[str, float]], success: float) -> float | None:
+    """Training seconds of the first evaluation with at least ``success``, or None."""
+    return next((r["train_s"] for r in rows if r["success_rate"] >= success), None)
+
+
+def _report(cfg: AdaptConfig, ckpt: Path, curves: dict[str, list[dict[str, float]]], out: Path) -> str:
+    out.mkdir(parents=True, exist_ok=True)
+    with open_atomic(out / "curve.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["run", "train_s", "env_steps", "success_rate", "spl", "collisions"])
+        for run, rows in curves.items():
+            w.writerows([run, r["train_s"], r["env_steps"], r["success_rate"], r["spl"], r["collisions"]]
+                        for r in rows)
+    plot_adapt_curves(curves, out / "curve.png", title=f"{cfg.scene}/{cfg.variant}: success vs training seconds")
+    lines = ["| run | start | end: success / SPL | seconds to >= 0.95 | seconds to >= 0.99 |", "|---|---|---|---|---|"]
+    for run, rows in curves.items():
+        t95, t99 = first_time_at(rows, 0.95), first_time_at(rows, 0.99)
+        lines.append(f"| {run} | {rows[0]['success_rate']:.3f} | {rows[-1]['success_rate']:.3f} / "
+                     f"{rows[-1]['spl']:.3f} | {'-' if t95 is None else f'{t95:.1f}'} | "
+                     f"{'-' if t99 is None else f'{t99:.1f}'} |")
+    md = "\n".join(lines) + "\n"
+    write_atomic(out / "adapt.md", md)
+    write_atomic(out / "adapt.json", json.dumps({"config": dataclasses.asdict(cfg), "checkpoint": str(ckpt),
+                                                 "curves": curves}, indent=2) + "\n")
+    return md

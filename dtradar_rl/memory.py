@@ -1,0 +1,192 @@
+"""Agents with memory: an egocentric map of what the robot has sensed so far, appended to its observation.
+
+A policy that sees only its four neighbours forgets a dead end the moment it turns away from it, walks back in and
+oscillates (the failure behind most of the blueprint -> dynamic gap). Here each robot keeps, for the current
+episode, two maps of the grid:
+
+* ``sensed``: cells it has sensed as occupied: a neighbour whose radio features are missing (has-radio flag 0 in the
+  ``neighbors`` observation; an augmented obstacle reads the same, see :mod:`dtradar_rl.batched`) or off the grid;
+* ``visited``: cells it has stood on.
+
+The observation is the ``neighbors`` one followed by a ``(2R+1) x (2R+1)`` window of each map centred on the robot
+(``memory_radius = R``; cells off the grid read as sensed). Everything the memory holds is derived from earlier
+observations, so the agent still moves from radio features alone; the window only keeps them.
+
+:class:`MemoryNavEnv` (batched torch) and :class:`MemoryGymEnv` (gymnasium) share one :class:`MemoryLayout` of index
+tables and are tested to agree step for step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from gymnasium import spaces
+
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import InvalidCoordinatesError
+
+from .batched import BatchedNavEnv
+from .envs import DtradarNavEnv
+from .mdp import ACTION_DELTAS, GridMDP
+from .observations import (
+    PAPER_COLUMNS,
+    RADIO_FEATURES,
+    Normalizer,
+    ObservationTable,
+    build_observations,
+)
+
+CHANNELS: tuple[str, ...] = ("sensed", "visited")
+
+
+def flag_columns() -> list[int]:
+    """Columns of the four has-radio flags in a ``neighbors`` observation, in action order."""
+    k = len(RADIO_FEATURES) + 1
+    return [len(PAPER_COLUMNS) + a * k + k - 1 for a in range(4)]
+
+
+class MemoryLayout:
+    """Index tables of the memory maps of one grid, padded by ``radius`` cells on every side (the padding reads as
+    sensed, so the window never needs a bounds check)."""
+
+    def __init__(self, nx: int, ny: int, radius: int):
+        if radius < 1:
+            raise InvalidCoordinatesError(f"memory radius must be >= 1, got {radius}")
+        self.nx, self.ny, self.radius = nx, ny, radius
+        r, pw = radius, nx + 2 * radius
+        self.padded_cells = pw * (ny + 2 * radius)
+        iy, ix = np.divmod(np.arange(nx * ny), nx)
+        #: ``int64[cells]``: each cell's index in the padded map
+        self.pad = (iy + r) * pw + (ix + r)
+        #: ``int64[cells, 4]``: each neighbour's padded index, in action order (off-grid ones land in the padding)
+        self.neighbor = self.pad[:, None] + ACTION_DELTAS[None, :, 1] * pw + ACTION_DELTAS[None, :, 0]
+        d = np.arange(-r, r + 1)
+        #: ``int64[cells, (2R+1)^2]``: the window around each cell, rows of +y
+        self.window = self.pad[:, None] + (d[:, None] * pw + d[None, :]).ravel()[None, :]
+        init = np.ones((ny + 2 * r, pw), np.float32)
+        init[r:r + ny, r:r + nx] = 0.0
+        #: ``float32[padded]``: an empty ``sensed`` map (only the padding set)
+        self.sensed_init = init.ravel()
+
+    @property
+    def dim(self) -> int:
+        return len(CHANNELS) * (2 * self.radius + 1) ** 2
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        r = self.radius
+        return tuple(f"{ch}[{dx:+d},{dy:+d}]" for ch in CHANNELS for dy in range(-r, r + 1) for dx in range(-r, r + 1))
+
+
+def _require_neighbors(obs_table: ObservationTable) -> None:
+    if obs_table.preset != "neighbors":
+        raise InvalidCoordinatesError(f"a memory agent senses obstacles through the 'neighbors' observation, "
+                                      f"got {obs_table.preset!r}", hint="use --obs neighbors")
+
+
+class MemoryNavEnv(BatchedNavEnv):
+    """:class:`~dtradar_rl.batched.BatchedNavEnv` whose observation carries each robot's memory window."""
+
+    def __init__(self, mdp: GridMDP, obs_table: ObservationTable, num_envs: int, *, memory_radius: int = 5, **kw):
+        _require_neighbors(obs_table)
+        self.layout = MemoryLayout(mdp.nx, mdp.ny, memory_radius)
+        super().__init__(mdp, obs_table, num_envs, **kw)
+        lay, dev = self.layout, self.device
+        t = lambda a: torch.as_tensor(a, device=dev)
+        self._pad, self._nbr, self._win = t(lay.pad), t(lay.neighbor), t(lay.window)
+        self._sensed_init = t(lay.sensed_init)
+        self._flags = torch.as_tensor(flag_columns(), device=dev)
+        self.sensed = self._sensed_init.repeat(self.num_envs, 1)
+        self.visited = torch.zeros_like(self.sensed)
+
+    @classmethod
+    def from_dataset(cls, ds: Dataset, num_envs: int, *, obs: str = "neighbors",
+                     normalizer: Normalizer | None = None, **kwargs) -> MemoryNavEnv:
+        normalizer = normalizer or Normalizer.fit(ds)
+        return cls(GridMDP.from_dataset(ds), build_observations(ds, obs, normalizer), num_envs, **kwargs)
+
+    @property
+    def obs_dim(self) -> int:
+        return self.obs_table.dim + self.layout.dim
+
+    @property
+    def obs_names(self) -> tuple[str, ...]:
+        return self.obs_table.names + self.layout.names
+
+    @property
+    def state_keys(self) -> tuple[str, ...]:
+        return super().state_keys + ("sensed", "visited")
+
+    def _sense(self, idx: torch.Tensor | None = None) -> None:
+        """Record what robots ``idx`` (default all) sense from where they stand now."""
+        base = super().observe()
+        cells = self.cell
+        if idx is not None:
+            base, cells = base[idx], cells[idx]
+        rows = torch.arange(self.num_envs, device=self.device) if idx is None else idx
+        occupied = (base[:, self._flags] < 0.5).float()  # [k, 4]
+        nbr = self._nbr[cells]
+        self.sensed[rows[:, None], nbr] = torch.maximum(self.sensed[rows[:, None], nbr], occupied)
+        self.visited[rows, self._pad[cells]] = 1.0
+
+    def reset_where(self, mask: torch.Tensor, starts=None, targets=None) -> None:
+        super().reset_where(mask, starts=starts, targets=targets)
+        idx = torch.nonzero(mask.to(self.device), as_tuple=True)[0]
+        if idx.numel():
+            self.sensed[idx] = self._sensed_init
+            self.visited[idx] = 0.0
+            self._sense(idx)
+
+    def step(self, actions: torch.Tensor):
+        _, reward, terminated, truncated, info = super().step(actions)
+        self._sense()
+        return self.observe(), reward, terminated, truncated, info
+
+    def memory_window(self) -> torch.Tensor:
+        win = self._win[self.cell]
+        return torch.cat([self.sensed.gather(1, win), self.visited.gather(1, win)], 1)
+
+    def observe(self) -> torch.Tensor:
+        return torch.cat([super().observe(), self.memory_window()], 1)
+
+
+class MemoryGymEnv(DtradarNavEnv):
+    """The gymnasium env with the same memory window appended (one robot; numpy)."""
+
+    def __init__(self, dataset: Dataset | str = "synthetic/blueprint", obs: str = "neighbors",
+                 memory_radius: int = 5, **kwargs):
+        super().__init__(dataset, obs=obs, **kwargs)
+        _require_neighbors(self.table)
+        self.layout = MemoryLayout(self.mdp.nx, self.mdp.ny, memory_radius)
+        base = self.observation_space
+        m = self.layout.dim
+        self.observation_space = spaces.Box(np.concatenate([base.low, np.zeros(m, np.float32)]),
+                                            np.concatenate([base.high, np.ones(m, np.float32)]),
+                                            (base.shape[0] + m,), np.float32)
+        self._sensed = self.layout.sensed_init.copy()
+        self._visited = np.zeros_like(self._sensed)
+
+    def _sense(self, obs: np.ndarray) -> np.ndarray:
+        occupied = (obs[flag_columns()] < 0.5).astype(np.float32)
+        nbr = self.layout.neighbor[self._cell]
+        self._sensed[nbr] = np.maximum(self._sensed[nbr], occupied)
+        self._visited[self.layout.pad[self._cell]] = 1.0
+        win = self.layout.window[self._cell]
+        return np.concatenate([obs, self._sensed[win], self._visited[win]]).astype(np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = super().reset(seed=seed, options=options)
+        self._sensed = self.layout.sensed_init.copy()
+        self._visited[:] = 0.0
+        return self._sense(obs), info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        return self._sense(obs), reward, terminated, truncated, info
+
+
+def batched_env(ds: Dataset, num_envs: int, *, memory_radius: int = 0, **kwargs) -> BatchedNavEnv:
+    """A batched env over ``ds``: with memory when ``memory_radius`` > 0, else the plain one."""
+    if memory_radius:
+        return MemoryNavEnv.from_dataset(ds, num_envs, memory_radius=memory_radius, **kwargs)
+    return BatchedNavEnv.from_dataset(ds, num_envs, **kwargs)

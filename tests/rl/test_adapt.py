@@ -1,0 +1,26 @@
+import json
+
+from dtradar_rl.adapt import AdaptConfig, adapt, first_time_at
+from dtradar_rl.config import config_for
+from dtradar_rl.dqn import train
+
+
+def test_a_tiny_adapt_run_fine_tunes_a_blueprint_agent_and_compares_it_with_training_from_scratch(tmp_path):
+    cfg = config_for("memory", scene="synthetic-12x8", total_env_steps=1_500, num_envs=16, learning_starts=300,
+                     memory_radius=2, out=str(tmp_path / "dqn"), verbose=False, threads=1)
+    ckpt = train(cfg).checkpoint
+    result = adapt(AdaptConfig(scene="synthetic-12x8", checkpoint=str(ckpt), seconds=0.6, eval_every_s=0.3,
+                               pairs=10, learning_starts=64, out=str(tmp_path / "adapt"), verbose=False, threads=1))
+    curves = result.curves
+    assert set(curves) == {"finetune", "scratch"}
+    assert curves["finetune"][0]["train_s"] == 0.0 and curves["finetune"][-1]["train_s"] >= 0.6
+    assert curves["scratch"][-1]["train_s"] >= 0.6
+    for name in ("curve.png", "curve.csv", "adapt.md", "adapt.json"):
+        assert (tmp_path / "adapt" / name).is_file()
+    saved = json.loads((tmp_path / "adapt" / "adapt.json").read_text())
+    assert saved["curves"]["finetune"] == curves["finetune"]
+
+
+def test_first_time_at_reads_the_curve():
+    rows = [{"train_s": 0.0, "success_rate": 0.8}, {"train_s": 2.0, "success_rate": 0.99}]
+    assert first_time_at(rows, 0.99) == 2.0 and first_time_at(rows, 1.0) is None

@@ -1,0 +1,82 @@
+import numpy as np
+import pytest
+import torch
+
+from dtradar_rl.config import config_for
+from dtradar_rl.data import load_dataset
+from dtradar_rl.memory import MemoryGymEnv, MemoryLayout, MemoryNavEnv
+from dtradar_rl.observations import OBS_DIMS, Normalizer
+
+
+@pytest.fixture(scope="module")
+def dyn():
+    return load_dataset("synthetic-12x8/dynamic")
+
+
+def test_memory_agents_in_the_batched_env_agree_step_for_step_with_the_gymnasium_env(dyn):
+    norm, n, steps = Normalizer.fit(dyn), 12, 30
+    batched = MemoryNavEnv.from_dataset(dyn, n, normalizer=norm, reward="geodesic", max_steps=steps, memory_radius=3)
+    envs = [MemoryGymEnv(dyn, reward="geodesic", normalizer=norm, max_steps=steps, memory_radius=3)
+            for _ in range(n)]
+    rng = np.random.default_rng(0)
+    pairs = envs[0].mdp.sample_pairs(n, rng)
+    batched.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
+    first = np.stack([e.reset(options={"start": e.mdp.xy(s), "target": e.mdp.xy(t)})[0]
+                      for e, (s, t) in zip(envs, pairs)])
+    np.testing.assert_allclose(batched.observe().numpy(), first, rtol=1e-6)
+    done = np.zeros(n, bool)
+    for _ in range(steps):
+        actions = rng.integers(0, 4, n)
+        obs_b, rew_b, term_b, trunc_b, _ = batched.step(torch.as_tensor(actions))
+        for i, e in enumerate(envs):
+            if done[i]:
+                continue
+            o, r, te, tr, _ = e.step(actions[i])
+            np.testing.assert_allclose(obs_b[i].numpy(), o, rtol=1e-6)
+            assert rew_b[i].item() == pytest.approx(r, abs=1e-5)
+            assert (bool(term_b[i]), bool(trunc_b[i])) == (te, tr)
+            done[i] = te or tr
+    assert done.all()
+
+
+def test_the_memory_window_keeps_an_obstacle_sensed_earlier_after_the_robot_moves_away():
+    ds = load_dataset("synthetic-12x8/blueprint")
+    env = MemoryGymEnv(ds, memory_radius=3, max_steps=50)
+    blocked = env.mdp.blocked
+    # a wall cell with two free cells on one side: stand beside it, then step away from it
+    iy, ix, side_x = next((int(y), int(x), sx) for y, x in np.argwhere(blocked) for sx in (-1, 1)
+                          if 0 <= x + 2 * sx < env.mdp.nx and not blocked[y, x + sx] and not blocked[y, x + 2 * sx])
+    start, away = (ix + side_x, iy), (0 if side_x < 0 else 1)
+    target = next((x, y) for y in range(env.mdp.ny) for x in range(env.mdp.nx)
+                  if not blocked[y, x] and (x, y) != start and env.mdp.connected(env.mdp.cell(*start),
+                                                                                  env.mdp.cell(x, y)))
+    obs, _ = env.reset(options={"start": start, "target": target})
+    obs, _, _, _, info = env.step(away)
+    assert not info["collision"]
+    lay, base = env.layout, OBS_DIMS["neighbors"]
+    r, side = lay.radius, 2 * lay.radius + 1
+    (x, y), dx = info["cell"], ix - info["cell"][0]
+    assert abs(dx) == 2 and y == iy
+    assert obs[base + r * side + dx + r] == 1.0                                  # sensed: the wall, now out of reach
+    assert obs[base + side * side + r * side + (start[0] - x) + r] == 1.0       # visited: where it stood
+
+
+def test_the_memory_preset_is_robust_plus_a_memory_window_and_needs_neighbour_observations():
+    cfg = config_for("memory", scene="synthetic")
+    assert cfg.memory_radius == 5 and cfg.aug_obstacles == config_for("robust").aug_obstacles
+    with pytest.raises(ValueError, match="--memory-radius needs --obs neighbors"):
+        config_for("memory", scene="synthetic", obs="goal")
+    assert MemoryLayout(12, 8, 5).dim == 2 * 11 * 11
+
+
+def test_a_tiny_memory_agent_trains_saves_and_evaluates(tmp_path):
+    from dtradar_rl.dqn import train
+    from dtradar_rl.evaluate import evaluate
+    from dtradar_rl.policy import load_policy
+
+    cfg = config_for("memory", scene="synthetic-12x8", total_env_steps=1_000, num_envs=16, learning_starts=200,
+                     memory_radius=2, out=str(tmp_path), verbose=False, threads=1)
+    result = train(cfg)
+    policy = load_policy(result.checkpoint)
+    metrics, _ = evaluate(policy, load_dataset("synthetic-12x8/dynamic"), pairs=10)
+    assert 0.0 <= metrics.success_rate <= 1.0 and metrics.latency_ms > 0
