@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval adapt offline sweep paper bench bench-rt bench-rl bench-ray clean-venv
+.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray clean-venv
 
 # One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
 setup:
@@ -58,6 +58,16 @@ eval:
 # Offline RL with d3rlpy on logged transitions, e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
 offline:
 	$(PY) -m dtradar_rl offline --scene $(SCENE) $(ARGS)
+
+# A logged offline-RL dataset <scene>/blueprint/<behaviour> in the store (+ Minari copy), e.g.
+# make logged SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt"
+BEHAVIOUR ?= noisy-shortest
+logged:
+	$(PY) -m dtradar_rl log --scene $(SCENE) --behaviour $(BEHAVIOUR) $(ARGS)
+
+# Offline-RL benchmark: d3rlpy CQL/BCQ/BC/DQN/DoubleDQN/NFQ x behaviour datasets x 3 seeds -> results/offline_bench/
+offline-bench:
+	$(PY) -m dtradar_rl offline-bench --scene $(SCENE) $(ARGS)
 
 # Train + evaluate several scenes x seeds as Ray tasks (one per core), gathered into one table with mean and spread.
 SWEEP_SCENES ?= cubicle

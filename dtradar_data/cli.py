@@ -24,7 +24,7 @@ from dtradar_data.core.layout import data_root
 from dtradar_data.publish import cards, hub
 from dtradar_data.rt import llvm
 from dtradar_data.rt.tracer import smoke_test
-from dtradar_data.store import listing, local
+from dtradar_data.store import listing, local, transitions
 
 #: A positional dataset id argument, shown as NAME in --help (the Makefile passes it positionally).
 Name = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="NAME")]
@@ -57,6 +57,13 @@ class ListCmd:
             shown = f"{latest.tag} {latest.version[:12]}" if latest else "-"
             print(f"{r.name:<24} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
                   f"{human_size(latest.size_bytes) if latest else '-':>10}")
+        logged = transitions.list_logged()
+        if logged:  # offline-RL datasets logged on the twins (scene/variant/behaviour)
+            print(f"\n{'logged dataset':<40} {'tag':<5} {'version':<18} {'steps':>8} {'episodes':>8} {'success':>8}")
+            for e in logged:
+                ok = f"{e.success_rate:.3f}" if e.success_rate is not None else "-"
+                print(f"{e.name:<40} {e.tag or '-':<5} {e.version:<18} {e.steps or '-':>8} {e.episodes or '-':>8} "
+                      f"{ok:>8}")
         damaged = [(r.name, v) for r in rows for v in r.damaged]
         for name, v in damaged:
             print(f"DAMAGED {name}@{v.tag or v.version}: {v.problem}")
@@ -110,7 +117,8 @@ class VerifyCmd:
     """Only this tag or version hash."""
 
     def run(self) -> int:
-        results = listing.verify(self.name, self.revision)
+        results = (transitions.verify_logged(self.name, self.revision) if transitions.is_logged_name(self.name)
+                   else listing.verify(self.name, self.revision))
         bad = 0
         for version, problems in results.items():
             print(f"{version}: {'ok' if not problems else 'FAILED'}")

@@ -6,6 +6,8 @@
     python -m dtradar_rl cross --scenes dallas-q1 dallas-q2 dallas-q3 dallas-q4   # train-on-Qi x eval-on-Qj
     python -m dtradar_rl offline --scene cubicle --algorithm cql   # d3rlpy on logged transitions -> runs/cubicle/offline/cql
     python -m dtradar_rl adapt --scene cubicle                 # fine-tune the blueprint agent on cubicle/dynamic
+    python -m dtradar_rl log --scene cubicle --behaviour mixture --checkpoint runs/cubicle/dqn/model.pt   # a logged dataset
+    python -m dtradar_rl offline-bench --scene cubicle         # offline-RL benchmark -> results/offline_bench/cubicle
     python -m dtradar_rl paper --scenes cubicle meeting        # the paper's tables and figures -> runs/paper/report.md
 """
 
@@ -29,8 +31,10 @@ from .dqn import train
 from .evaluate import cross_matrix, evaluate_twins, write_results
 from .figures import plot_bars
 from .inference import evaluate_pair
+from .logged import LogConfig
 from .adapt import AdaptConfig, adapt
 from .offline import OfflineConfig
+from .offline_bench import OfflineBenchConfig
 from .paper import PaperConfig, run_paper
 from .planner import planner_for_scene
 from .plots import plot_matrix, plot_paths
@@ -240,6 +244,21 @@ def _parse_and_run(argv: list[str]) -> int:
         print(f"model: {result.model}\nlogged {result.logged['steps']} steps ({result.logged['transitions']} "
               f"transitions), {result.n_steps} d3rlpy steps in {result.train_s:.1f} s; total {result.wall_s:.1f} s")
 
+    def log_cmd(cfg: Annotated[LogConfig, tyro.conf.arg(name="")] = LogConfig()) -> None:
+        """Log a behaviour policy (random, noisy-shortest, epsilon-greedy, mixture) on a twin into the store as a
+        versioned, carded offline-RL dataset <scene>/<variant>/<behaviour> (+ its Minari copy)."""
+        from .logged import log_dataset
+
+        logged = log_dataset(cfg.validate())
+        print(f"{logged!r}\ncard: {logged.path / 'README.md'}\nload: dtradar_data.load({logged.name!r})")
+
+    def offline_bench_cmd(cfg: Annotated[OfflineBenchConfig, tyro.conf.arg(name="")] = OfflineBenchConfig()) -> None:
+        """Offline-RL benchmark: d3rlpy CQL, BCQ, BC, DQN, DoubleDQN, NFQ on every logged behaviour dataset, several
+        seeds, evaluated on the blueprint and dynamic twins beside the online DQN; JSON, Markdown and a bar plot."""
+        from .offline_bench import run_bench
+
+        run_bench(cfg.validate())
+
     def sweep_cmd(cfg: Annotated[SweepConfig, tyro.conf.arg(name="")] = SweepConfig()) -> None:
         """Train and evaluate several scenes x seeds (on Ray workers by default); one table with mean and spread."""
         sweep(cfg.validate())
@@ -253,7 +272,8 @@ def _parse_and_run(argv: list[str]) -> int:
         run_paper(cfg.validate())
 
     tyro.extras.subcommand_cli_from_dict({"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd,
-                                          "offline": offline_cmd, "adapt": adapt_cmd, "sweep": sweep_cmd, "paper": paper_cmd},
+                                          "offline": offline_cmd, "adapt": adapt_cmd, "log": log_cmd,
+                                          "offline-bench": offline_bench_cmd, "sweep": sweep_cmd, "paper": paper_cmd},
                                          args=argv, prog="python -m dtradar_rl",
                                          description="Navigation agents on dtradar datasets. " + DEBUG_HELP)
     return 0

@@ -52,11 +52,14 @@ import torch
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import unknown_name
 from dtradar_data.core.files import open_atomic, write_atomic
+from dtradar_data.store.transitions import LoggedDataset
 
 from .batched import BatchedNavEnv
+from .behaviour import ShortestPathOracle
 from .config import ConfigError, TwinConfig
 from .data import load_dataset
 from .evaluate import evaluate_twins, write_results
+from .logged import as_logged, check_compatible, to_mdp_dataset
 from .observations import Normalizer, build_observations
 from .policy import CheckpointError, Policy
 from .runtime import auto_threads
@@ -64,7 +67,7 @@ from .runtime import auto_threads
 OFFLINE_FORMAT = "dtradar-offline/1"
 #: Algorithm names and the d3rlpy config class each one uses.
 ALGORITHMS: dict[str, str] = {"cql": "DiscreteCQLConfig", "bcq": "DiscreteBCQConfig", "bc": "DiscreteBCConfig",
-                              "dqn": "DQNConfig"}
+                              "dqn": "DQNConfig", "ddqn": "DoubleDQNConfig", "nfq": "NFQConfig"}
 BEHAVIOURS: tuple[str, ...] = ("noisy-shortest", "random")
 
 
@@ -93,7 +96,8 @@ class OfflineConfig(TwinConfig):
     """Offline RL with d3rlpy: log a behaviour policy on a twin, train on the log, evaluate on the twins."""
 
     algorithm: str = "cql"
-    """d3rlpy algorithm: cql (DiscreteCQL), bcq (DiscreteBCQ), bc (DiscreteBC), dqn (DQN, offline)"""
+    """d3rlpy algorithm: cql (DiscreteCQL), bcq (DiscreteBCQ), bc (DiscreteBC), dqn (DQN, offline), ddqn
+    (DoubleDQN, offline), nfq (NFQ: fitted Q, no target network)"""
     reward: str = "geodesic"
     """reward logged with each transition: paper, scaled, euclidean or geodesic (see dtradar_rl.mdp)"""
     behaviour: str = "noisy-shortest"
@@ -129,6 +133,9 @@ class OfflineConfig(TwinConfig):
     """also report the policy with the obstacle shield (neighbors preset only)"""
     save_dataset: bool = True
     """write the logged data as dataset.h5 (d3rlpy dump) and transitions.npz"""
+    logged: str = ""
+    """train on a stored logged dataset (e.g. cubicle/blueprint/noisy-shortest, see `dtradar_rl log`) instead of
+    logging a fresh throw-away one"""
     out: str = ""
     """output directory (default runs/<scene>/offline/<algorithm>)"""
 
@@ -196,39 +203,6 @@ class LoggedTransitions:
             np.savez_compressed(f, cells=self.cells, targets=self.targets, actions=self.actions, rewards=self.rewards,
                             terminals=self.terminals, timeouts=self.timeouts, robots=self.robots)
         return Path(path)
-
-
-class ShortestPathOracle:
-    """Breadth-first shortest-path moves for every robot of a :class:`BatchedNavEnv` (the behaviour's expert)."""
-
-    def __init__(self, env: BatchedNavEnv):
-        self.env = env
-        self._pool_size = -1
-        self._refresh()
-
-    def _refresh(self) -> None:
-        env = self.env
-        if env.pool.numel() != self._pool_size:  # targets are rows of env.pool; it only grows
-            if env.dist.shape[1]:  # the geodesic reward already keeps this table
-                self.dist = env.dist
-            else:
-                d = env.mdp.bfs_distances_many(env.pool.cpu().numpy())
-                self.dist = torch.as_tensor(d, dtype=torch.int32, device=env.device)
-            self._pool_size = env.pool.numel()
-
-    def optimal(self) -> torch.Tensor:
-        """``bool[num_envs, 4]``: moves that shorten the breadth-first distance to the target by one."""
-        self._refresh()
-        env = self.env
-        d_now = self.dist[env.tpool, env.cell]
-        d_next = self.dist[env.tpool[:, None], env.next_cell[env.cell]]
-        return d_next == (d_now - 1)[:, None]  # a collision stays in place, so it is never optimal
-
-    def act(self, gen: torch.Generator) -> torch.Tensor:
-        """One shortest-path move per robot, ties broken at random."""
-        good = self.optimal()
-        u = torch.rand(good.shape, generator=gen, device=good.device) + good.float()
-        return u.argmax(1)
 
 
 def behaviour_actions(kind: str, oracle: ShortestPathOracle, shortest_prob: float,
@@ -318,7 +292,9 @@ def make_algorithm(cfg: OfflineConfig):
               "bcq": lambda: algos.DiscreteBCQConfig(**q_learning, action_flexibility=cfg.bcq_flexibility,
                                                      beta=cfg.bc_beta),
               "bc": lambda: algos.DiscreteBCConfig(**common, beta=cfg.bc_beta),
-              "dqn": lambda: algos.DQNConfig(**q_learning)}[cfg.algorithm]()
+              "dqn": lambda: algos.DQNConfig(**q_learning),
+              "ddqn": lambda: algos.DoubleDQNConfig(**q_learning),
+              "nfq": lambda: algos.NFQConfig(**common, gamma=cfg.gamma)}[cfg.algorithm]()
     return config.create(device=_device(cfg.device))
 
 
@@ -353,7 +329,9 @@ class OfflineResult:
 def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> OfflineResult:
     """Log transitions, train ``cfg.algorithm`` on them with d3rlpy, save, and evaluate on ``cfg.eval_variants``.
 
-    ``dataset``: the twin to log on (default: load ``cfg.dataset_name``), or an already logged d3rlpy
+    ``dataset``: the twin to log on (default: load ``cfg.dataset_name``), a stored logged dataset
+    (:class:`~dtradar_data.store.transitions.LoggedDataset` or its name; also ``cfg.logged``), checked to have been
+    logged on that twin with ``cfg.obs`` (:func:`dtradar_rl.logged.check_compatible`), or an already logged d3rlpy
     ``MDPDataset``/``ReplayBuffer`` (then it must have been logged on ``cfg.dataset_name`` with ``cfg.obs``; its
     normaliser is refitted on that twin, which reproduces the one used for logging).
     """
@@ -369,6 +347,11 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
     logged_data = dataset if isinstance(dataset, d3rlpy.dataset.ReplayBufferBase) else None
     ds = dataset if isinstance(dataset, Dataset) else load_dataset(cfg.dataset_name)
     normalizer = Normalizer.fit(ds)
+    store_log = None
+    if isinstance(dataset, (str, LoggedDataset)) or cfg.logged:
+        store_log = as_logged(dataset if isinstance(dataset, (str, LoggedDataset)) else cfg.logged)
+        check_compatible(store_log, cfg, ds)  # parent twin, its version, preset and normaliser
+        logged_data = to_mdp_dataset(store_log)
     if logged_data is None:
         logged = roll_behaviour(ds, cfg, normalizer)
         stats = dict(logged.stats)
@@ -379,6 +362,8 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
             with open_atomic(out / "dataset.h5", "w+b") as f:
                 logged_data.dump(f)
             logged.save_npz(out / "transitions.npz")
+    elif store_log is not None:
+        stats = {**store_log.meta["stats"], "source": f"{store_log.name}@{store_log.version}"}
     else:
         stats = {"steps": sum(ep.size() for ep in logged_data.episodes), "episodes": len(logged_data.episodes),
                  "source": "given"}

@@ -153,7 +153,7 @@ def test_bc_trained_offline_saves_reloads_and_beats_a_random_policy(tmp_path, sm
     assert trained.success_rate >= 0.7 and trained.success_rate > random_.success_rate + 0.3, (trained, random_)
 
 
-@pytest.mark.parametrize("algorithm", ["cql", "bcq", "dqn"])
+@pytest.mark.parametrize("algorithm", ["cql", "bcq", "dqn", "ddqn", "nfq"])
 def test_every_q_learning_algorithm_trains_saves_and_reloads_to_the_same_actions(tmp_path, small, algorithm):
     result = train_offline(OfflineConfig(**dict(LOG, algorithm=algorithm, n_steps=20, batch_size=32, hidden=(16,),
                                                 eval_variants=(), save_dataset=False, threads=1, verbose=False,
