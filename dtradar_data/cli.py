@@ -21,7 +21,7 @@ from dtradar_data.build.pipeline import BuildConfig
 from dtradar_data.core.boundary import DEBUG_HELP, EXIT_FAILED_CHECK, run_cli
 from dtradar_data.core.files import human_size
 from dtradar_data.core.layout import data_root
-from dtradar_data.publish import cards, hub
+from dtradar_data.publish import cards, hub, logged_hub
 from dtradar_data.rt import llvm
 from dtradar_data.rt.tracer import smoke_test
 from dtradar_data.store import listing, local, transitions
@@ -177,7 +177,8 @@ class PublishCmd:
     """Create the repo as private if it does not exist."""
 
     def run(self) -> int:
-        result = hub.publish(self.name, self.revision, repo_id=self.repo, private=self.private)
+        publish = logged_hub.publish if transitions.is_logged_name(self.name) else hub.publish
+        result = publish(self.name, self.revision, repo_id=self.repo, private=self.private)
         print(result.describe())
         return 0
 
@@ -194,7 +195,8 @@ class PullCmd:
     """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>."""
 
     def run(self) -> int:
-        path = hub.pull(self.name, self.revision, repo_id=self.repo)
+        pull = logged_hub.pull if transitions.is_logged_name(self.name) else hub.pull
+        path = pull(self.name, self.revision, repo_id=self.repo)
         print(f"pulled into {path}")
         return 0
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError, RevisionNotFoundError
 from dtradar_data.core.ids import DatasetId
-from dtradar_data.publish import hub
+from dtradar_data.publish import hub, logged_hub
 from dtradar_data.store import local, transitions
 
 
@@ -18,9 +18,16 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
     store (see :func:`dtradar_data.publish.hub.pull`).
 
     A logged offline-RL dataset, ``scene/variant/behaviour[@revision]``, returns a
-    :class:`~dtradar_data.store.transitions.LoggedDataset` (local store only).
+    :class:`~dtradar_data.store.transitions.LoggedDataset` (``from_hub`` as above, see
+    :mod:`dtradar_data.publish.logged_hub`).
     """
     if transitions.is_logged_name(name):
+        try:
+            return transitions.load_logged(name, revision, verify=verify)
+        except (DatasetNotFoundError, RevisionNotFoundError):
+            if not from_hub:
+                raise
+        logged_hub.pull(name, revision, repo_id=repo_id)
         return transitions.load_logged(name, revision, verify=verify)
     try:
         return local.load(name, revision, paths=paths, verify=verify)

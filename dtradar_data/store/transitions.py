@@ -391,6 +391,48 @@ def write_logged(name: str | LoggedId, inputs: dict[str, Any], table: pa.Table, 
     return version, vdir
 
 
+def check_version_dir(vdir: Path) -> tuple[str, dict[str, Any]]:
+    """Verify a version folder that is not (yet) in the store, e.g. a download: its record, the file's sha256, the
+    table's invariants, and that the version is the hash of the recorded logging inputs. Returns ``(version, meta)``
+    or raises :class:`CorruptDatasetError` / :class:`SchemaMismatchError`."""
+    meta = _read_meta(vdir)
+    version = meta.get("version")
+    if not isinstance(meta.get("inputs"), dict) or logged_version(meta["inputs"]) != version:
+        raise CorruptDatasetError(f"{vdir / P.META_FILE}: version {version!r} is not the hash of its logging inputs",
+                                  hint="the record was edited or damaged; log or pull the dataset again")
+    f = vdir / TRANSITIONS_FILE
+    rec = (meta.get("files") or {}).get(TRANSITIONS_FILE) or {}
+    if not f.is_file() or sha256_file(f) != rec.get("sha256"):
+        raise CorruptDatasetError(f"{f} is missing or its sha256 differs from meta.json",
+                                  hint="log or pull the dataset again")
+    read_transitions(f)
+    return version, meta
+
+
+def install_logged(name: str | LoggedId, staged: Path, *, preferred_tag: str | None = None) -> Path:
+    """Move a verified version folder (:func:`check_version_dir`) into the store and tag it (``preferred_tag`` when
+    it is free, e.g. the publisher's tag; else the next one). An existing version is kept; returns its folder."""
+    lid = parse_logged_id(name).with_revision(None)
+    version, meta = check_version_dir(staged)
+    if meta.get("name") != lid.name:
+        raise CorruptDatasetError(f"{staged} holds {meta.get('name')!r}, not {lid.name!r}",
+                                  hint="pull it under its own name")
+    ddir = logged_dir(lid)
+    ddir.mkdir(parents=True, exist_ok=True)
+    with FileLock(ddir / ".lock"):
+        vdir = ddir / version
+        if not (vdir / P.META_FILE).is_file():
+            if vdir.exists():
+                shutil.rmtree(vdir)
+            shutil.move(str(staged), vdir)
+        refs = read_refs(_refs_path(lid))
+        if refs.tag_of(version) is None:
+            tag = preferred_tag if preferred_tag and is_tag(preferred_tag) and preferred_tag not in refs.tags \
+                else refs.next_tag()
+            write_refs(_refs_path(lid), Refs({**refs.tags, tag: version}, version))
+    return vdir
+
+
 # --------------------------------------------------------------------------------------------------------- reading
 
 @dataclass
@@ -541,5 +583,5 @@ def list_logged() -> list[LoggedEntry]:
 
 __all__ = ["GRAMMAR", "TRANSITION_SCHEMA", "LoggedDataset", "LoggedEntry", "LoggedId", "arrays", "check_transitions",
            "episode_stats", "format_logged_id", "is_logged_name", "list_logged", "load_logged", "logged_version",
-           "logging_inputs", "minari_id", "parse_logged_id", "render_logged_card", "table_digest",
+           "logging_inputs", "minari_id", "check_version_dir", "install_logged", "parse_logged_id", "render_logged_card", "table_digest",
            "transitions_table", "verify_logged", "write_logged"]

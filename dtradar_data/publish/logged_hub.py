@@ -1,0 +1,113 @@
+"""Publish logged offline-RL datasets to, and pull them from, Hugging Face Hub dataset repos.
+
+The same protocol as RT datasets (:mod:`dtradar_data.publish.hub`, whose error handling, offline switch, endpoint
+and token lookup this reuses): one repo per ``scene/variant/behaviour`` (default
+``dtradar/dtradar-<scene>-<variant>-<behaviour>``), one commit per version holding ``transitions.parquet``,
+``meta.json`` and the card ``README.md`` (its ``configs`` point the Hub viewer and ``datasets.load_dataset`` at the
+Parquet file), tagged with the local tag and the content version. A pull downloads into a temporary folder under
+``<root>/work``, checks the record, the file's sha256, the table's invariants and that the version is the hash of
+the recorded logging inputs, and only then moves it into the store.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from dtradar_data.core import layout as P
+from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError, HubError, RevisionNotFoundError
+from dtradar_data.core.ids import is_tag
+from dtradar_data.publish import hub
+from dtradar_data.store import transitions as T
+
+FILES = (T.TRANSITIONS_FILE, P.META_FILE, P.CARD_FILE)
+
+
+def default_repo(lid: T.LoggedId) -> str:
+    return f"dtradar/dtradar-{lid.scene}-{lid.variant}-{lid.behaviour}"
+
+
+def publish(name: str | T.LoggedId, revision: str | None = None, *, repo_id: str | None = None,
+            private: bool = False, api: Any = None) -> hub.PublishResult:
+    """Upload one stored logged version (verified first) as one commit tagged with its tag and version."""
+    from huggingface_hub import CommitOperationAdd
+
+    if repo_id is not None:
+        hub.check_repo_id(repo_id)
+    lid, version, vdir = T.resolve_logged(name, revision)
+    repo_id = repo_id or default_repo(lid)
+    try:
+        T.check_version_dir(vdir)
+    except CorruptDatasetError as exc:
+        raise CorruptDatasetError(f"refusing to publish damaged {lid.name}@{version}: {exc.message}",
+                                  hint="log it again first") from exc
+    tag = T.read_refs(T._refs_path(lid)).tag_of(version)
+    ops = [CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in FILES if (vdir / f).is_file()]
+    if hub.offline():
+        raise HubError(f"cannot publish to {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1)",
+                       hint="unset HF_HUB_OFFLINE on a machine with network access")
+    if api is None:
+        from huggingface_hub import HfApi
+
+        api = HfApi(endpoint=hub.endpoint(), token=hub._token())
+    with hub.hub_errors("publish to", repo_id):
+        api.create_repo(repo_id, repo_type="dataset", private=private, exist_ok=True)
+        remote_tags = {t.name for t in api.list_repo_refs(repo_id, repo_type="dataset").tags}
+        if version in remote_tags:
+            return hub.PublishResult(repo_id, tag, version, None, already_published=True)
+        if tag in remote_tags:
+            raise HubError(f"{repo_id!r} already has a tag {tag!r} for another version than {version}",
+                           hint="tags are never moved: publish to another --repo")
+        info = api.create_commit(repo_id, ops, commit_message=f"{lid.name} {tag}: version {version}",
+                                 commit_description=f"dtradar logged dataset {lid.name}, content version {version}",
+                                 repo_type="dataset")
+        for name_ in (tag, version):
+            if name_:
+                api.create_tag(repo_id, tag=name_, revision=info.oid, repo_type="dataset",
+                               tag_message=f"{lid.name} version {version}")
+    return hub.PublishResult(repo_id, tag, version, info.oid)
+
+
+def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
+    """The only download call (tests replace it with a local folder)."""
+    from huggingface_hub import snapshot_download
+
+    return Path(snapshot_download(repo_id, repo_type="dataset", revision=revision, local_dir=dest, cache_dir=cache,
+                                  endpoint=hub.endpoint(), local_files_only=hub.offline(), allow_patterns=list(FILES)))
+
+
+def pull(name: str | T.LoggedId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
+    """Make ``name@revision`` available locally: return it if stored, else download, verify and install it."""
+    if repo_id is not None:
+        hub.check_repo_id(repo_id)
+    lid = T.parse_logged_id(name)
+    revision = revision or lid.revision
+    if revision is not None:
+        with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
+            return T.resolve_logged(lid.with_revision(None), revision)[2]
+    repo_id = repo_id or default_repo(lid)
+    P.work_root().mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix="pull-logged-", dir=P.work_root()))
+    try:
+        with hub.hub_errors("pull from", repo_id):
+            got = _download(repo_id, revision or "main", stage / "download", stage / "cache")
+        version_dir = stage / "version"
+        version_dir.mkdir()
+        for f in FILES:
+            if (got / f).is_file():
+                shutil.move(str(got / f), version_dir / f)
+        try:
+            T.check_version_dir(version_dir)
+        except CorruptDatasetError as exc:
+            raise CorruptDatasetError(f"the download of {lid.name} from {repo_id!r} failed verification: "
+                                      f"{exc.message}", hint="retry; if it persists the Hub copy is damaged") from exc
+        preferred = revision if revision and is_tag(revision) else hub._card_tag(version_dir / P.CARD_FILE)
+        return T.install_logged(lid, version_dir, preferred_tag=preferred)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+__all__ = ["FILES", "default_repo", "publish", "pull"]
