@@ -196,6 +196,40 @@ def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, dev
 
 
 @dataclass
+class BehaviourPolicy(Policy):
+    """A behaviour as a :class:`~dtradar_rl.policy.Policy`, so :func:`dtradar_rl.evaluate.rollout` measures it on
+    any twin like a trained agent: the env it asks for gets an :class:`Actor` (its shortest-path oracle plans on the
+    twin being evaluated; robot ``i`` of a mixture uses component ``i mod k``). Stochastic, seeded by ``seed``."""
+
+    spec: BehaviourSpec = field(default_factory=BehaviourSpec)
+    seed: int = 0
+    greedy: Policy | None = None
+    _actor: Actor | None = None
+
+    def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
+        env = BatchedNavEnv.from_dataset(ds, num_envs, obs=self.obs_preset, normalizer=self.normalizer, **kwargs)
+        gen = torch.Generator(device=env.device)
+        gen.manual_seed(self.seed)
+        self._actor = Actor(self.spec, env, gen, policy=self.greedy)
+        return env
+
+    def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
+        if self._actor is None:
+            raise ConfigError("a behaviour policy acts only in the env it made (use dtradar_rl.evaluate.rollout)")
+        return self._actor(obs)
+
+
+def behaviour_policy(spec: BehaviourSpec, ds: Dataset, obs: str = "neighbors", seed: int = 0,
+                     device: str = "cpu") -> BehaviourPolicy:
+    """The behaviour ``spec`` observing like a log on ``ds`` (its preset, the normaliser fitted on ``ds``)."""
+    spec.validate()
+    normalizer = Normalizer.fit(ds)
+    return BehaviourPolicy(q=None, config=None, normalizer=normalizer, obs_preset=obs,
+                           meta={"dataset": {"name": ds.name, "version": ds.version}}, spec=spec, seed=seed,
+                           greedy=checkpoint_policy(spec, obs, normalizer, device))
+
+
+@dataclass
 class Rollout:
     """Logged steps robot by robot (``obs``/``next_obs`` float32[T, D]) and how the log went."""
 
@@ -253,4 +287,4 @@ def roll(ds: Dataset, spec: BehaviourSpec, *, steps: int, num_envs: int = 256, o
     return Rollout(out, stats)
 
 
-__all__ = ["BEHAVIOURS", "Actor", "BehaviourSpec", "Rollout", "ShortestPathOracle", "checkpoint_policy", "roll"]
+__all__ = ["BEHAVIOURS", "Actor", "BehaviourPolicy", "BehaviourSpec", "behaviour_policy", "Rollout", "ShortestPathOracle", "checkpoint_policy", "roll"]

@@ -31,11 +31,12 @@ from typing import Any
 import numpy as np
 
 from dtradar_data.core.files import write_atomic
+from dtradar_data.store.transitions import episode_stats
 
-from .behaviour import BEHAVIOURS
+from .behaviour import BEHAVIOURS, behaviour_policy
 from .config import ConfigError, config_for
 from .data import load_dataset
-from .evaluate import evaluate_twins
+from .evaluate import evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
 from .logged import LogConfig, log_dataset
 from .offline import ALGORITHMS, OfflineConfig, check_algorithm, train_offline
 from .policy import load_policy
@@ -128,6 +129,20 @@ def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, An
                                "env_steps": result.env_steps}
 
 
+def evaluate_behaviour(cfg: OfflineBenchConfig, behaviour: str, checkpoint: str | Path | None,
+                       twins: dict[str, Any], blueprint: Any) -> dict[str, dict[str, float]]:
+    """The behaviour policy itself, rolled out with our evaluation (same seeded pairs as the trained agents) on
+    every twin: ``{variant: {success_rate, spl, collisions}}``."""
+    log_cfg = LogConfig(scene=cfg.scene, behaviour=behaviour, shortest_prob=cfg.shortest_prob, epsilon=cfg.epsilon,
+                        checkpoint=str(checkpoint or ""))
+    bp = behaviour_policy(log_cfg.spec(), blueprint, obs=log_cfg.obs, seed=2024, device=cfg.device)
+    out = {}
+    for name, ds in twins.items():
+        r = rollout(bp, ds, sample_eval_pairs(ds, cfg.pairs, 2024), device=cfg.device)
+        out[name.split("/")[1]] = {m: float(v) for m, v in metrics_from_rollouts(r).to_dict().items() if m in METRICS}
+    return out
+
+
 def _row_metrics(rows: list[dict[str, Any]], variant_name: str) -> dict[str, float]:
     row = next(r for r in rows if r["dataset"] == variant_name and not r.get("shield"))
     return {m: float(row[m]) for m in METRICS}
@@ -195,10 +210,13 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
                             device=cfg.device, minari=False, verbose=cfg.verbose)
         t0 = time.perf_counter()
         logged = log_dataset(log_cfg, blueprint)
-        s = logged.meta["stats"]
+        # recomputed, not read from the card: logs stored by an older dtradar counted end-of-log cuts as failures
+        s = episode_stats(logged.table, (logged.meta.get("settings") or {}).get("max_steps"))
         datasets[beh] = {"name": logged.name, "version": logged.version, "tag": logged.tag, "steps": s["steps"],
-                         "episodes": s["episodes"], "success_rate": s["success_rate"],
-                         "mean_return": s["mean_return"], "log_s": time.perf_counter() - t0}
+                         "episodes": s["episodes"], "cut_by_end_of_log": s["cut_by_end_of_log"],
+                         "success_rate": s["success_rate"], "reached_of_all": s["reached_of_all"],
+                         "mean_return": s["mean_return"], "log_s": time.perf_counter() - t0,
+                         "eval": evaluate_behaviour(cfg, beh, ckpt, twins, blueprint)}
         for algo in cfg.algorithms:
             for seed in cfg.seeds:
                 ocfg = OfflineConfig(scene=cfg.scene, algorithm=algo, seed=seed, n_steps=cfg.n_steps,
@@ -246,9 +264,12 @@ def markdown(result: dict[str, Any]) -> str:
             cells += [f"{m['collisions']:.2f}" if m else "-"]
         lines.append(f"| (online) | DQN, tuned | " + " | ".join(cells) + " | - |")
     for beh, d in result["datasets"].items():
-        blank = " | ".join(["-"] * (3 * len(variants)))
-        lines.append(f"| `{d['name']}`@{d['tag']} | behaviour itself (logged episodes on the blueprint: success "
-                     f"{d['success_rate']:.3f}, mean return {d['mean_return']:.2f}, {d['episodes']} episodes) | "
+        ev = d.get("eval") or {}
+        blank = " | ".join(f"{ev[v]['success_rate']:.3f} | {ev[v]['spl']:.3f} | {ev[v]['collisions']:.2f}" if v in ev
+                           else "- | - | -" for v in variants)
+        lines.append(f"| `{d['name']}`@{d['tag']} | behaviour itself (its logged episodes on the blueprint: success "
+                     f"{d['success_rate']:.3f} of finished episodes, {d.get('reached_of_all', 0):.3f} of all; mean return {d['mean_return']:.2f}, {d['episodes']} episodes, "
+                     f"{d.get('cut_by_end_of_log', 0)} cut by the end of logging) | "
                      f"{blank} | - |")
         for e in (e for e in result["summary"] if e["behaviour"] == beh):
             cells = []

@@ -275,17 +275,29 @@ def check_transitions(table: pa.Table, where: str = "transition table") -> None:
         bad("non-finite rewards or observations")
 
 
-def episode_stats(table: pa.Table) -> dict[str, Any]:
-    """Counts, the behaviour's success rate (terminated episodes / all) and its mean undiscounted return."""
+def episode_stats(table: pa.Table, max_steps: int | None = None) -> dict[str, Any]:
+    """Counts, the behaviour's success rate and its mean undiscounted return per episode.
+
+    With ``max_steps`` (the step limit), a truncated episode shorter than it was cut by the end of logging, not
+    failed: such episodes are counted (``cut_by_end_of_log``) but left out of the success rate and the mean return,
+    which are over the *finished* episodes (target reached or step limit). ``reached_of_all`` counts the cut ones as
+    failures: the two bracket the behaviour's true success when a log is short next to the step limit."""
     a = arrays(table)
     ep = a["episode"]
     returns = np.bincount(ep, weights=a["reward"].astype(np.float64))
     lengths = np.bincount(ep)
     n_ep = len(lengths)
-    term = int(a["terminated"].sum())
-    return {"steps": int(len(ep)), "episodes": int(n_ep), "terminated": term, "truncated": int(a["truncated"].sum()),
-            "success_rate": term / max(1, n_ep), "mean_return": float(returns.mean()) if n_ep else 0.0,
-            "mean_length": float(lengths.mean()) if n_ep else 0.0, "obs_dim": int(a["obs"].shape[1]),
+    last = np.r_[ep[1:] != ep[:-1], True]
+    term_ep = a["terminated"][last]
+    cut = a["truncated"][last] & (lengths < max_steps) if max_steps else np.zeros(n_ep, bool)
+    done = ~cut
+    n_done = int(done.sum())
+    return {"steps": int(len(ep)), "episodes": int(n_ep), "terminated": int(term_ep.sum()),
+            "truncated": int(a["truncated"].sum()), "cut_by_end_of_log": int(cut.sum()),
+            "success_rate": float(term_ep[done].sum() / max(1, n_done)),
+            "reached_of_all": float(term_ep.sum() / max(1, n_ep)),
+            "mean_return": float(returns[done].mean()) if n_done else 0.0,
+            "mean_length": float(lengths[done].mean()) if n_done else 0.0, "obs_dim": int(a["obs"].shape[1]),
             "mean_reward": float(a["reward"].mean())}
 
 
@@ -371,7 +383,8 @@ def write_logged(name: str | LoggedId, inputs: dict[str, Any], table: pa.Table, 
                         "parent_version": inputs["parent_version"], "behaviour": inputs["behaviour"],
                         "steps": inputs["steps"], "seed": inputs["seed"], "settings": inputs["settings"],
                         "library_versions": inputs["library_versions"],
-                        "stats": {**episode_stats(table), **json_safe(meta.get("stats") or {})},
+                        "stats": {**episode_stats(table, (inputs.get("settings") or {}).get("max_steps")),
+                                  **json_safe(meta.get("stats") or {})},
                         "created_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")}
                 schema_meta = {META_KEY: json.dumps({"name": lid.name, "version": version}).encode()}
                 pq.write_table(table.replace_schema_metadata(schema_meta), stage / TRANSITIONS_FILE,

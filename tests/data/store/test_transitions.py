@@ -86,13 +86,19 @@ def test_a_stored_version_loads_by_name_lists_verifies_and_its_card_says_what_it
     assert isinstance(ds, T.LoggedDataset) and (ds.version, ds.tag) == (version, "v0")
     assert ds.frame.shape == (12, len(T.TRANSITION_SCHEMA)) and ds.table.equals(table)
     s = ds.meta["stats"]
-    assert (s["episodes"], s["terminated"], s["truncated"]) == (3, 2, 1) and s["success_rate"] == pytest.approx(2 / 3)
+    assert (s["episodes"], s["terminated"], s["truncated"], s["cut_by_end_of_log"]) == (3, 2, 1, 0)
+    assert s["success_rate"] == pytest.approx(2 / 3)  # 4 steps = the step limit: a failure
     card = (vdir / "README.md").read_text()
     for text in ("noisy-shortest", "behaviour success rate | 0.667", "truncated", "not** a terminal", "goal",
                  "dtradar/tiny-blueprint-noisy-shortest-v0", "parent RT dataset | `tiny/blueprint`"):
         assert text in card, text
     assert [e.name for e in T.list_logged()] == [NAME]
     assert T.verify_logged(NAME) == {version: []}
+
+
+def test_an_episode_cut_by_the_end_of_logging_is_not_counted_as_a_failure():
+    s = T.episode_stats(T.transitions_table(**columns()), max_steps=5)
+    assert (s["cut_by_end_of_log"], s["success_rate"]) == (1, 1.0)
 
 
 def test_the_same_name_and_settings_give_the_same_version_and_a_change_a_new_tag(root):
