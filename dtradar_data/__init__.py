@@ -3,6 +3,7 @@
     >>> import dtradar_data
     >>> ds = dtradar_data.load("cubicle/blueprint")     # newest version in the data root
     >>> ds.frame, ds.table, ds.grid(), ds.blocked, ds.meta
+    >>> logged = dtradar_data.load("cubicle/blueprint/noisy-shortest")   # a logged offline-RL dataset (LoggedDataset)
 
 Layers, each importing only those below it (checked by import-linter in ``make test``)::
 
@@ -21,6 +22,7 @@ from dtradar_data.core.errors import DtradarError, RayTracerUnavailableError
 from dtradar_data.publish.loading import load
 from dtradar_data.rt import llvm as _llvm
 from dtradar_data.store.listing import list_datasets
+from dtradar_data.store.transitions import LoggedDataset, list_logged
 
 # Point Dr.Jit at a libLLVM >= 16 now, before anything imports mitsuba/drjit (they read it once, at import).
 # An explicit DRJIT_LIBLLVM_PATH wins; with none found, the ray tracer raises a typed error when first used.
@@ -29,4 +31,4 @@ try:
 except RayTracerUnavailableError:
     pass
 
-__all__ = ["Dataset", "GridInfo", "DtradarError", "load", "list_datasets"]
+__all__ = ["Dataset", "GridInfo", "DtradarError", "LoggedDataset", "load", "list_datasets", "list_logged"]
