@@ -1,4 +1,4 @@
-"""Figures: training curves, navigation paths over the coverage map (paper Figs. 6 and 11), cross-twin heatmaps."""
+"""Figures: training curves, navigation paths over the coverage map (paper Figs. 10, 22-24), cross-twin heatmaps."""
 
 from __future__ import annotations
 

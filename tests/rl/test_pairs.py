@@ -1,5 +1,7 @@
 """The paper's Table VI pairs on our grids: transform, snapping, fixed-pair training and its safety cap."""
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -8,6 +10,7 @@ from dtradar_data.core.grid import Grid
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.scenes import load_scene_spec
 from dtradar_rl.batched import BatchedNavEnv
+from dtradar_rl.cli import main
 from dtradar_rl.config import ConfigError, config_for
 from dtradar_rl.data import load_dataset
 from dtradar_rl.dqn import train, training_pair
@@ -80,6 +83,12 @@ def test_the_paper_preset_trains_on_one_pair_and_its_episodes_are_not_cut_before
     for _, _, _, steps, _, success in rows:
         assert success == "True" or int(steps) == pair.cap
     assert tuple(load_policy(result.checkpoint).meta["stats"]["pair"]["start"]) == pair.start
+
+    # make eval runs a fixed-pair agent on its own pair, on each twin, instead of on random pairs.
+    assert main(["eval", "--scene", "synthetic-12x8", "--checkpoint", str(result.checkpoint), "--out",
+                 str(tmp_path / "eval"), "--plot-paths", "1"]) == 0
+    rows = json.loads((tmp_path / "eval" / "results.json").read_text())["results"]
+    assert [r["pairs"] for r in rows] == [1, 1] and tuple(rows[0]["pair"]["start"]) == pair.start
 
 
 def test_a_fixed_pair_needs_both_ends_and_no_obstacle_augmentation():
