@@ -4,9 +4,9 @@
 
 The blueprint checkpoint's network and normaliser are the starting point; DQN (:func:`dtradar_rl.dqn.train`) then
 trains on the changed twin with its own breadth-first shaping (the changed map is known: it was just built), little
-exploration and no obstacle augmentation. Every ``eval_every_s`` seconds of training the greedy policy is evaluated
-on seeded pairs of the changed twin (evaluation time is not counted), giving success and SPL against seconds of
-fine-tuning. The same budget of seconds then trains the checkpoint's preset from scratch on the changed twin, for
+exploration, the final learning rate of training and the checkpoint's obstacle augmentation. Every ``eval_every_s`` seconds of training the greedy policy is evaluated
+on seeded pairs of the changed twin, giving success and SPL against seconds of fine-tuning (seconds in the training
+loop: neither the evaluations nor the set-up of loading the twin and building its tables, about a second, count). The same budget of seconds then trains the checkpoint's preset from scratch on the changed twin, for
 comparison. Writes ``adapt.{json,md}``, ``curve.csv`` and ``curve.png`` to ``runs/<scene>/adapt``.
 """
 
@@ -50,12 +50,18 @@ class AdaptConfig:
     """seed of the pairs (the same as make eval)"""
     seed: int = 0
     """seed of the network updates, the environment and exploration"""
-    eps: float = 0.1
+    eps: float = 0.05
     """exploration rate while fine-tuning (the start is already a good policy)"""
-    lr: float = 3e-4
-    """Adam learning rate while fine-tuning (constant)"""
-    learning_starts: int = 2_048
+    lr: float = 3e-5
+    """Adam learning rate while fine-tuning (constant; Adam's first steps move every weight by about this much,
+    and at 1e-4 they cost the blueprint agent 2-4 points before it gains anything)"""
+    learning_starts: int = 4_096
     """environment steps collected before the first fine-tuning update"""
+    aug_obstacles: int = -1
+    """extra random obstacles per episode while fine-tuning (-1 = as the checkpoint was trained: a fine-tuned memory
+    agent keeps meeting dead ends, so it does not unlearn them on the few new ones)"""
+    env_steps_per_update: int = 16
+    """environment steps per gradient update while fine-tuning (updates, not steps, cost the time)"""
     scratch: bool = True
     """also train the checkpoint's preset from scratch on the changed twin for the same seconds"""
     threads: int = 0
@@ -104,7 +110,7 @@ def _curve(cfg: AdaptConfig, label: str, train_cfg, ds, init: Policy | None, out
     def callback(q, env_steps: int, train_s: float) -> bool:
         if train_s >= holder["next"] or train_s >= cfg.seconds:
             record(q, env_steps, train_s)
-            holder["next"] += cfg.eval_every_s
+            holder["next"] = (train_s // cfg.eval_every_s + 1) * cfg.eval_every_s
         return train_s >= cfg.seconds
 
     holder["next"] = cfg.eval_every_s
@@ -130,8 +136,10 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
     # the clock, not the step budget, ends both runs: exploration and learning rate stay at the fine-tuning values
     common = {"scene": cfg.scene, "variant": cfg.variant, "seed": cfg.seed, "threads": cfg.threads,
               "verbose": False, "checkpoint_every": 0, "save_replay": False, "total_env_steps": 50_000_000}
-    finetune_cfg = dataclasses.replace(base, **common, aug_obstacles=0, eps_start=cfg.eps, eps_end=cfg.eps,
+    finetune_cfg = dataclasses.replace(base, **common, aug_obstacles=cfg.aug_obstacles if cfg.aug_obstacles >= 0
+                                       else base.aug_obstacles, eps_start=cfg.eps, eps_end=cfg.eps,
                                        lr=cfg.lr, lr_end=-1.0, learning_starts=cfg.learning_starts,
+                                       env_steps_per_update=cfg.env_steps_per_update,
                                        out=str(out / "finetune"), resume=False).validate()
     curves = {"finetune": _curve(cfg, "finetune", finetune_cfg, ds, start, out)}
     if cfg.scratch:

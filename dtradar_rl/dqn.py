@@ -140,8 +140,9 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
     """Train a DQN agent on ``dataset`` (default: load ``config.dataset_name``); write checkpoints and curves.
 
     Fine-tuning (:mod:`dtradar_rl.adapt`): ``init`` is a Q-network state dict to start from and ``normalizer`` the
-    one it was trained with; ``callback(q, env_steps, train_s)`` runs after every batch of steps, its own time
-    is not counted in ``train_s`` or ``wall_s``, and it stops training by returning True."""
+    one it was trained with; ``callback(q, env_steps, train_s)`` runs after every batch of steps with the seconds
+    spent in the training loop (set-up excluded), its own time is not counted there or in ``wall_s``, and it
+    stops training by returning True."""
     cfg = config.validate()
     t_start = time.perf_counter()
     callback_s = 0.0
@@ -216,6 +217,7 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
         save_torch_atomic(state, out / "last.pt")
 
     obs = env.observe()
+    t_loop = time.perf_counter()  # the callback's clock starts here: loading and env tables are set-up, not training
     next_checkpoint = (env_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every if cfg.checkpoint_every else None
     next_log = env_steps + cfg.total_env_steps // 10
     # With an episode budget (the paper's protocol) the step backstop says nothing about progress: log by episodes.
@@ -274,7 +276,7 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
 
         if callback is not None:
             t_cb = time.perf_counter()
-            stop = callback(q, env_steps, t_cb - t_start - callback_s)
+            stop = callback(q, env_steps, t_cb - t_loop - callback_s)
             callback_s += time.perf_counter() - t_cb
             if stop:
                 break

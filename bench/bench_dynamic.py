@@ -1,0 +1,136 @@
+"""Navigation that survives change (issue 12): learned agents beside the classical baseline, and twin updates.
+
+For each scene and seed: train the ``robust`` and ``memory`` presets on the blueprint (600 K steps; a run whose
+``model.pt`` exists under ``--runs`` is reused), evaluate them zero-shot on the blueprint and the dynamic twin beside
+the fingerprint + breadth-first planner (:mod:`dtradar_rl.planner`), then fine-tune the memory agent on the dynamic
+twin for ``--seconds`` against training from scratch (:mod:`dtradar_rl.adapt`). Writes
+``results/bench_dynamic.{json,md}`` (mean and spread over seeds) and ``results/bench_dynamic_adapt_<scene>.png``.
+
+    python bench/bench_dynamic.py --scenes cubicle meeting --seeds 0 1 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dtradar_data.core.files import write_atomic
+from dtradar_rl.adapt import AdaptConfig, adapt, first_time_at
+from dtradar_rl.config import config_for
+from dtradar_rl.data import load_dataset
+from dtradar_rl.dqn import train
+from dtradar_rl.evaluate import evaluate
+from dtradar_rl.planner import FingerprintPlanner
+from dtradar_rl.plots import plot_adapt_curves
+from dtradar_rl.policy import load_policy
+
+
+def machine_state() -> str:
+    load1, load5, _ = os.getloadavg()
+    return f"{os.cpu_count()} cores, load average {load1:.1f} (1 min) / {load5:.1f} (5 min)"
+
+
+def spread(values: list[float]) -> str:
+    v = np.asarray(values, float)
+    return f"{v.mean():.3f} ± {v.std():.3f}" if v.size > 1 else f"{v.mean():.3f}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", nargs="+", default=["cubicle", "meeting"])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--presets", nargs="+", default=["robust", "memory"])
+    ap.add_argument("--pairs", type=int, default=500)
+    ap.add_argument("--seconds", type=float, default=20.0, help="fine-tuning (and from-scratch) training seconds")
+    ap.add_argument("--adapt-seeds", nargs="*", type=int, default=None, help="seeds to adapt (default: --seeds)")
+    ap.add_argument("--runs", default="runs/bench_dynamic")
+    ap.add_argument("--out", default="results")
+    args = ap.parse_args()
+    runs, out = Path(args.runs), Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows, adapt_rows, train_s = [], [], {}
+    for scene in args.scenes:
+        twins = {v: load_dataset(f"{scene}/{v}") for v in ("blueprint", "dynamic")}
+        planner = FingerprintPlanner(twins["blueprint"])
+        for v, ds in twins.items():
+            m, _ = evaluate(planner, ds, pairs=args.pairs, latency=True)
+            rows.append({"scene": scene, "agent": "planner", "seed": None, "twin": v, **m.to_dict()})
+            print(f"{scene} planner -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}", flush=True)
+        for seed in args.seeds:
+            for preset in args.presets:
+                run = runs / scene / preset / f"seed{seed}"
+                if not (run / "model.pt").exists():
+                    state = machine_state()
+                    result = train(config_for(preset, scene=scene, seed=seed, out=str(run), verbose=False))
+                    train_s[f"{scene}/{preset}/{seed}"] = {"wall_s": result.wall_s, "machine": state}
+                policy = load_policy(run / "model.pt")
+                for v, ds in twins.items():
+                    m, _ = evaluate(policy, ds, pairs=args.pairs, latency=True)
+                    rows.append({"scene": scene, "agent": preset, "seed": seed, "twin": v, **m.to_dict(),
+                                 "train_s": policy.meta["stats"].get("wall_s")})
+                    print(f"{scene} {preset} seed {seed} -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}",
+                          flush=True)
+        for seed in args.seeds if args.adapt_seeds is None else args.adapt_seeds:
+            state = machine_state()
+            t0 = time.perf_counter()
+            res = adapt(AdaptConfig(scene=scene, checkpoint=str(runs / scene / "memory" / f"seed{seed}" / "model.pt"),
+                                    seconds=args.seconds, pairs=args.pairs, seed=seed, verbose=False,
+                                    out=str(runs / scene / "adapt" / f"seed{seed}")))
+            adapt_rows.append({"scene": scene, "seed": seed, "curves": res.curves, "machine": state,
+                               "wall_s": time.perf_counter() - t0})
+            shutil.copy(res.out_dir / "curve.png", out / f"bench_dynamic_adapt_{scene}_seed{seed}.png")
+            print(res.markdown, flush=True)
+    md = report(rows, adapt_rows, args)
+    write_atomic(out / "bench_dynamic.md", md)
+    write_atomic(out / "bench_dynamic.json", json.dumps({"args": vars(args), "rows": rows, "adapt": adapt_rows,
+                                                         "train": train_s, "machine_end": machine_state()},
+                                                        indent=2, default=str) + "\n")
+    print(md)
+
+
+def report(rows, adapt_rows, args) -> str:
+    head = (f"Zero-shot (trained on the blueprint), mean ± std over seeds {', '.join(map(str, args.seeds))}; "
+            f"{args.pairs} seeded pairs per twin:")
+    lines = [head, "",
+             ("| scene | agent | blueprint → blueprint: success / SPL | → dynamic: success / SPL | "
+              "collisions/ep (dynamic) | decision (ms) |"), "|---|---|---|---|---|---|"]
+    for scene in args.scenes:
+        for agent in ["planner", *args.presets]:
+            sel = {t: [r for r in rows if r["scene"] == scene and r["agent"] == agent and r["twin"] == t]
+                   for t in ("blueprint", "dynamic")}
+            if not sel["dynamic"]:
+                continue
+
+            def f(t, k, sel=sel):
+                return spread([r[k] for r in sel[t]])
+
+            lines.append(f"| {scene} | {agent} | {f('blueprint', 'success_rate')} / {f('blueprint', 'spl')} | "
+                         f"{f('dynamic', 'success_rate')} / {f('dynamic', 'spl')} | {f('dynamic', 'collisions')} | "
+                         f"{np.median([r['latency_ms'] for r in sel['dynamic']]):.3f} |")
+    if adapt_rows:
+        lines += ["", f"Twin update on the dynamic twin ({args.seconds:g} s of training, memory agent as the start):",
+                  "", "| scene | seed | run | success at 0 s | success / SPL at the end | s to ≥ 0.95 | s to ≥ 0.99 |",
+                  "|---|---|---|---|---|---|---|"]
+        for a in adapt_rows:
+            for run, curve in a["curves"].items():
+                t95, t99 = first_time_at(curve, 0.95), first_time_at(curve, 0.99)
+                lines.append(f"| {a['scene']} | {a['seed']} | {run} | {curve[0]['success_rate']:.3f} | "
+                             f"{curve[-1]['success_rate']:.3f} / {curve[-1]['spl']:.3f} | "
+                             f"{'-' if t95 is None else f'{t95:.1f}'} | {'-' if t99 is None else f'{t99:.1f}'} |")
+        for scene in args.scenes:
+            curves = {f"{run} seed {a['seed']}": c for a in adapt_rows if a["scene"] == scene
+                      for run, c in a["curves"].items()}
+            if curves:
+                plot_adapt_curves(curves, Path(args.out) / f"bench_dynamic_adapt_{scene}.png",
+                                  title=f"{scene}/dynamic: success vs training seconds")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main()
