@@ -299,7 +299,7 @@ def plot(result: dict[str, Any], path: Path) -> Path:
     variants = result["config"]["variants"]
     behs = list(result["datasets"])
     algos = list(result["algorithms"])
-    fig, axes = plt.subplots(1, len(variants), figsize=(5.5 * len(variants), 3.8), squeeze=False)
+    fig, axes = plt.subplots(1, len(variants), figsize=(5.5 * len(variants), 4.2), squeeze=False)
     width = 0.8 / max(1, len(algos))
     for ax, v in zip(axes[0], variants):
         x = np.arange(len(behs))
@@ -312,17 +312,17 @@ def plot(result: dict[str, Any], path: Path) -> Path:
                 stds.append(m["std"])
             ax.bar(x + (k - (len(algos) - 1) / 2) * width, means, width, yerr=stds, capsize=2,
                    label=result["algorithms"][a])
-        if v == "blueprint":
-            ax.scatter(x, [result["datasets"][b]["success_rate"] for b in behs], marker="x", color="k", zorder=3,
-                       label="behaviour (logged)")
+        beh_success = [((result["datasets"][b].get("eval") or {}).get(v) or {}).get("success_rate", np.nan)
+                       for b in behs]
+        ax.scatter(x, beh_success, marker="x", color="k", zorder=3, label="behaviour itself")
         online = (result.get("online_dqn") or {}).get(v)
         if online:
             ax.axhline(online["success_rate"], color="k", ls="--", lw=1, label="online DQN")
         ax.set_xticks(x, behs, rotation=15)
-        ax.set_ylim(0, 1.05)
+        ax.set_ylim(0, 1.25)
         ax.set_ylabel("success rate")
         ax.set_title(f"{result['config']['scene']} → {v}")
-    axes[0][-1].legend(fontsize=7, loc="lower right")
+    axes[0][-1].legend(fontsize=7, loc="upper right", ncol=2)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
