@@ -54,7 +54,7 @@ def test_a_worker_killed_mid_build_is_replaced_and_the_build_finishes_unchanged(
     killed = []
 
     def kill_one_worker():
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 300  # Ray workers start slowly on a busy machine
         while time.monotonic() < deadline and not killed:
             done = list(work.glob("batch_*.npz")) if work.is_dir() else []
             pids = subprocess.run(["pgrep", "-f", "ray::TraceWorker"], capture_output=True, text=True).stdout.split()
