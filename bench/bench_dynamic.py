@@ -51,6 +51,7 @@ def main() -> None:
     ap.add_argument("--adapt-seeds", nargs="*", type=int, default=None, help="seeds to adapt (default: --seeds)")
     ap.add_argument("--runs", default="runs/bench_dynamic")
     ap.add_argument("--out", default="results")
+    ap.add_argument("--name", default="bench_dynamic", help="stem of the result files")
     args = ap.parse_args()
     runs, out = Path(args.runs), Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -84,11 +85,11 @@ def main() -> None:
                                     out=str(runs / scene / "adapt" / f"seed{seed}")))
             adapt_rows.append({"scene": scene, "seed": seed, "curves": res.curves, "machine": state,
                                "wall_s": time.perf_counter() - t0})
-            shutil.copy(res.out_dir / "curve.png", out / f"bench_dynamic_adapt_{scene}_seed{seed}.png")
+            shutil.copy(res.out_dir / "curve.png", out / f"{args.name}_adapt_{scene}_seed{seed}.png")
             print(res.markdown, flush=True)
     md = report(rows, adapt_rows, args)
-    write_atomic(out / "bench_dynamic.md", md)
-    write_atomic(out / "bench_dynamic.json", json.dumps({"args": vars(args), "rows": rows, "adapt": adapt_rows,
+    write_atomic(out / f"{args.name}.md", md)
+    write_atomic(out / f"{args.name}.json", json.dumps({"args": vars(args), "rows": rows, "adapt": adapt_rows,
                                                          "train": train_s, "machine_end": machine_state()},
                                                         indent=2, default=str) + "\n")
     print(md)
@@ -127,7 +128,7 @@ def report(rows, adapt_rows, args) -> str:
             curves = {f"{run} seed {a['seed']}": c for a in adapt_rows if a["scene"] == scene
                       for run, c in a["curves"].items()}
             if curves:
-                plot_adapt_curves(curves, Path(args.out) / f"bench_dynamic_adapt_{scene}.png",
+                plot_adapt_curves(curves, Path(args.out) / f"{args.name}_adapt_{scene}.png",
                                   title=f"{scene}/dynamic: success vs training seconds")
     return "\n".join(lines) + "\n"
 

@@ -6,15 +6,15 @@ from dtradar_rl.dqn import train
 
 
 def test_a_tiny_adapt_run_fine_tunes_a_blueprint_agent_and_compares_it_with_training_from_scratch(tmp_path):
-    cfg = config_for("memory", scene="synthetic-12x8", total_env_steps=1_500, num_envs=16, learning_starts=300,
+    cfg = config_for("memory", scene="synthetic-12x8", total_env_steps=400, num_envs=16, learning_starts=100,
                      memory_radius=2, out=str(tmp_path / "dqn"), verbose=False, threads=1)
     ckpt = train(cfg).checkpoint
-    result = adapt(AdaptConfig(scene="synthetic-12x8", checkpoint=str(ckpt), seconds=0.6, eval_every_s=0.3,
+    result = adapt(AdaptConfig(scene="synthetic-12x8", checkpoint=str(ckpt), seconds=0.4, eval_every_s=0.4,
                                pairs=10, learning_starts=64, out=str(tmp_path / "adapt"), verbose=False, threads=1))
     curves = result.curves
     assert set(curves) == {"finetune", "scratch"}
-    assert curves["finetune"][0]["train_s"] == 0.0 and curves["finetune"][-1]["train_s"] >= 0.6
-    assert curves["scratch"][-1]["train_s"] >= 0.6
+    assert curves["finetune"][0]["train_s"] == 0.0 and curves["finetune"][-1]["train_s"] >= 0.4
+    assert curves["scratch"][-1]["train_s"] >= 0.4
     for name in ("curve.png", "curve.csv", "adapt.md", "adapt.json"):
         assert (tmp_path / "adapt" / name).is_file()
     saved = json.loads((tmp_path / "adapt" / "adapt.json").read_text())

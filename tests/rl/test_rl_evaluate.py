@@ -49,7 +49,9 @@ def test_cli_trains_then_evaluates_on_blueprint_and_dynamic(tmp_path, capsys):
     results = json.loads((out / "results.json").read_text())
     assert [(r["dataset"], r["shield"]) for r in results["results"]] == [
         ("synthetic-6x5/blueprint", False), ("synthetic-6x5/blueprint", True),
-        ("synthetic-6x5/dynamic", False), ("synthetic-6x5/dynamic", True)]
+        ("synthetic-6x5/dynamic", False), ("synthetic-6x5/dynamic", True),
+        ("synthetic-6x5/blueprint", False), ("synthetic-6x5/dynamic", False)]   # + the classical baseline
+    assert [r["case"].startswith("planner: ") for r in results["results"]] == [False] * 4 + [True] * 2
     for name in ("results.md", "config.json", "paths_blueprint.png", "paths_dynamic.png"):
         assert (out / name).exists(), name
 
