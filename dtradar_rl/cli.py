@@ -25,6 +25,7 @@ from dtradar_data.core.boundary import DEBUG_HELP, run_cli
 from dtradar_data.core.errors import DatasetNotFoundError, unknown_name
 from dtradar_data.core.ids import VARIANTS
 
+from .adapt import AdaptConfig, adapt
 from .config import PRESETS, ConfigError, DQNConfig, check_device, config_for, flag
 from .data import load_dataset
 from .dqn import train
@@ -32,7 +33,6 @@ from .evaluate import cross_matrix, evaluate_twins, write_results
 from .figures import plot_bars
 from .inference import evaluate_pair
 from .logged import LogConfig
-from .adapt import AdaptConfig, adapt
 from .offline import OfflineConfig
 from .offline_bench import OfflineBenchConfig
 from .paper import PaperConfig, run_paper

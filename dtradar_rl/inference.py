@@ -34,7 +34,9 @@ def policy_pair(policy: Policy, ds: Dataset) -> ResolvedPair | None:
     ok = all(0 <= c[0] < mdp.nx and 0 <= c[1] < mdp.ny and not mdp.blocked[c[1], c[0]] for c in (s, t))
     if ok and mdp.connected(mdp.cell(*s), mdp.cell(*t)):
         return resolve(mdp, ds.grid_info, cfg.scene, s, t)
-    from .pairs import snap  # the twin moved an obstacle onto an end: the nearest usable cell instead
+    from .pairs import (
+        snap,  # the twin moved an obstacle onto an end: the nearest usable cell instead
+    )
 
     (s2, _), (t2, _) = snap(mdp, *s), snap(mdp, *t)
     return resolve(mdp, ds.grid_info, cfg.scene, s2, t2)

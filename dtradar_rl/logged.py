@@ -165,7 +165,7 @@ def as_logged(data: LoggedDataset | str | LoggedId) -> LoggedDataset:
 
 
 # -- d3rlpy --------------------------------------------------------------------------------------------------------
-def _d3rlpy():
+def import_d3rlpy():
     """Import d3rlpy without the banner its ``import gym`` prints to stderr."""
     with contextlib.redirect_stderr(io.StringIO()):
         import d3rlpy
@@ -173,7 +173,7 @@ def _d3rlpy():
 
 
 @contextlib.contextmanager
-def _quiet_d3rlpy():
+def quiet_d3rlpy():
     """Silence d3rlpy's structlog info lines, restoring the config after."""
     import logging
 
@@ -204,9 +204,9 @@ def d3rlpy_arrays(data: LoggedDataset | dict[str, np.ndarray]) -> dict[str, np.n
 
 def to_mdp_dataset(data: LoggedDataset | str | LoggedId):
     """The d3rlpy ``MDPDataset`` of a logged dataset (see the module docstring; discrete, 4 actions)."""
-    d3rlpy = _d3rlpy()
+    d3rlpy = import_d3rlpy()
     arr = d3rlpy_arrays(as_logged(data))
-    with _quiet_d3rlpy():
+    with quiet_d3rlpy():
         return d3rlpy.dataset.MDPDataset(
             observations=arr["observations"], actions=arr["actions"], rewards=arr["rewards"],
             terminals=arr["terminals"], timeouts=arr["timeouts"],

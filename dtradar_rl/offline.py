@@ -35,11 +35,8 @@ the training dataset) make a run reloadable: :func:`load_offline_policy`.
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import io
 import json
-import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -59,7 +56,13 @@ from .behaviour import ShortestPathOracle
 from .config import ConfigError, TwinConfig
 from .data import load_dataset
 from .evaluate import evaluate_twins, write_results
-from .logged import as_logged, check_compatible, to_mdp_dataset
+from .logged import (
+    as_logged,
+    check_compatible,
+    import_d3rlpy,
+    quiet_d3rlpy,
+    to_mdp_dataset,
+)
 from .observations import Normalizer, build_observations
 from .policy import CheckpointError, Policy
 from .runtime import auto_threads
@@ -69,26 +72,6 @@ OFFLINE_FORMAT = "dtradar-offline/1"
 ALGORITHMS: dict[str, str] = {"cql": "DiscreteCQLConfig", "bcq": "DiscreteBCQConfig", "bc": "DiscreteBCConfig",
                               "dqn": "DQNConfig", "ddqn": "DoubleDQNConfig", "nfq": "NFQConfig"}
 BEHAVIOURS: tuple[str, ...] = ("noisy-shortest", "random")
-
-
-def _d3rlpy():
-    """Import d3rlpy without the banner its ``import gym`` prints to stderr."""
-    with contextlib.redirect_stderr(io.StringIO()):
-        import d3rlpy
-    return d3rlpy
-
-
-@contextlib.contextmanager
-def _quiet_d3rlpy():
-    """Silence d3rlpy's structlog info lines ("dataset info", "Parameters", ...), restoring the config after."""
-    import structlog
-
-    old = structlog.get_config()
-    structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING))
-    try:
-        yield
-    finally:
-        structlog.configure(**old)
 
 
 @dataclass(frozen=True)
@@ -190,8 +173,8 @@ class LoggedTransitions:
 
     def to_mdp_dataset(self):
         """The d3rlpy ``MDPDataset`` (discrete action space, 4 actions)."""
-        d3rlpy = _d3rlpy()
-        with _quiet_d3rlpy():  # "Signatures have been automatically determined."
+        d3rlpy = import_d3rlpy()
+        with quiet_d3rlpy():  # "Signatures have been automatically determined."
             return d3rlpy.dataset.MDPDataset(
                 observations=self.observations, actions=self.actions.astype(np.int64), rewards=self.rewards,
                 terminals=self.terminals, timeouts=self.timeouts,
@@ -282,7 +265,7 @@ def log_transitions(ds: Dataset, cfg: OfflineConfig, normalizer: Normalizer | No
 # -- 2. training ---------------------------------------------------------------------------------------------------
 def make_algorithm(cfg: OfflineConfig):
     """The d3rlpy algorithm of ``cfg`` (created, not yet built: ``fit`` builds it from the data)."""
-    d3rlpy = _d3rlpy()
+    d3rlpy = import_d3rlpy()
     check_algorithm(cfg.algorithm)
     common = {"batch_size": cfg.batch_size, "learning_rate": cfg.lr,
               "encoder_factory": d3rlpy.models.VectorEncoderFactory(hidden_units=list(cfg.hidden))}
@@ -336,7 +319,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
     normaliser is refitted on that twin, which reproduces the one used for logging).
     """
     cfg = cfg.validate()
-    d3rlpy = _d3rlpy()
+    d3rlpy = import_d3rlpy()
     t_start = time.perf_counter()
     torch.set_num_threads(cfg.threads or auto_threads())
     torch.set_flush_denormal(True)
@@ -379,7 +362,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
     epochs = _epochs(cfg.n_steps)
     losses: list[dict[str, float]] = []
     t_fit = time.perf_counter()
-    with _quiet_d3rlpy():
+    with quiet_d3rlpy():
         for epoch, metrics in algo.fitter(logged_data, n_steps=cfg.n_steps, n_steps_per_epoch=cfg.n_steps // epochs,
                                           experiment_name=cfg.algorithm, with_timestamp=False,
                                           logger_adapter=d3rlpy.logging.NoopAdapterFactory(),
@@ -473,8 +456,8 @@ def load_offline_policy(path: str | Path, device: str = "cpu") -> OfflinePolicy:
     if not isinstance(meta, dict) or meta.get("format") != OFFLINE_FORMAT:
         raise CheckpointError(f"{meta_path} is not a dtradar offline-RL config",
                               hint="pass the model.d3 written by `python -m dtradar_rl offline`")
-    d3rlpy = _d3rlpy()
-    with _quiet_d3rlpy():
+    d3rlpy = import_d3rlpy()
+    with quiet_d3rlpy():
         algo = d3rlpy.load_learnable(str(model), device=_device(device))
     cfg = OfflineConfig.from_dict(meta["config"])
     return OfflinePolicy(q=ActionScores(algo, cfg.algorithm), config=cfg,

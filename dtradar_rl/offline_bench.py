@@ -262,7 +262,7 @@ def markdown(result: dict[str, Any]) -> str:
             m = online.get(v) or {}
             cells += [f"{m.get(k, float('nan')):.3f}" if m else "-" for k in ("success_rate", "spl")]
             cells += [f"{m['collisions']:.2f}" if m else "-"]
-        lines.append(f"| (online) | DQN, tuned | " + " | ".join(cells) + " | - |")
+        lines.append("| (online) | DQN, tuned | " + " | ".join(cells) + " | - |")
     for beh, d in result["datasets"].items():
         ev = d.get("eval") or {}
         blank = " | ".join(f"{ev[v]['success_rate']:.3f} | {ev[v]['spl']:.3f} | {ev[v]['collisions']:.2f}" if v in ev

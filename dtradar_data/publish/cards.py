@@ -15,7 +15,11 @@ from pathlib import Path
 from typing import Any
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError, DtradarError
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    DatasetNotFoundError,
+    DtradarError,
+)
 from dtradar_data.store import listing, local
 from dtradar_data.store.card import CITY_FILE, history_entry, render_card
 

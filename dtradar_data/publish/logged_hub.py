@@ -18,7 +18,12 @@ from pathlib import Path
 from typing import Any
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError, HubError, RevisionNotFoundError
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    DatasetNotFoundError,
+    HubError,
+    RevisionNotFoundError,
+)
 from dtradar_data.core.ids import is_tag
 from dtradar_data.publish import hub
 from dtradar_data.store import transitions as T

@@ -35,11 +35,23 @@ from typing import Annotated, Any, Literal
 import tomllib
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
-from dtradar_data.core.errors import MissingDependencyError, SceneFileError, did_you_mean, unknown_name
+from dtradar_data.core.errors import (
+    MissingDependencyError,
+    SceneFileError,
+    did_you_mean,
+    unknown_name,
+)
 from dtradar_data.core.grid import Grid
 from dtradar_data.core.ids import SCENE_RE
 from dtradar_data.scenes.indoor.reader import Num, Pos, PosInt, SceneName, Text
-from dtradar_data.scenes.model import OUTDOOR_RT_DEFAULTS, PATTERNS, POLARIZATIONS, MeshScene, SceneSpec, TxSpec
+from dtradar_data.scenes.model import (
+    OUTDOOR_RT_DEFAULTS,
+    PATTERNS,
+    POLARIZATIONS,
+    MeshScene,
+    SceneSpec,
+    TxSpec,
+)
 
 FORMAT = 1
 SIONNA_PREFIX = "sionna:"

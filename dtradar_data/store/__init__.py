@@ -8,7 +8,14 @@
 """
 
 from dtradar_data.store.catalog import as_id, known_names, known_scenes
-from dtradar_data.store.listing import DatasetEntry, VersionInfo, history, list_datasets, verify, version_infos
+from dtradar_data.store.listing import (
+                                      DatasetEntry,
+                                      VersionInfo,
+                                      history,
+                                      list_datasets,
+                                      verify,
+                                      version_infos,
+)
 from dtradar_data.store.local import (
                                       InvalidTableError,
                                       install_staged,

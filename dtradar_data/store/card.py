@@ -18,7 +18,12 @@ from huggingface_hub import DatasetCard, DatasetCardData
 from dtradar_data.core import layout as P
 from dtradar_data.core.files import human_size
 from dtradar_data.core.record import VersionRecord
-from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_COLUMN_DESCRIPTIONS, PATH_SCHEMA
+from dtradar_data.core.schema import (
+    CELL_SCHEMA,
+    COLUMN_DESCRIPTIONS,
+    PATH_COLUMN_DESCRIPTIONS,
+    PATH_SCHEMA,
+)
 
 DEFAULT_HUB_NAMESPACE = "dtradar"
 TAGS = ("robotics", "reinforcement-learning", "wireless", "radio", "ray-tracing", "sionna", "digital-twin",

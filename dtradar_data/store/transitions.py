@@ -39,7 +39,6 @@ terminal, bootstrap from ``next_obs``); no other step has either. :func:`check_t
 from __future__ import annotations
 
 import json
-import re
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -63,7 +62,14 @@ from dtradar_data.core.errors import (
 from dtradar_data.core.files import human_size, json_safe, sha256_file, write_atomic
 from dtradar_data.core.ids import GRAMMAR as RT_GRAMMAR
 from dtradar_data.core.ids import HASH_RE, SCENE_RE, VARIANTS, is_hash, is_tag
-from dtradar_data.store.versions import Refs, library_versions, read_refs, resolve_revision, version_id, write_refs
+from dtradar_data.store.versions import (
+    Refs,
+    library_versions,
+    read_refs,
+    resolve_revision,
+    version_id,
+    write_refs,
+)
 
 TRANSITIONS_FORMAT = 1
 TRANSITIONS_FILE = "transitions.parquet"
