@@ -70,10 +70,9 @@ offline-bench:
 	$(PY) -m dtradar_rl offline-bench --scene $(SCENE) $(ARGS)
 
 # Train + evaluate several scenes x seeds as Ray tasks (one per core), gathered into one table with mean and spread.
-SWEEP_SCENES ?= cubicle
-SEEDS        ?= 0 1 2
+SEEDS   ?= 0 1 2
 sweep:
-	$(PY) -m dtradar_rl sweep --scenes $(SWEEP_SCENES) --seeds $(SEEDS) $(ARGS)
+	$(PY) -m dtradar_rl sweep $(if $(SCENES),--scenes $(SCENES)) --seeds $(SEEDS) $(ARGS)
 
 # Twin update: fine-tune runs/$(SCENE)/dqn/model.pt on the dynamic twin, beside training from scratch (curve.png).
 adapt:
