@@ -4,25 +4,22 @@
     result = train(config_for("tuned", scene="synthetic", total_env_steps=100_000))
     result.checkpoint   # runs/synthetic/dqn/model.pt, with config.json, curves.csv and curves.png beside it
 
-Three presets (:data:`PRESETS`, :func:`config_for`):
+Four presets (:data:`~dtradar_rl.config.PRESETS`, :func:`~dtradar_rl.config.config_for`); what each reaches is
+measured in the README (Navigation, Benchmarks), not here:
 
-``paper``  the paper's agent: ``paper`` observations (no target), ``paper`` reward, 5 dense ReLU layers of 256,
-           γ = 0.9, constant ε = 0.1, one environment, one gradient update per step, 500 episodes indoor / 80
-           outdoor. Kept for reproduction; with random targets and no target in the state it cannot learn to reach
-           them (see :mod:`dtradar_rl.observations`).
-``tuned``  the default: ``neighbors`` observations (goal-conditioned, senses blocked neighbours), ``geodesic``
-           shaped reward, Double DQN, 2 x 256 hidden units, γ = 0.5, 256 robots in the batched torch environment,
-           ε decaying 1 → 0.05 over 40 % of the budget, Adam 1e-3 decaying linearly to 1e-4, and one gradient update
-           (batch 512) per 48 environment steps, so the paper's 600 K-step budget (~12 K updates) trains in under a
-           minute on two CPU cores (updates, not the table lookups, bound the speed).
+``paper``  the paper's protocol: its Table VI start/target pair per run (:mod:`dtradar_rl.pairs`), ``paper``
+           observations (10 inputs, no target) and reward, 5 dense ReLU layers of 256, γ = 0.9, constant ε = 0.1,
+           one environment, one gradient update per step, episodes until the target (safety cap 10x the shortest
+           path), 500 episodes indoor / 80 outdoor.
+``tuned``  the default, goal-conditioned over random pairs: ``neighbors`` observations (senses blocked
+           neighbours), ``geodesic`` shaped reward, Double DQN, 2 x 256 hidden units, γ = 0.5, 256 robots in the
+           batched torch environment, ε decaying 1 → 0.05 over 40 % of the budget, Adam 1e-3 decaying linearly to
+           1e-4, one gradient update (batch 512) per 48 environment steps: updates, not table lookups, bound the speed.
 ``robust`` ``tuned`` + obstacle augmentation (domain randomisation, :mod:`dtradar_rl.batched`): at every episode
-           reset each robot gets 10 random extra obstacles of 1 x 1 to 2 x 2 cells on the training twin, which
-           collide and read as blocked neighbours, with the geodesic potential replanned around them. The agent
-           learns to read its neighbours' has-radio flags and detour. On the real cubicle twin (600 K steps, seeds
-           0-2) it lifts blueprint -> dynamic success from 0.67-0.70 (0.68-0.74 with the shield) to 0.79-0.82 with
-           no collisions, keeps blueprint success >= 0.99 (SPL >= 0.99) and trains ~14 % slower (52 s vs 46 s on 2
-           idle cores). What it cannot fix: the dynamic twin's changed radio features (~5 points) and detours a
-           memoryless policy cannot plan from its 4 neighbours alone.
+           reset each robot gets 10 random extra obstacles of 1 x 1 to 2 x 2 cells that collide and read as blocked
+           neighbours, with the geodesic potential replanned around them, so the agent learns to detour.
+``memory`` ``robust`` + a window of the obstacles sensed and cells visited so far (:mod:`dtradar_rl.memory`), so a
+           dead end, once seen, is not revisited.
 
 The loop: every robot acts ε-greedily, the batch of transitions goes into a replay buffer, finished robots are
 reset; every ``env_steps_per_update`` environment steps one Huber-loss update on a random minibatch follows, with
