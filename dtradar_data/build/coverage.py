@@ -1,4 +1,5 @@
-"""Coverage maps: the RadioMapSolver path gain over a scene's grid, with the floor plan drawn on top (paper Figs. 5 and 7)."""
+"""Coverage maps: the RadioMapSolver path gain over a scene's grid, with the floor plan drawn on top (paper Figs. 5
+and 7)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ COVERAGE_SUBCELLS = 4  # radio-map cells per grid cell side: the map is finer th
 
 
 def render_coverage_png(spec, tracer, path: Path, *, samples: int) -> Path:
-    """RadioMapSolver path gain over the grid (4 sub-cells per cell side), obstacles drawn on top (paper Figs. 5 and 7)."""
+    """RadioMapSolver path gain over the grid (4 sub-cells per cell side), obstacles drawn on top (paper Figs. 5
+    and 7)."""
     import matplotlib
 
     matplotlib.use("Agg")
