@@ -50,12 +50,13 @@ class ListCmd:
                               for r in rows], indent=2))
             return 0
         print(f"data root: {data_root()}")
-        print(f"{'dataset':<24} {'versions':<20} {'latest':<22} {'rows':>8} {'size':>10}")
+        w = max([24, *(len(r.name) for r in rows)])  # names like sionna-san_francisco/blueprint are long
+        print(f"{'dataset':<{w}} {'versions':<20} {'latest':<22} {'rows':>8} {'size':>10}")
         for r in rows:
             latest = next((v for v in r.versions if v.version == r.latest), None)
             tags = ",".join(v.tag or v.version[:7] for v in r.versions) or "(not built)"
             shown = f"{latest.tag} {latest.version[:12]}" if latest else "-"
-            print(f"{r.name:<24} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
+            print(f"{r.name:<{w}} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
                   f"{human_size(latest.size_bytes) if latest else '-':>10}")
         logged = transitions.list_logged()
         if logged:  # offline-RL datasets logged on the twins (scene/variant/behaviour)
