@@ -22,6 +22,7 @@ import numpy as np
 from filelock import FileLock
 from tqdm.auto import tqdm
 
+from dtradar_data.build import differential
 from dtradar_data.build.batches import batch_path, load_batch, save_batch, trace_batch
 from dtradar_data.build.coverage import COVERAGE_SUBCELLS, render_coverage_png
 from dtradar_data.build.executors import import_ray, trace_on_ray
@@ -38,6 +39,7 @@ from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
 from dtradar_data.scenes import build_targets, load_scene_spec
+from dtradar_data.scenes.model import Box
 from dtradar_data.store import local, versions
 
 REDUCTION_DOC = (
@@ -85,11 +87,18 @@ class BuildConfig:
     for this build."""
     workers: int = 0
     """With --executor ray: Ray workers (one scene each); 0 = one per CPU of the cluster."""
+    differential: bool = False
+    """Dynamic twins: start from the newest stored blueprint and re-trace only the cells whose radio features the
+    changed objects can affect (see dtradar_data.build.differential); the card records the parent version."""
+    retrace_radius_m: float = 1.0
+    """With --differential: also re-trace cells within this distance of a changed object or of its line of sight."""
 
     def __post_init__(self) -> None:
         if self.coverage_samples < 1:
             raise InvalidSettingError(f"--coverage-samples {self.coverage_samples} must be positive",
                                       hint="the default is 2000000; use --no-coverage-map to skip the map")
+        if self.retrace_radius_m < 0:
+            raise InvalidSettingError(f"--retrace-radius-m {self.retrace_radius_m} must be >= 0")
         if self.workers < 0:
             raise InvalidSettingError(f"--workers {self.workers} must be >= 0 (0 = one per CPU)")
         if self.executor == "ray":
@@ -188,6 +197,11 @@ def build_one(spec, config: BuildConfig) -> Dataset:
     ds_id = DatasetId(spec.scene, spec.variant, None)
     name = format_id(ds_id)
     inputs = build_inputs(spec, config)
+    parent = None
+    if config.differential and spec.variant == "dynamic":
+        parent, parent_spec = differential_parent(spec, config)
+        inputs["differential"] = {"parent": parent.version, "rule": differential.RULE,
+                                  "radius_m": config.retrace_radius_m}
     version = versions.version_id(inputs)
     local.check_can_store(ds_id, version)  # a damaged version folder would otherwise fail only after tracing
     work_dir = work_root() / spec.scene / spec.variant / version
@@ -198,18 +212,51 @@ def build_one(spec, config: BuildConfig) -> Dataset:
         if local.version_exists(ds_id, version):
             print(f"{name}: version {version} already built, reusing it")
             return local.load(name, revision=version)
+        if parent is not None:
+            t0 = time.perf_counter()
+            cells, paths, blocked, tracer, record = differential.differential_trace(
+                parent, parent_spec, spec, config.rt, radius_m=config.retrace_radius_m, per_path=config.per_path,
+                tracer_factory=lambda: RayTracer(spec, config.rt))
+            print(f"{name}: re-traced {record['retraced_cells']} of {record['free_cells']} free cells "
+                  f"(parent {record['parent']})")
+            return _store(spec, config, ds_id, version, inputs, work_dir, cells, paths, blocked, tracer,
+                          time.perf_counter() - t0, {"differential": record})
         return _trace_and_store(spec, config, ds_id, version, inputs, work_dir)
+
+
+def differential_parent(spec, config: BuildConfig):
+    """The newest stored blueprint of ``spec``'s scene (with its per-path table) and its scene, checked to differ from
+    ``spec`` only in objects: same grid, transmitter, heights and buildings."""
+    parent = local.load(f"{spec.scene}/blueprint", paths=config.per_path)
+    recorded = parent.meta["scene_spec"]
+    here = spec.to_dict()
+    same = ("grid", "tx", "rx_height_m", "robot_height_m", "room", "prisms", "base")
+    differs = [k for k in same if recorded.get(k) != here.get(k)]
+    if differs:
+        raise InvalidSettingError(f"--differential: {spec.scene}/blueprint@{parent.version} differs from "
+                                  f"{spec.name} in {', '.join(differs)}, not only in objects",
+                                  hint="build the dynamic twin in full (drop --differential)")
+    parent_spec = dataclasses.replace(spec, variant="blueprint",
+                                      objects=tuple(Box(**o) for o in recorded["objects"]))
+    return parent, parent_spec
 
 
 def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: dict,
                      work_dir: Path) -> Dataset:
     settings = config.rt
-    name = format_id(ds_id)
     t0 = time.perf_counter()
     cells, paths, blocked, tracer = trace_grid(spec, settings, work_dir, per_path=config.per_path,
                                                progress=config.progress, executor=config.executor,
                                                ray_address=config.ray_address, workers=config.workers)
     trace_s = time.perf_counter() - t0
+    return _store(spec, config, ds_id, version, inputs, work_dir, cells, paths, blocked, tracer, trace_s, {})
+
+
+def _store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: dict, work_dir: Path, cells, paths,
+           blocked, tracer, trace_s: float, extra_meta: dict) -> Dataset:
+    """Render the coverage map and overview, write the version with its metadata, clean the work folder."""
+    settings = config.rt
+    name = format_id(ds_id)
     with tempfile.TemporaryDirectory(prefix="dtradar-build-") as tmp:
         extra = {}
         if config.coverage_map:
@@ -243,6 +290,7 @@ def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, 
             "attribution": spec.attribution,
             "source": spec.source,
             **({"city": spec.provenance} if spec.provenance else {}),
+            **extra_meta,
             "build_inputs_hash": version,
             "stats": {
                 "num_cells": int(blocked.size),

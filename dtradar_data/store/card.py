@@ -191,6 +191,7 @@ def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str
                     for c, r in ranges.items() if isinstance(r, dict)],
         coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None, hub_repo=hub_repo, history=hist,
         city=_city_section(rec), city_png=CITY_FILE if CITY_FILE in rec.files else None,
+        differential=(rec.model_extra or {}).get("differential"),
     )
     return str(card).rstrip("\n") + "\n"
 
