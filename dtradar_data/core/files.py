@@ -72,3 +72,21 @@ def human_size(n: int | None) -> str:
             return f"{int(size)} B" if unit == "B" else f"{size:.1f} {unit}"
         size /= 1024
     return f"{size:.1f} GiB"
+
+
+def installed_file(dist: str, rel: str, what: str) -> Path:
+    """A file shipped inside an installed distribution (``rel`` from its site-packages root), found through package
+    metadata so nothing is imported; :class:`MissingDependencyError` says how to install or repair it."""
+    from importlib import metadata
+
+    from dtradar_data.core.errors import MissingDependencyError
+
+    try:
+        path = Path(str(metadata.distribution(dist).locate_file(rel)))
+    except metadata.PackageNotFoundError as e:
+        raise MissingDependencyError(f"{what} comes with {dist}, which is not installed",
+                                     hint="run `make setup`") from e
+    if not path.is_file():
+        raise MissingDependencyError(f"{path} is missing from the installed {dist}",
+                                     hint=f"reinstall it: `pip install --force-reinstall {dist}`")
+    return path

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import functools
 import math
-from importlib import metadata
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -23,7 +22,8 @@ import numpy as np
 import trimesh
 from shapely.geometry import Polygon
 
-from dtradar_data.core.errors import MissingDependencyError, unknown_name
+from dtradar_data.core.errors import unknown_name
+from dtradar_data.core.files import installed_file
 from dtradar_data.scenes.model import Box, Prism, SceneSpec
 
 # Slab thickness per material for Sionna's transmission model (it treats every surface a ray crosses as a slab of the
@@ -60,14 +60,7 @@ def bundled_mesh(name: str) -> trimesh.Trimesh:
     if name not in BUNDLED_MESHES:
         raise unknown_name("bundled mesh", name, BUNDLED_MESHES)
     dist, rel = BUNDLED_MESHES[name]
-    try:
-        path = Path(str(metadata.distribution(dist).locate_file(rel)))
-    except metadata.PackageNotFoundError as e:
-        raise MissingDependencyError(f"the mesh {name!r} comes with {dist}, which is not installed",
-                                     hint="run `make setup`") from e
-    if not path.is_file():
-        raise MissingDependencyError(f"{path} is missing from the installed {dist}",
-                                     hint=f"reinstall it: `pip install --force-reinstall {dist}`")
+    path = installed_file(dist, rel, f"the mesh {name!r}")
     mesh = trimesh.load(str(path), process=False, force="mesh")
     lo, hi = mesh.bounds
     mesh.apply_translation((-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -lo[2]))

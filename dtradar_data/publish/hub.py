@@ -167,6 +167,19 @@ def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str 
     tag = next((t for t, m in history if m.get("version") == version), None)
     card = render_version_card(meta, tag=tag, history=upto, hub_repo=repo_id)
     ops = publish_operations(vdir, card)
+
+    def stale(api_) -> list[str]:  # e.g. paths.parquet of an older version
+        return [f for f in api_.list_repo_files(repo_id, repo_type="dataset")
+                if f in DATA_FILES and not (vdir / f).is_file()]
+
+    return push_version(repo_id, ops, name=did.name, tag=tag, version=version, what="dataset", private=private,
+                        api=api, stale=stale)
+
+
+def push_version(repo_id: str, ops: list[Any], *, name: str, tag: str | None, version: str, what: str,
+                 private: bool, api: Any = None, stale=None) -> PublishResult:
+    """Upload ``ops`` as one commit tagged with ``tag`` and ``version`` (both never moved); ``stale(api)`` names
+    remote files to delete in the same commit. Shared by RT and logged datasets; ``api`` replaces ``HfApi`` in tests."""
     if offline():
         raise HubError(f"cannot publish to {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1)",
                        hint="unset HF_HUB_OFFLINE on a machine with network access")
@@ -183,18 +196,17 @@ def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str 
             raise HubError(f"{repo_id!r} already has a tag {tag!r} for another version than {version}",
                            hint="tags are never moved: publish to another --repo, or pull the Hub's versions "
                                 "first so local tags follow the Hub's")
-        from huggingface_hub import CommitOperationDelete
+        if stale is not None:
+            from huggingface_hub import CommitOperationDelete
 
-        stale = [f for f in api.list_repo_files(repo_id, repo_type="dataset")
-                 if f in DATA_FILES and not (vdir / f).is_file()]  # e.g. paths.parquet of an older version
-        ops += [CommitOperationDelete(path_in_repo=f) for f in stale]
-        info = api.create_commit(repo_id, ops, commit_message=f"{did.name} {tag}: version {version}",
-                                 commit_description=f"dtradar dataset {did.name}, content version {version}",
+            ops = [*ops, *(CommitOperationDelete(path_in_repo=f) for f in stale(api))]
+        info = api.create_commit(repo_id, ops, commit_message=f"{name} {tag}: version {version}",
+                                 commit_description=f"dtradar {what} {name}, content version {version}",
                                  repo_type="dataset")
         for name_ in (tag, version):
             if name_:
                 api.create_tag(repo_id, tag=name_, revision=info.oid, repo_type="dataset",
-                               tag_message=f"{did.name} version {version}")
+                               tag_message=f"{name} version {version}")
     return PublishResult(repo_id, tag, version, info.oid)
 
 

@@ -21,7 +21,6 @@ from dtradar_data.core import layout as P
 from dtradar_data.core.errors import (
     CorruptDatasetError,
     DatasetNotFoundError,
-    HubError,
     RevisionNotFoundError,
 )
 from dtradar_data.core.ids import is_tag
@@ -51,29 +50,8 @@ def publish(name: str | T.LoggedId, revision: str | None = None, *, repo_id: str
                                   hint="log it again first") from exc
     tag = T.read_refs(T._refs_path(lid)).tag_of(version)
     ops = [CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in FILES if (vdir / f).is_file()]
-    if hub.offline():
-        raise HubError(f"cannot publish to {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1)",
-                       hint="unset HF_HUB_OFFLINE on a machine with network access")
-    if api is None:
-        from huggingface_hub import HfApi
-
-        api = HfApi(endpoint=hub.endpoint(), token=hub._token())
-    with hub.hub_errors("publish to", repo_id):
-        api.create_repo(repo_id, repo_type="dataset", private=private, exist_ok=True)
-        remote_tags = {t.name for t in api.list_repo_refs(repo_id, repo_type="dataset").tags}
-        if version in remote_tags:
-            return hub.PublishResult(repo_id, tag, version, None, already_published=True)
-        if tag in remote_tags:
-            raise HubError(f"{repo_id!r} already has a tag {tag!r} for another version than {version}",
-                           hint="tags are never moved: publish to another --repo")
-        info = api.create_commit(repo_id, ops, commit_message=f"{lid.name} {tag}: version {version}",
-                                 commit_description=f"dtradar logged dataset {lid.name}, content version {version}",
-                                 repo_type="dataset")
-        for name_ in (tag, version):
-            if name_:
-                api.create_tag(repo_id, tag=name_, revision=info.oid, repo_type="dataset",
-                               tag_message=f"{lid.name} version {version}")
-    return hub.PublishResult(repo_id, tag, version, info.oid)
+    return hub.push_version(repo_id, ops, name=lid.name, tag=tag, version=version, what="logged dataset",
+                            private=private, api=api)
 
 
 def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:

@@ -36,11 +36,11 @@ import tomllib
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
 from dtradar_data.core.errors import (
-    MissingDependencyError,
     SceneFileError,
     did_you_mean,
     unknown_name,
 )
+from dtradar_data.core.files import installed_file
 from dtradar_data.core.grid import Grid
 from dtradar_data.core.ids import SCENE_RE
 from dtradar_data.scenes.indoor.reader import Num, Pos, PosInt, SceneName, Text
@@ -135,16 +135,7 @@ def sionna_key(scene: str) -> str:
 
 def sionna_xml(key: str) -> Path:
     """The bundled XML of one Sionna scene, found through package metadata (importing sionna is ``rt``'s job)."""
-    rel = f"sionna/rt/scenes/{key}/{key}.xml"
-    try:
-        path = Path(str(metadata.distribution(SIONNA_DIST).locate_file(rel)))
-    except metadata.PackageNotFoundError as e:
-        raise MissingDependencyError(f"the scene sionna:{key} comes with {SIONNA_DIST}, which is not installed",
-                                     hint="run `make setup`") from e
-    if not path.is_file():
-        raise MissingDependencyError(f"{path} is missing from the installed {SIONNA_DIST}",
-                                     hint=f"reinstall it: `pip install --force-reinstall {SIONNA_DIST}`")
-    return path
+    return installed_file(SIONNA_DIST, f"sionna/rt/scenes/{key}/{key}.xml", f"the scene sionna:{key}")
 
 
 # ------------------------------------------------------------------------------------------- the XML
