@@ -3,11 +3,18 @@
     python -m dtradar_rl adapt --scene cubicle      # runs/<scene>/dqn/model.pt fine-tuned on cubicle/dynamic
 
 The blueprint checkpoint's network and normaliser are the starting point; DQN (:func:`dtradar_rl.dqn.train`) then
-trains on the changed twin with its own breadth-first shaping (the changed map is known: it was just built), little
-exploration, the final learning rate of training and the checkpoint's obstacle augmentation. Every ``eval_every_s`` seconds of training the greedy policy is evaluated
-on seeded pairs of the changed twin, giving success and SPL against seconds of fine-tuning (seconds in the training
-loop: neither the evaluations nor the set-up of loading the twin and building its tables, about a second, count). The same budget of seconds then trains the checkpoint's preset from scratch on the changed twin, for
-comparison. Writes ``adapt.{json,md}``, ``curve.csv`` and ``curve.png`` to ``runs/<scene>/adapt``.
+trains on the changed twin with its own breadth-first shaping, little exploration, a small constant learning rate
+and the checkpoint's obstacle augmentation. The changed map is known (it was just built, and the shaping already
+reads it), so by default the update is also told the right move: a large-margin loss (DQfD, Hester et al. 2018)
+pulls the value of the twin's breadth-first shortest moves above the others in every state the agent visits
+(``--expert-weight``, 0 = plain DQN). The policy still acts from its observation alone.
+
+Every ``eval_every_s`` seconds of training the greedy policy is evaluated on seeded pairs of the changed twin,
+giving success and SPL against seconds of training (seconds in the training loop: neither the evaluations nor the
+set-up of loading the twin and building its tables, about a second, count). The same seconds then fine-tune with
+plain DQN (``finetune-dqn``, with ``plain``) and train the checkpoint's preset from scratch with the same loss
+(``scratch``), for comparison. Writes ``adapt.{json,md}``, ``curve.csv`` and ``curve.png`` to
+``runs/<scene>/adapt``.
 """
 
 from __future__ import annotations
@@ -62,6 +69,14 @@ class AdaptConfig:
     agent keeps meeting dead ends, so it does not unlearn them on the few new ones)"""
     env_steps_per_update: int = 16
     """environment steps per gradient update while fine-tuning (updates, not steps, cost the time)"""
+    expert_weight: float = 1.0
+    """weight of the large-margin loss towards the changed twin's breadth-first shortest moves (DQfD; 0 = plain DQN
+    fine-tuning). The changed map is known (it was just built, and its shaping already uses it), so the update can
+    be told the right move in every state the agent visits; the scratch run gets the same loss"""
+    expert_margin: float = 1.0
+    """margin of that loss"""
+    plain: bool = True
+    """also fine-tune with plain DQN (no expert loss) for the same seconds, to show what the expert loss buys"""
     scratch: bool = True
     """also train the checkpoint's preset from scratch on the changed twin for the same seconds"""
     threads: int = 0
@@ -140,8 +155,12 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
                                        else base.aug_obstacles, eps_start=cfg.eps, eps_end=cfg.eps,
                                        lr=cfg.lr, lr_end=-1.0, learning_starts=cfg.learning_starts,
                                        env_steps_per_update=cfg.env_steps_per_update,
+                                       expert_weight=cfg.expert_weight, expert_margin=cfg.expert_margin,
                                        out=str(out / "finetune"), resume=False).validate()
     curves = {"finetune": _curve(cfg, "finetune", finetune_cfg, ds, start, out)}
+    if cfg.plain and cfg.expert_weight > 0:
+        plain_cfg = dataclasses.replace(finetune_cfg, expert_weight=0.0, out=str(out / "finetune-dqn")).validate()
+        curves["finetune-dqn"] = _curve(cfg, "finetune-dqn", plain_cfg, ds, start, out)
     if cfg.scratch:
         # from scratch: the preset, with its exploration decay fitted to the steps the seconds allow (a constant
         # learning rate, since the clock ends the run)
@@ -151,7 +170,8 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
         scratch_cfg = config_for(preset.preset, **{**common, "aug_obstacles": 0, "out": str(out / "scratch"),
                                  "eps_decay_fraction": min(1.0, preset.eps_decay_fraction * expected
                                                            / common["total_env_steps"]),
-                                 "lr_end": -1.0, "learning_starts": min(preset.learning_starts, int(expected / 4))})
+                                 "lr_end": -1.0, "learning_starts": min(preset.learning_starts, int(expected / 4)),
+                                 "expert_weight": cfg.expert_weight, "expert_margin": cfg.expert_margin})
         curves["scratch"] = _curve(cfg, "scratch", scratch_cfg, ds, None, out)
     md = _report(cfg, ckpt, curves, out)
     return AdaptResult(out, curves, md)

@@ -292,6 +292,24 @@ class BatchedNavEnv:
         dx, dy = self.ix[self.target] - self.ix[cell], self.iy[self.target] - self.iy[cell]
         return torch.sqrt(dx * dx + dy * dy)
 
+    def shortest_moves(self) -> torch.Tensor:
+        """``bool[num_envs, 4]``: the moves that take each robot one cell closer to its target along a breadth-first
+        shortest path of the map the episode is played on (with obstacle augmentation, the robot's augmented grid).
+
+        This is the twin's own answer, known because the table is: :mod:`dtradar_rl.dqn` uses it as the expert of a
+        large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin (:mod:`dtradar_rl.adapt`).
+        A robot with no such move (cut off from its target) gets an all-false row. Needs the ``geodesic`` reward,
+        whose distance tables it reads."""
+        if self.potential != "geodesic":
+            raise InvalidCoordinatesError("shortest moves read the breadth-first distance tables of the geodesic "
+                                          f"reward; this env uses {self.reward_name!r}", hint="use reward='geodesic'")
+        nxt = self.next_cell[self.cell]  # [N, 4]; a colliding move stays on the cell, so it never gets closer
+        if self.aug_obstacles:
+            here, there = self.adist.gather(1, self.cell[:, None]), self.adist.gather(1, nxt)
+        else:
+            here, there = self.dist[self.tpool, self.cell][:, None], self.dist[self.tpool[:, None], nxt]
+        return (there >= 0) & (there == here - 1) & ~self.collides[self.cell]
+
     def step(self, actions: torch.Tensor):
         """Move every robot; returns ``(next_obs, reward, terminated, truncated, info)`` (no auto-reset).
 

@@ -173,6 +173,11 @@ class DQNConfig(TwinConfig):
     """final exploration rate"""
     eps_decay_fraction: float = 0.4
     """fraction of the budget over which exploration decays linearly from eps_start to eps_end"""
+    expert_weight: float = 0.0
+    """weight of a large-margin loss towards the training twin's breadth-first shortest moves (DQfD; 0 = off, plain
+    DQN). The twin's map is known, as the geodesic reward already uses it; make adapt uses it to fine-tune fast"""
+    expert_margin: float = 1.0
+    """margin by which the expert loss wants a shortest move's value above every other move's"""
     max_grad_norm: float = 10.0
     """gradient-norm clipping (0 = off)"""
     checkpoint_every: int = 200_000
@@ -215,6 +220,12 @@ class DQNConfig(TwinConfig):
         if self.lr_end == 0:
             raise ConfigError("--lr-end 0 stops learning at the end of the budget",
                               hint="use a positive end rate, or a negative one for a constant --lr")
+        if self.expert_weight < 0 or not self.expert_margin > 0:
+            raise ConfigError(f"--expert-weight must be >= 0 and --expert-margin > 0, got {self.expert_weight} and "
+                              f"{self.expert_margin}")
+        if self.expert_weight > 0 and self.reward != "geodesic":
+            raise ConfigError(f"--expert-weight reads the breadth-first distances of the geodesic reward, got "
+                              f"--reward {self.reward}", hint="use --reward geodesic, or --expert-weight 0")
         if self.max_grad_norm < 0:
             raise ConfigError(f"--max-grad-norm must be >= 0 (0 = off), got {self.max_grad_norm}")
         self.check_within(0, 1, "gamma", open_interval=True)

@@ -68,7 +68,9 @@ from .runtime import auto_threads
 
 # -- replay buffer -------------------------------------------------------------------------------------------------
 class ReplayBuffer:
-    """A ring buffer of transitions ``(obs, action, reward, next_obs, terminated)`` as preallocated tensors."""
+    """A ring buffer of transitions ``(obs, action, reward, next_obs, terminated, expert)`` as preallocated tensors
+    (``expert``: ``bool[4]``, the moves a breadth-first shortest path would take; all false unless an expert loss
+    asked for them)."""
 
     def __init__(self, capacity: int, obs_dim: int, device: torch.device):
         self.capacity, self.ptr, self.size = capacity, 0, 0
@@ -77,30 +79,34 @@ class ReplayBuffer:
         self.action = torch.zeros(capacity, dtype=torch.long, device=device)
         self.reward = torch.zeros(capacity, device=device)
         self.terminated = torch.zeros(capacity, device=device)
+        self.expert = torch.zeros((capacity, 4), dtype=torch.bool, device=device)
 
-    def add(self, obs, action, reward, next_obs, terminated) -> None:
+    def add(self, obs, action, reward, next_obs, terminated, expert=None) -> None:
         n = obs.shape[0]
         idx = (self.ptr + torch.arange(n, device=obs.device)) % self.capacity
         self.obs[idx], self.next_obs[idx] = obs, next_obs
         self.action[idx], self.reward[idx], self.terminated[idx] = action, reward, terminated.float()
+        self.expert[idx] = False if expert is None else expert
         self.ptr = (self.ptr + n) % self.capacity
         self.size = min(self.size + n, self.capacity)
 
     def sample(self, batch_size: int, gen: torch.Generator):
         idx = torch.randint(self.size, (batch_size,), generator=gen, device=self.obs.device)
-        return self.obs[idx], self.action[idx], self.reward[idx], self.next_obs[idx], self.terminated[idx]
+        return (self.obs[idx], self.action[idx], self.reward[idx], self.next_obs[idx], self.terminated[idx],
+                self.expert[idx])
 
     def state_dict(self) -> dict[str, Any]:
         n = self.size
         return {"ptr": self.ptr, "size": n, "obs": self.obs[:n].clone(), "next_obs": self.next_obs[:n].clone(),
                 "action": self.action[:n].clone(), "reward": self.reward[:n].clone(),
-                "terminated": self.terminated[:n].clone()}
+                "terminated": self.terminated[:n].clone(), "expert": self.expert[:n].clone()}
 
     def load_state_dict(self, s: dict[str, Any]) -> None:
         n = s["size"]
         self.ptr, self.size = s["ptr"], n
-        for k in ("obs", "next_obs", "action", "reward", "terminated"):
-            getattr(self, k)[:n] = s[k]
+        for k in ("obs", "next_obs", "action", "reward", "terminated", "expert"):
+            if k in s:  # runs saved before the expert loss existed have no expert column
+                getattr(self, k)[:n] = s[k]
 
 
 # -- training ------------------------------------------------------------------------------------------------------
@@ -230,8 +236,9 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
         actions = torch.where(explore, random_actions, greedy)
 
         # 2. step every robot, store the transitions (truncation is not termination: bootstrap through it)
+        expert = env.shortest_moves() if cfg.expert_weight > 0 else None
         next_obs, reward, terminated, truncated, info = env.step(actions)
-        buffer.add(obs, actions, reward, next_obs, terminated)
+        buffer.add(obs, actions, reward, next_obs, terminated, expert)
         env_steps += n
 
         # 3. book-keeping of finished episodes, then reset them
@@ -249,7 +256,7 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
         # 4. gradient updates owed for the steps collected so far
         owed = (env_steps - cfg.learning_starts) // cfg.env_steps_per_update if env_steps >= cfg.learning_starts else 0
         while updates < owed:
-            b_obs, b_act, b_rew, b_next, b_term = buffer.sample(cfg.batch_size, gen)
+            b_obs, b_act, b_rew, b_next, b_term, b_expert = buffer.sample(cfg.batch_size, gen)
             with torch.no_grad():
                 next_q = q_target(b_next)
                 if cfg.double_dqn:
@@ -257,8 +264,11 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
                 else:
                     next_v = next_q.max(1).values
                 td_target = b_rew + cfg.gamma * (1.0 - b_term) * next_v
-            q_sa = q(b_obs).gather(1, b_act[:, None]).squeeze(1)
+            q_all = q(b_obs)
+            q_sa = q_all.gather(1, b_act[:, None]).squeeze(1)
             loss = F.smooth_l1_loss(q_sa, td_target)  # Huber
+            if cfg.expert_weight > 0:
+                loss = loss + cfg.expert_weight * expert_margin_loss(q_all, b_expert, cfg.expert_margin)
             if cfg.lr_end >= 0:
                 for group in optimizer.param_groups:
                     group["lr"] = cfg.lr + min(1.0, env_steps / cfg.total_env_steps) * (cfg.lr_end - cfg.lr)
@@ -298,6 +308,18 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
     return TrainResult(ckpt, out, env_steps, updates, len(episodes), wall, _summary(episodes))
 
 
+def expert_margin_loss(q_all: torch.Tensor, expert: torch.Tensor, margin: float) -> torch.Tensor:
+    """DQfD's large-margin loss (Hester et al. 2018), with a set of expert moves per state:
+    ``max_a [Q(s, a) + margin * (a not expert)] - max_(a expert) Q(s, a)``, averaged over states with an expert move.
+    Zero once every expert move's value leads every other move's by ``margin``; TD learning still sets the values."""
+    has = expert.any(1)
+    if not bool(has.any()):
+        return q_all.sum() * 0.0
+    q, e = q_all[has], expert[has]
+    best_expert = q.masked_fill(~e, float("-inf")).max(1).values
+    return ((q + margin * (~e).float()).max(1).values - best_expert).mean()
+
+
 def _summary(episodes: list[tuple]) -> dict[str, float]:
     if not episodes:
         return {}
@@ -318,4 +340,5 @@ def write_curves(episodes: list[tuple], out: Path) -> tuple[Path, Path]:
     return csv_path, png_path
 
 
-__all__ = ["DQNConfig", "PRESETS", "config_for", "train", "TrainResult", "ReplayBuffer", "epsilon", "load_policy"]
+__all__ = ["DQNConfig", "PRESETS", "config_for", "train", "TrainResult", "ReplayBuffer", "epsilon", "load_policy",
+           "expert_margin_loss"]

@@ -114,7 +114,7 @@ def plot_matrix(matrix: np.ndarray, rows: Sequence[str], cols: Sequence[str], pa
 
 
 def plot_adapt_curves(curves: dict[str, Sequence[dict]], path: Path, *, title: str = "") -> Path:
-    """Success (solid) and SPL (dashed) against training seconds, one colour per run (fine-tune, scratch)."""
+    """Success (solid) and SPL (dashed) against training seconds, one colour per run (fine-tune, plain fine-tune, scratch)."""
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     for k, (run, rows) in enumerate(curves.items()):
         t = [r["train_s"] for r in rows]

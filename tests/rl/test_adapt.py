@@ -12,7 +12,7 @@ def test_a_tiny_adapt_run_fine_tunes_a_blueprint_agent_and_compares_it_with_trai
     result = adapt(AdaptConfig(scene="synthetic-12x8", checkpoint=str(ckpt), seconds=0.4, eval_every_s=0.4,
                                pairs=10, learning_starts=64, out=str(tmp_path / "adapt"), verbose=False, threads=1))
     curves = result.curves
-    assert set(curves) == {"finetune", "scratch"}
+    assert set(curves) == {"finetune", "finetune-dqn", "scratch"}
     assert curves["finetune"][0]["train_s"] == 0.0 and curves["finetune"][-1]["train_s"] >= 0.4
     assert curves["scratch"][-1]["train_s"] >= 0.4
     for name in ("curve.png", "curve.csv", "adapt.md", "adapt.json"):

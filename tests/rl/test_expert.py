@@ -1,0 +1,77 @@
+"""The expert of fine-tuning: the twin's breadth-first shortest moves, and DQfD's large-margin loss on them."""
+
+import pytest
+import torch
+
+from dtradar_data.core.errors import InvalidCoordinatesError
+from dtradar_rl.batched import BatchedNavEnv
+from dtradar_rl.config import ConfigError, config_for
+from dtradar_rl.data import load_dataset
+from dtradar_rl.dqn import expert_margin_loss, train
+from dtradar_rl.memory import MemoryNavEnv
+
+
+@pytest.fixture(scope="module")
+def synth():
+    return load_dataset("synthetic/dynamic")
+
+
+def _walk_shortest(env: BatchedNavEnv) -> None:
+    """Every robot follows its first shortest move; each must reach its target in exactly its BFS distance."""
+    start_dist = env._potential(env.cell).long()
+    assert bool((start_dist > 0).all())
+    done = torch.zeros(env.num_envs, dtype=torch.bool)
+    for step in range(1, int(start_dist.max()) + 1):
+        moves = env.shortest_moves()
+        assert bool(moves[~done].any(1).all()), "a robot short of its target has no shortest move"
+        _, _, terminated, _, info = env.step(moves.float().argmax(1))
+        assert not bool(info["collision"][~done].any())
+        assert bool((terminated == (start_dist == step))[~done].all())
+        done |= terminated
+
+
+@pytest.mark.parametrize("aug", [0, 6])
+def test_following_the_shortest_moves_reaches_every_target_in_its_breadth_first_distance(synth, aug):
+    env = BatchedNavEnv.from_dataset(synth, 128, obs="neighbors", reward="geodesic", seed=3, aug_obstacles=aug)
+    env.reset()
+    _walk_shortest(env)
+
+
+def test_memory_envs_give_the_same_shortest_moves(synth):
+    env = MemoryNavEnv.from_dataset(synth, 64, reward="geodesic", seed=4, memory_radius=2, aug_obstacles=4)
+    env.reset()
+    _walk_shortest(env)
+
+
+def test_shortest_moves_need_the_geodesic_distance_tables(synth):
+    env = BatchedNavEnv.from_dataset(synth, 4, obs="neighbors", reward="euclidean", seed=0)
+    env.reset()
+    with pytest.raises(InvalidCoordinatesError, match="geodesic"):
+        env.shortest_moves()
+
+
+def test_the_margin_loss_is_zero_once_expert_moves_lead_by_the_margin_and_ignores_states_without_one():
+    q = torch.tensor([[2.0, 0.5, 0.9, 0.0], [0.0, 1.0, 0.0, 0.0], [5.0, 0.0, 0.0, 0.0]])
+    expert = torch.tensor([[True, False, False, False], [True, False, True, False], [False] * 4])
+    # row 0: expert leads by 1.1 >= 1 -> 0; row 1: best expert 0.0, best other 1.0 + 1 -> 2; row 2: no expert
+    assert expert_margin_loss(q, expert, 1.0).item() == pytest.approx(1.0)
+    assert expert_margin_loss(q[:1], expert[:1], 1.0).item() == 0.0
+    assert expert_margin_loss(q[2:], expert[2:], 1.0).item() == 0.0
+
+
+def test_the_expert_loss_needs_the_geodesic_reward_and_a_positive_margin():
+    with pytest.raises(ConfigError, match="geodesic"):
+        config_for("tuned", expert_weight=1.0, reward="scaled").validate()
+    with pytest.raises(ConfigError, match="expert"):
+        config_for("tuned", expert_weight=1.0, expert_margin=0.0).validate()
+
+
+def test_training_with_the_expert_loss_learns_the_shortest_moves(tmp_path):
+    common = dict(scene="synthetic-12x8", total_env_steps=6_000, num_envs=32, learning_starts=256,
+                  env_steps_per_update=8, verbose=False, threads=1, checkpoint_every=0, eps_decay_fraction=0.2)
+    res = train(config_for("tuned", **common, expert_weight=1.0, out=str(tmp_path / "expert")))
+    from dtradar_rl.evaluate import evaluate
+    from dtradar_rl.policy import load_policy
+    m, _ = evaluate(load_policy(res.checkpoint), load_dataset("synthetic-12x8/blueprint"), pairs=100, seed=0,
+                    latency=False)
+    assert m.success_rate >= 0.9 and m.spl >= 0.85
