@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray clean-venv
+.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic clean-venv
 
 # One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
 setup:
@@ -90,6 +90,14 @@ bench-rt:
 
 bench-rl:
 	$(PY) bench/bench_rl.py $(ARGS)
+
+# Differential vs full re-trace of each dynamic twin, side by side (time, agreement) -> results/bench_differential_*
+bench-diff:
+	$(PY) bench/bench_differential.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
+
+# Navigation under change: the planner beside the memory agents, and twin-update curves -> results/bench_dynamic*
+bench-dynamic:
+	$(PY) bench/bench_dynamic.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
 # Serial vs Ray tracing, side by side in one run (cells/s and the speed-up on this machine's cores).
 bench-ray:

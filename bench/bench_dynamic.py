@@ -27,7 +27,7 @@ from dtradar_rl.data import load_dataset
 from dtradar_rl.dqn import train
 from dtradar_rl.evaluate import evaluate
 from dtradar_rl.planner import FingerprintPlanner
-from dtradar_rl.plots import plot_adapt_curves
+from dtradar_rl.plots import plot_adapt_seeds
 from dtradar_rl.policy import load_policy
 
 
@@ -125,11 +125,15 @@ def report(rows, adapt_rows, args) -> str:
                              f"{curve[-1]['success_rate']:.3f} / {curve[-1]['spl']:.3f} | "
                              f"{'-' if t95 is None else f'{t95:.1f}'} | {'-' if t99 is None else f'{t99:.1f}'} |")
         for scene in args.scenes:
-            curves = {f"{run} seed {a['seed']}": c for a in adapt_rows if a["scene"] == scene
-                      for run, c in a["curves"].items()}
-            if curves:
-                plot_adapt_curves(curves, Path(args.out) / f"{args.name}_adapt_{scene}.png",
-                                  title=f"{scene}/dynamic: success vs training seconds")
+            runs: dict[str, list] = {}
+            for a in adapt_rows:
+                if a["scene"] == scene:
+                    for run, c in a["curves"].items():
+                        runs.setdefault(run, []).append(c)
+            if runs:
+                plot_adapt_seeds(runs, Path(args.out) / f"{args.name}_adapt_{scene}.png",
+                                 title=f"{scene}/dynamic: success vs training seconds, seeds "
+                                       f"{', '.join(str(a['seed']) for a in adapt_rows if a['scene'] == scene)}")
     return "\n".join(lines) + "\n"
 
 

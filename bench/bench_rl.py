@@ -1,6 +1,7 @@
 """RL benchmark, side by side in one run: batched env throughput, decision latency, and the paper's training budget.
 
     python bench/bench_rl.py                 # `make bench-rl`; writes results/bench_rl.json and results/bench_rl.md
+    python bench/bench_rl.py --scene meeting # -> results/bench_rl_meeting.{json,md}
     python bench/bench_rl.py --help
 
 Measures (paper figures in brackets): env steps/s of the batched torch env vs the gymnasium env; one greedy
@@ -27,6 +28,7 @@ import torch
 import tyro
 
 from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.files import write_atomic
 from dtradar_rl.batched import BatchedNavEnv
 from dtradar_rl.config import config_for
 from dtradar_rl.data import load_dataset
@@ -65,7 +67,7 @@ class BenchConfig:
     threads: int = 0
     """torch threads (0 = auto)"""
     out: str = "results"
-    """where bench_rl.json and bench_rl.md go"""
+    """where bench_rl.{json,md} go (bench_rl_<scene>.{json,md} for a scene other than the cubicle)"""
     runs: str = "runs/bench_rl"
     """where the benchmark's checkpoints go"""
 
@@ -220,9 +222,10 @@ def main(cfg: BenchConfig) -> dict:
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_rl.json").write_text(json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n")
+    stem = "bench_rl" if cfg.scene == "cubicle" else f"bench_rl_{cfg.scene}"
+    write_atomic(out / f"{stem}.json", json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n")
     md = render_markdown(report)
-    (out / "bench_rl.md").write_text(md)
+    write_atomic(out / f"{stem}.md", md)
     print(md)
     return report
 

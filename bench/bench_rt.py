@@ -24,13 +24,11 @@ import numpy as np
 
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.rt import features
+from dtradar_data.rt.compare import agreement
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.store.versions import library_versions
-
-TAU_TOL_S = 1e-10
-ANGLE_TOL_RAD = np.deg2rad(1.0)
 
 
 def strongest(batch) -> dict[str, np.ndarray]:
@@ -47,21 +45,6 @@ def strongest(batch) -> dict[str, np.ndarray]:
     for k in ("tau_s", "aod_zen_rad", "aod_az_rad", "aoa_zen_rad", "aoa_az_rad"):
         out[k][idx] = rows[k][first]
     return out
-
-
-def agreement(ref: dict, got: dict) -> np.ndarray:
-    """Per-cell bool: same strongest path with angles within 1 degree (see module docstring)."""
-    both_none = ~ref["has"] & ~got["has"]
-    same = ref["has"] & got["has"] & (ref["inter"] == got["inter"]) & (np.abs(ref["tau_s"] - got["tau_s"]) < TAU_TOL_S)
-
-    def close(a, b, wrap):
-        d = np.abs(a - b)
-        return np.minimum(d, 2 * np.pi - d) < ANGLE_TOL_RAD if wrap else d < ANGLE_TOL_RAD
-
-    for zen, az in (("aod_zen_rad", "aod_az_rad"), ("aoa_zen_rad", "aoa_az_rad")):
-        pole = (ref[zen] < ANGLE_TOL_RAD) | (ref[zen] > np.pi - ANGLE_TOL_RAD)
-        same &= close(ref[zen], got[zen], False) & (pole | close(ref[az], got[az], True))
-    return both_none | same
 
 
 def timed_trace(tracer: RayTracer, points: np.ndarray, batch_size: int):

@@ -23,7 +23,9 @@ measured in the README (Navigation, Benchmarks), not here:
 
 The loop: every robot acts ε-greedily, the batch of transitions goes into a replay buffer, finished robots are
 reset; every ``env_steps_per_update`` environment steps one Huber-loss update on a random minibatch follows, with
-targets from a target network copied every ``target_update_every`` updates. Checkpoints carry the config and the
+targets from a target network copied every ``target_update_every`` updates; with ``expert_weight`` > 0, DQfD's
+large-margin loss towards the twin's breadth-first shortest moves is added to it (:func:`expert_margin_loss`; what
+:mod:`dtradar_rl.adapt` fine-tunes with). Checkpoints carry the config and the
 feature normaliser; ``last.pt`` also carries optimiser, replay buffer and random states, so ``resume=True``
 continues a run exactly where it stopped.
 """

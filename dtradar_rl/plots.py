@@ -126,3 +126,23 @@ def plot_adapt_curves(curves: dict[str, Sequence[dict]], path: Path, *, title: s
     ax.grid(alpha=0.3)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def plot_adapt_seeds(runs: dict[str, Sequence[Sequence[dict]]], path: Path, *, title: str = "") -> Path:
+    """Success against training seconds of several seeds per run (fine-tune, plain fine-tune, scratch): one colour
+    per run, a thin line per seed; the right panel zooms into 0.9-1.0, where the 0.99 goal line is."""
+    fig, axes = plt.subplots(1, 2, figsize=(10.5, 3.8))
+    for ax, lo in zip(axes, (0.0, 0.9), strict=True):
+        for k, (run, seeds) in enumerate(runs.items()):
+            for j, rows in enumerate(seeds):
+                ax.plot([r["train_s"] for r in rows], [r["success_rate"] for r in rows], "-o", ms=2.5, lw=1.1,
+                        color=f"C{k}", alpha=0.85, label=f"{run} ({len(seeds)} seeds)" if j == 0 else None)
+        ax.axhline(0.99, color="grey", lw=0.8, ls=":")
+        ax.set(xlabel="training seconds", ylim=(lo, 1.005 if lo else 1.02))
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("success on the changed twin")
+    axes[1].set_title("zoom: 0.9-1.0 (dotted: 0.99)", fontsize=9)
+    axes[0].legend(fontsize=8, loc="lower right")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
