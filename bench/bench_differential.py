@@ -98,7 +98,7 @@ def plot(spec, blocked, mask, c, path: Path, row: dict) -> None:
     cmap = matplotlib.colors.ListedColormap(["#f2f2f2", "#9ecae1", "#404040", "#d62728"])
     ax.imshow(img, origin="lower", cmap=cmap, vmin=0, vmax=3, interpolation="nearest")
     a = row["differential_vs_full"]
-    ax.set_title(f"{row['scene']}/dynamic: {row['retraced_cells']} of {row['free_cells']} cells re-traced (blue), "
+    ax.set_title(f"{row['scene']}/dynamic: {row['retraced_cells']} of {row['free_cells']} cells re-traced (blue; dark: blocked), "
                  f"{row['full_s']:.1f} s → {row['differential_s']:.1f} s\nred: strongest path differs from the full "
                  f"re-trace ({100 * (1 - a['all']['agreement']):.1f} % of free cells)", fontsize=9)
     ax.set(xlabel="ix", ylabel="iy")
