@@ -24,16 +24,21 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from dtradar_data.build import differential  # noqa: E402
-from dtradar_data.build.pipeline import BuildConfig, differential_parent, scene_config, trace_grid  # noqa: E402
-from dtradar_data.core.dataset import Dataset  # noqa: E402
-from dtradar_data.core.files import write_atomic  # noqa: E402
-from dtradar_data.rt.compare import compare  # noqa: E402
-from dtradar_data.rt.tracer import RayTracer  # noqa: E402
-from dtradar_data.scenes import load_scene_spec  # noqa: E402
+from dtradar_data.build import differential
+from dtradar_data.build.pipeline import (
+    BuildConfig,
+    differential_parent,
+    scene_config,
+    trace_grid,
+)
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.files import write_atomic
+from dtradar_data.rt.compare import compare
+from dtradar_data.rt.tracer import RayTracer
+from dtradar_data.scenes import load_scene_spec
 
 
 def as_dataset(name: str, parent: Dataset, cells, paths) -> Dataset:
