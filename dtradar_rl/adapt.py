@@ -148,6 +148,9 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
     start = load_policy(ckpt)
     ds = load_dataset(f"{cfg.scene}/{cfg.variant}")
     base = start.config
+    if cfg.expert_weight > 0 and base.reward != "geodesic":
+        raise ConfigError(f"{ckpt} was trained with --reward {base.reward}; the expert loss reads the breadth-first "
+                          f"distance tables of the geodesic reward", hint="fine-tune with --expert-weight 0")
     # the clock, not the step budget, ends both runs: exploration and learning rate stay at the fine-tuning values
     common = {"scene": cfg.scene, "variant": cfg.variant, "seed": cfg.seed, "threads": cfg.threads,
               "verbose": False, "checkpoint_every": 0, "save_replay": False, "total_env_steps": 50_000_000}
