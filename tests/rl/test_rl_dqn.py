@@ -45,8 +45,10 @@ def test_training_is_seeded(tmp_path):
     assert all(torch.equal(qa[k], qb[k]) for k in qa)
 
 
-def test_resumed_training_equals_an_uninterrupted_run(tmp_path):
-    cfg = dict(TINY, buffer_size=1_000, eps_start=0.3, eps_end=0.3, lr_end=-1.0)  # budget-independent
+@pytest.mark.parametrize("expert_weight", [0.0, 1.0])
+def test_resumed_training_equals_an_uninterrupted_run(tmp_path, expert_weight):
+    cfg = dict(TINY, buffer_size=1_000, eps_start=0.3, eps_end=0.3, lr_end=-1.0,  # budget-independent
+               expert_weight=expert_weight)  # with the expert loss, last.pt also carries the replay's expert moves
     full = train(config_for("tuned", out=str(tmp_path / "full"), **dict(cfg, total_env_steps=4_000)))
     train(config_for("tuned", out=str(tmp_path / "res"), **dict(cfg, total_env_steps=2_000)))
     resumed = train(config_for("tuned", out=str(tmp_path / "res"), resume=True, **dict(cfg, total_env_steps=4_000)))
