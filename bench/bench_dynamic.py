@@ -1,7 +1,7 @@
 """Navigation that survives change (issue 12): learned agents beside the classical baseline, and twin updates.
 
-For each scene and seed: train the ``robust`` and ``memory`` presets on the blueprint (600 K steps; a run whose
-``model.pt`` exists under ``--runs`` is reused), evaluate them zero-shot on the blueprint and the dynamic twin beside
+For each scene and seed: train the ``robust`` and ``memory`` presets on the blueprint (``--steps``, default the
+paper's 600 K; a run whose ``model.pt`` exists under ``--runs`` is reused), evaluate them zero-shot on the blueprint and the dynamic twin beside
 the fingerprint + breadth-first planner (:mod:`dtradar_rl.planner`), then fine-tune the memory agent on the dynamic
 twin for ``--seconds`` against training from scratch (:mod:`dtradar_rl.adapt`). Writes
 ``results/bench_dynamic.{json,md}`` (mean and spread over seeds) and ``results/bench_dynamic_adapt_<scene>.png``.
@@ -47,6 +47,7 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--presets", nargs="+", default=["robust", "memory"])
     ap.add_argument("--pairs", type=int, default=500)
+    ap.add_argument("--steps", type=int, default=600_000, help="training budget of each agent (the paper's: 600K)")
     ap.add_argument("--seconds", type=float, default=20.0, help="fine-tuning (and from-scratch) training seconds")
     ap.add_argument("--adapt-seeds", nargs="*", type=int, default=None, help="seeds to adapt (default: --seeds)")
     ap.add_argument("--runs", default="runs/bench_dynamic")
@@ -68,7 +69,8 @@ def main() -> None:
                 run = runs / scene / preset / f"seed{seed}"
                 if not (run / "model.pt").exists():
                     state = machine_state()
-                    result = train(config_for(preset, scene=scene, seed=seed, out=str(run), verbose=False))
+                    result = train(config_for(preset, scene=scene, seed=seed, out=str(run), verbose=False,
+                                              total_env_steps=args.steps))
                     train_s[f"{scene}/{preset}/{seed}"] = {"wall_s": result.wall_s, "machine": state}
                 policy = load_policy(run / "model.pt")
                 for v, ds in twins.items():
