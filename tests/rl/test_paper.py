@@ -35,3 +35,11 @@ def test_the_cross_quadrant_figure_groups_the_built_quadrants_of_each_city():
     twins = {f"dallas-q{k}/blueprint": None for k in (1, 3, 4)} | {"houston-q2/blueprint": None}
     cfg = PaperConfig(scenes=("cubicle", "dallas-q1", "dallas-q2", "dallas-q3", "dallas-q4", "houston-q2"))
     assert cross_groups(cfg, twins) == [("dallas", ["dallas-q1", "dallas-q3", "dallas-q4"])]
+
+
+def test_the_report_calls_the_machine_shared_only_when_other_jobs_competed():
+    from dtradar_rl.paper_md import shared_machine
+
+    assert not shared_machine({"cores": 2, "load_avg_start": 0.08, "load_avg_max": 2.0})  # the run's own 2 threads
+    assert shared_machine({"cores": 2, "load_avg_start": 0.3, "load_avg_max": 6.5})  # helpers training alongside
+    assert shared_machine({"cores": 2, "load_avg_start": 1.9, "load_avg_max": 2.0})  # busy before it started
