@@ -1,7 +1,9 @@
 import json
 
+import pytest
+
 from dtradar_rl.adapt import AdaptConfig, adapt, first_time_at
-from dtradar_rl.config import config_for
+from dtradar_rl.config import ConfigError, config_for
 from dtradar_rl.dqn import train
 
 
@@ -27,10 +29,6 @@ def test_first_time_at_reads_the_curve():
 
 
 def test_adapting_a_checkpoint_without_the_geodesic_reward_asks_for_plain_fine_tuning(tmp_path):
-    import pytest
-
-    from dtradar_rl.config import ConfigError
-
     cfg = config_for("tuned", scene="synthetic-12x8", reward="scaled", total_env_steps=200, num_envs=8,
                      learning_starts=50, out=str(tmp_path / "dqn"), verbose=False, threads=1)
     ckpt = train(cfg).checkpoint

@@ -8,7 +8,9 @@ from dtradar_rl.batched import BatchedNavEnv
 from dtradar_rl.config import ConfigError, config_for
 from dtradar_rl.data import load_dataset
 from dtradar_rl.dqn import expert_margin_loss, train
+from dtradar_rl.evaluate import evaluate
 from dtradar_rl.memory import MemoryNavEnv
+from dtradar_rl.policy import load_policy
 
 
 @pytest.fixture(scope="module")
@@ -70,8 +72,6 @@ def test_training_with_the_expert_loss_learns_the_shortest_moves(tmp_path):
     common = dict(scene="synthetic-12x8", total_env_steps=6_000, num_envs=32, learning_starts=256,
                   env_steps_per_update=8, verbose=False, threads=1, checkpoint_every=0, eps_decay_fraction=0.2)
     res = train(config_for("tuned", **common, expert_weight=1.0, out=str(tmp_path / "expert")))
-    from dtradar_rl.evaluate import evaluate
-    from dtradar_rl.policy import load_policy
     m, _ = evaluate(load_policy(res.checkpoint), load_dataset("synthetic-12x8/blueprint"), pairs=100, seed=0,
                     latency=False)
     assert m.success_rate >= 0.9 and m.spl >= 0.85
