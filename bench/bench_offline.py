@@ -7,7 +7,7 @@
 d3rlpy DiscreteCQL, DiscreteBCQ, DiscreteBC, DQN, DoubleDQN and NFQ on every logged behaviour dataset (random,
 noisy-shortest, epsilon-greedy from the online DQN, mixture), evaluated with our own rollouts on the blueprint and
 dynamic twins beside the online DQN and the behaviour itself; mean ± std over seeds. Writes bench.json, bench.md and
-bench.png to results/offline_bench/<scene>/ (see dtradar_rl.offline_bench).
+bench.png to results/offline_bench/<scene>/ (see dtradar_rl.experiments.offline_bench).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import sys
 import tyro
 
 from dtradar_data.core.boundary import run_cli
-from dtradar_rl.offline_bench import OfflineBenchConfig, run_bench
+from dtradar_rl.experiments.offline_bench import OfflineBenchConfig, run_bench
 
 
 def _run(argv: list[str]) -> int:

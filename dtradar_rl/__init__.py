@@ -1,8 +1,8 @@
 """dtradar_rl: navigation agents on dtradar datasets (after DT-RaDaR, arXiv 2411.12284).
 
-A per-cell table becomes a grid MDP (:mod:`.mdp`); agents observe radio features by preset (:mod:`.observations`)
-through a gymnasium env (:mod:`.envs`) or a batched torch env (:mod:`.batched`); DQN (:mod:`.dqn`) trains on the
-blueprint twin and :mod:`.evaluate` measures success, SPL, collisions and latency on blueprint and dynamic twins.
+A per-cell table becomes a grid MDP (:mod:`dtradar_rl.task.mdp`); agents observe radio features by preset (:mod:`dtradar_rl.task.observations`)
+through a gymnasium env (:mod:`dtradar_rl.envs.nav_env`) or a batched torch env (:mod:`dtradar_rl.envs.batched`); DQN (:mod:`dtradar_rl.train.dqn`) trains on the
+blueprint twin and :mod:`dtradar_rl.evaluation.evaluate` measures success, SPL, collisions and latency on blueprint and dynamic twins.
 
     from dtradar_rl import config_for, train, load_policy, evaluate, load_dataset
     result = train(config_for("tuned", scene="synthetic"))

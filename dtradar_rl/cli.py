@@ -25,21 +25,21 @@ from dtradar_data.core.boundary import DEBUG_HELP, run_cli
 from dtradar_data.core.errors import DatasetNotFoundError, unknown_name
 from dtradar_data.core.ids import VARIANTS
 
-from .adapt import AdaptConfig, adapt
-from .config import PRESETS, ConfigError, DQNConfig, check_device, config_for, flag
-from .data import load_dataset
-from .dqn import train
-from .evaluate import cross_matrix, evaluate_twins, write_results
-from .figures import plot_bars
-from .inference import evaluate_pair
-from .logged import LogConfig
-from .offline import OfflineConfig
-from .offline_bench import OfflineBenchConfig
-from .paper import PaperConfig, run_paper
-from .planner import planner_for_scene
-from .plots import plot_matrix, plot_paths
-from .policy import load_policy
-from .sweep import SweepConfig, sweep
+from dtradar_rl.train.adapt import AdaptConfig, adapt
+from dtradar_rl.task.config import PRESETS, ConfigError, DQNConfig, check_device, config_for, flag
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.dqn import train
+from dtradar_rl.evaluation.evaluate import cross_matrix, evaluate_twins, write_results
+from dtradar_rl.viz.figures import plot_bars
+from dtradar_rl.evaluation.fixed_pair import evaluate_pair
+from dtradar_rl.offline.logged import LogConfig
+from dtradar_rl.offline.trainer import OfflineConfig
+from dtradar_rl.experiments.offline_bench import OfflineBenchConfig
+from dtradar_rl.experiments.paper import PaperConfig, run_paper
+from dtradar_rl.agents.planner import planner_for_scene
+from dtradar_rl.viz.plots import plot_matrix, plot_paths
+from dtradar_rl.agents.policy import load_policy
+from dtradar_rl.experiments.sweep import SweepConfig, sweep
 
 
 @dataclass(frozen=True)
@@ -63,7 +63,7 @@ class EvalConfig:
     neighbors preset only)"""
     planner: bool = True
     """also report the classical baseline (fingerprint localisation + breadth-first replanning on the blueprint;
-    see dtradar_rl.planner)"""
+    see dtradar_rl.agents.planner)"""
     plot_paths: int = 6
     """navigation paths drawn over the coverage map per twin"""
     out: str = ""
@@ -235,7 +235,7 @@ def _parse_and_run(argv: list[str]) -> int:
     def offline_cmd(cfg: Annotated[OfflineConfig, tyro.conf.arg(name="")] = OFFLINE_DEFAULT) -> None:
         """Offline RL with d3rlpy (cql, bcq, bc, dqn): log a behaviour policy's transitions on the blueprint twin,
         train on them, evaluate on the blueprint and dynamic twins; prints the table."""
-        from .offline import train_offline
+        from dtradar_rl.offline.trainer import train_offline
 
         result = train_offline(cfg.validate())
         if result.rows:
@@ -247,7 +247,7 @@ def _parse_and_run(argv: list[str]) -> int:
     def log_cmd(cfg: Annotated[LogConfig, tyro.conf.arg(name="")] = LogConfig()) -> None:
         """Log a behaviour policy (random, noisy-shortest, epsilon-greedy, mixture) on a twin into the store as a
         versioned, carded offline-RL dataset <scene>/<variant>/<behaviour> (+ its Minari copy)."""
-        from .logged import log_dataset
+        from dtradar_rl.offline.logged import log_dataset
 
         logged = log_dataset(cfg.validate())
         print(f"{logged!r}\ncard: {logged.path / 'README.md'}\nload: dtradar_data.load({logged.name!r})")
@@ -255,7 +255,7 @@ def _parse_and_run(argv: list[str]) -> int:
     def offline_bench_cmd(cfg: Annotated[OfflineBenchConfig, tyro.conf.arg(name="")] = OfflineBenchConfig()) -> None:
         """Offline-RL benchmark: d3rlpy CQL, BCQ, BC, DQN, DoubleDQN, NFQ on every logged behaviour dataset, several
         seeds, evaluated on the blueprint and dynamic twins beside the online DQN; JSON, Markdown and a bar plot."""
-        from .offline_bench import run_bench
+        from dtradar_rl.experiments.offline_bench import run_bench
 
         run_bench(cfg.validate())
 

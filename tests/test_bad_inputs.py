@@ -29,7 +29,7 @@ from dtradar_data.store import listing
 from dtradar_data.store import local as store
 from dtradar_data.store.versions import version_id
 from dtradar_rl import cli as rl_cli
-from dtradar_rl.envs import DtradarNavEnv, InvalidActionError
+from dtradar_rl.envs.nav_env import DtradarNavEnv, InvalidActionError
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 
@@ -329,7 +329,7 @@ def test_a_write_that_fails_half_way_leaves_the_old_file_and_no_temporary(tmp_pa
 
 
 def test_training_curves_are_written_atomically(tmp_path):
-    from dtradar_rl.dqn import write_curves
+    from dtradar_rl.train.dqn import write_curves
 
     write_curves([(1, 10, -1.0, 5, 0, 1)], tmp_path)
     before = (tmp_path / "curves.csv").read_text()
@@ -340,7 +340,7 @@ def test_training_curves_are_written_atomically(tmp_path):
 
 
 def test_offline_losses_are_written_atomically(tmp_path):
-    from dtradar_rl.offline import _write_losses
+    from dtradar_rl.offline.trainer import _write_losses
 
     _write_losses([{"epoch": 1, "loss": 0.5}], tmp_path / "losses.csv")
     before = (tmp_path / "losses.csv").read_text()
@@ -350,7 +350,7 @@ def test_offline_losses_are_written_atomically(tmp_path):
 
 
 def test_evaluation_results_are_written_atomically(tmp_path):
-    from dtradar_rl.evaluate import write_results
+    from dtradar_rl.evaluation.evaluate import write_results
 
     row = {"case": "a -> b", "pairs": 1, "success_rate": 1.0, "spl": 1.0}
     write_results([row], tmp_path, {"run": 1})

@@ -2,9 +2,9 @@ import json
 
 import pytest
 
-from dtradar_rl.adapt import AdaptConfig, adapt, first_time_at
-from dtradar_rl.config import ConfigError, config_for
-from dtradar_rl.dqn import train
+from dtradar_rl.train.adapt import AdaptConfig, adapt, first_time_at
+from dtradar_rl.task.config import ConfigError, config_for
+from dtradar_rl.train.dqn import train
 
 
 def test_a_tiny_adapt_run_fine_tunes_a_blueprint_agent_and_compares_it_with_training_from_scratch(tmp_path):

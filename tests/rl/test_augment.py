@@ -7,14 +7,14 @@ import torch
 
 from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, UnknownNameError
-from dtradar_rl.batched import BatchedNavEnv
-from dtradar_rl.config import PRESETS, ConfigError, config_for
-from dtradar_rl.data import load_dataset, synthetic_blocked
-from dtradar_rl.dqn import train
-from dtradar_rl.envs import DtradarNavEnv
-from dtradar_rl.mdp import GridMDP
-from dtradar_rl.observations import Normalizer
-from dtradar_rl.policy import load_policy
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.task.config import PRESETS, ConfigError, config_for
+from dtradar_rl.task.twins import load_dataset, synthetic_blocked
+from dtradar_rl.train.dqn import train
+from dtradar_rl.envs.nav_env import DtradarNavEnv
+from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.agents.policy import load_policy
 
 
 @pytest.fixture(scope="module", autouse=True)

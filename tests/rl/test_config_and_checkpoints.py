@@ -6,9 +6,9 @@ import dataclasses
 import pytest
 import torch
 
-from dtradar_rl.config import ConfigError, DQNConfig, config_for
-from dtradar_rl.offline import OfflineConfig
-from dtradar_rl.policy import CheckpointError, load_policy, read_checkpoint, save_torch_atomic
+from dtradar_rl.task.config import ConfigError, DQNConfig, config_for
+from dtradar_rl.offline.trainer import OfflineConfig
+from dtradar_rl.agents.policy import CheckpointError, load_policy, read_checkpoint, save_torch_atomic
 
 
 @pytest.mark.parametrize("changes, flag", [

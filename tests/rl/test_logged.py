@@ -9,14 +9,14 @@ import torch
 
 import dtradar_data
 from dtradar_data.core.errors import SchemaMismatchError
-from dtradar_rl.behaviour import BehaviourSpec
-from dtradar_rl.config import ConfigError, config_for
-from dtradar_rl.data import load_dataset
-from dtradar_rl.logged import LogConfig, d3rlpy_arrays, export_minari, from_minari, log_dataset, to_mdp_dataset
-from dtradar_rl.mdp import GridMDP
-from dtradar_rl.observations import Normalizer, build_observations
-from dtradar_rl.offline import OfflineConfig, train_offline
-from dtradar_rl.policy import QNetwork, save_checkpoint
+from dtradar_rl.agents.behaviours import BehaviourSpec
+from dtradar_rl.task.config import ConfigError, config_for
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.offline.logged import LogConfig, d3rlpy_arrays, export_minari, from_minari, log_dataset, to_mdp_dataset
+from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.offline.trainer import OfflineConfig, train_offline
+from dtradar_rl.agents.policy import QNetwork, save_checkpoint
 
 SMALL = "synthetic-10x8"
 CFG = LogConfig(scene=SMALL, behaviour="noisy-shortest", steps=1200, num_envs=12, max_steps=15, seed=2,

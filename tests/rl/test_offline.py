@@ -10,12 +10,12 @@ import torch
 
 from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.cli import main
-from dtradar_rl.config import ConfigError
-from dtradar_rl.data import load_dataset
-from dtradar_rl.evaluate import evaluate
-from dtradar_rl.mdp import GridMDP, reward_fn
-from dtradar_rl.observations import Normalizer, build_observations
-from dtradar_rl.offline import (
+from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.evaluation.evaluate import evaluate
+from dtradar_rl.task.mdp import GridMDP, reward_fn
+from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.offline.trainer import (
     ActionScores,
     OfflineConfig,
     OfflinePolicy,

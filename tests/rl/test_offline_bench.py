@@ -4,7 +4,7 @@ JSON, Markdown and a bar plot."""
 import json
 
 from dtradar_rl.cli import main
-from dtradar_rl.offline_bench import OfflineBenchConfig, aggregate, run_bench
+from dtradar_rl.experiments.offline_bench import OfflineBenchConfig, aggregate, run_bench
 
 
 def test_mean_and_std_are_over_seeds():

@@ -3,7 +3,7 @@
 import json
 
 from dtradar_rl.cli import main
-from dtradar_rl.paper import PaperConfig, cross_groups
+from dtradar_rl.experiments.paper import PaperConfig, cross_groups
 
 
 def test_a_tiny_paper_run_on_synthetic_tables_writes_every_file_of_the_report(tmp_path, root, capsys):
@@ -38,7 +38,7 @@ def test_the_cross_quadrant_figure_groups_the_built_quadrants_of_each_city():
 
 
 def test_the_report_calls_the_machine_shared_only_when_other_jobs_competed():
-    from dtradar_rl.paper_md import shared_machine
+    from dtradar_rl.experiments.paper_report import shared_machine
 
     assert not shared_machine({"cores": 2, "load_avg_start": 0.08, "load_avg_max": 2.0})  # the run's own 2 threads
     assert shared_machine({"cores": 2, "load_avg_start": 0.3, "load_avg_max": 6.5})  # helpers training alongside

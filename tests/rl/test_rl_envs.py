@@ -8,10 +8,10 @@ from gymnasium.utils.env_checker import check_env
 
 from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import UnknownNameError
-from dtradar_rl.batched import BatchedNavEnv
-from dtradar_rl.data import load_dataset, synthetic_blocked
-from dtradar_rl.envs import DtradarNavEnv, register_dataset_envs
-from dtradar_rl.observations import OBS_DIMS, PAPER_COLUMNS, Normalizer, build_observations
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.task.twins import load_dataset, synthetic_blocked
+from dtradar_rl.envs.nav_env import DtradarNavEnv, register_dataset_envs
+from dtradar_rl.task.observations import OBS_DIMS, PAPER_COLUMNS, Normalizer, build_observations
 
 
 @pytest.fixture(scope="module")

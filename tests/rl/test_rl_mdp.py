@@ -5,8 +5,8 @@ import pytest
 
 from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import UnknownNameError
-from dtradar_rl.envs import DtradarNavEnv
-from dtradar_rl.mdp import GridMDP, NoConnectedPairError, default_max_steps, reward_fn
+from dtradar_rl.envs.nav_env import DtradarNavEnv
+from dtradar_rl.task.mdp import GridMDP, NoConnectedPairError, default_max_steps, reward_fn
 
 X_MINUS, X_PLUS, Y_MINUS, Y_PLUS = range(4)
 

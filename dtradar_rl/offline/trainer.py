@@ -1,16 +1,16 @@
 """Offline-RL baselines with d3rlpy: log a behaviour policy's transitions on a twin, train on them, evaluate.
 
-    from dtradar_rl.offline import OfflineConfig, train_offline
+    from dtradar_rl.offline.trainer import OfflineConfig, train_offline
     result = train_offline(OfflineConfig(scene="cubicle", algorithm="cql"))
     result.model      # runs/cubicle/offline/cql/model.d3, with config.json, dataset.h5, results.{json,md} beside it
 
 Three stages, each usable on its own:
 
 1. **Logging** (:func:`roll_behaviour`, :func:`log_transitions`). ``num_envs`` robots act with a *behaviour policy*
-   in the batched environment (:class:`dtradar_rl.batched.BatchedNavEnv`, same observations and rewards as online
+   in the batched environment (:class:`dtradar_rl.envs.batched.BatchedNavEnv`, same observations and rewards as online
    DQN) until about ``transitions`` steps are logged. ``noisy-shortest`` takes, with probability
    ``shortest_prob``, a breadth-first shortest-path move (ties broken at random, distances from
-   :meth:`GridMDP.bfs_distances_many <dtradar_rl.mdp.GridMDP.bfs_distances_many>` on the logged twin) and otherwise
+   :meth:`GridMDP.bfs_distances_many <dtradar_rl.task.mdp.GridMDP.bfs_distances_many>` on the logged twin) and otherwise
    a uniformly random move; ``random`` always moves at random. The interleaved ``[step, robot]`` streams are
    reordered robot by robot, so every episode is contiguous and ends in exactly one flag: ``terminal`` (target
    reached) or ``timeout`` (the step limit, or the logging budget ending mid-episode; an unfinished tail shorter
@@ -23,9 +23,9 @@ Three stages, each usable on its own:
    file logging and progress bars off (our ``losses.csv`` holds the per-epoch losses). d3rlpy's defaults are
    tuned for Atari (learning rate 6.25e-5, target sync every 8000 updates, γ = 0.99); here γ, learning rate,
    target interval and hidden sizes come from :class:`OfflineConfig`, with defaults measured on the cubicle twin.
-3. **Evaluation**: :class:`OfflinePolicy` wraps the trained algorithm as a :class:`dtradar_rl.dqn.Policy`, so
-   :func:`dtradar_rl.evaluate.evaluate` runs it unchanged (greedy action = ``algo.predict``). The obstacle shield of
-   :meth:`Policy.act <dtradar_rl.dqn.Policy.act>` is reused: a vetoed greedy move is replaced by the best allowed
+3. **Evaluation**: :class:`OfflinePolicy` wraps the trained algorithm as a :class:`dtradar_rl.train.dqn.Policy`, so
+   :func:`dtradar_rl.evaluation.evaluate.evaluate` runs it unchanged (greedy action = ``algo.predict``). The obstacle shield of
+   :meth:`Policy.act <dtradar_rl.train.dqn.Policy.act>` is reused: a vetoed greedy move is replaced by the best allowed
    one by the algorithm's action values (``predict_value``; BC: its policy logits). Blueprint → blueprint and
    blueprint → dynamic go to ``results.json`` / ``results.md`` as for ``make eval``.
 
@@ -51,21 +51,21 @@ from dtradar_data.core.errors import unknown_name
 from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_data.store.transitions import LoggedDataset
 
-from .batched import BatchedNavEnv
-from .behaviour import ShortestPathOracle
-from .config import ConfigError, TwinConfig
-from .data import load_dataset
-from .evaluate import evaluate_twins, write_results
-from .logged import (
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.agents.behaviours import ShortestPathOracle
+from dtradar_rl.task.config import ConfigError, TwinConfig
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.evaluation.evaluate import evaluate_twins, write_results
+from dtradar_rl.offline.logged import (
     as_logged,
     check_compatible,
     import_d3rlpy,
     quiet_d3rlpy,
     to_mdp_dataset,
 )
-from .observations import Normalizer, build_observations
-from .policy import CheckpointError, Policy
-from .runtime import auto_threads
+from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.agents.policy import CheckpointError, Policy
+from dtradar_rl.task.runtime import auto_threads
 
 OFFLINE_FORMAT = "dtradar-offline/1"
 #: Algorithm names and the d3rlpy config class each one uses.
@@ -82,7 +82,7 @@ class OfflineConfig(TwinConfig):
     """d3rlpy algorithm: cql (DiscreteCQL), bcq (DiscreteBCQ), bc (DiscreteBC), dqn (DQN, offline), ddqn
     (DoubleDQN, offline), nfq (NFQ: fitted Q, no target network)"""
     reward: str = "geodesic"
-    """reward logged with each transition: paper, scaled, euclidean or geodesic (see dtradar_rl.mdp)"""
+    """reward logged with each transition: paper, scaled, euclidean or geodesic (see dtradar_rl.task.mdp)"""
     behaviour: str = "noisy-shortest"
     """behaviour policy that logs the data: noisy-shortest (a breadth-first shortest-path move with probability
     shortest-prob, else a random move) or random"""
@@ -314,7 +314,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | Any | None = None) -> O
 
     ``dataset``: the twin to log on (default: load ``cfg.dataset_name``), a stored logged dataset
     (:class:`~dtradar_data.store.transitions.LoggedDataset` or its name; also ``cfg.logged``), checked to have been
-    logged on that twin with ``cfg.obs`` (:func:`dtradar_rl.logged.check_compatible`), or an already logged d3rlpy
+    logged on that twin with ``cfg.obs`` (:func:`dtradar_rl.offline.logged.check_compatible`), or an already logged d3rlpy
     ``MDPDataset``/``ReplayBuffer`` (then it must have been logged on ``cfg.dataset_name`` with ``cfg.obs``; its
     normaliser is refitted on that twin, which reproduces the one used for logging).
     """
@@ -422,7 +422,7 @@ class ActionScores:
 
 @dataclass
 class OfflinePolicy(Policy):
-    """A trained d3rlpy algorithm as a :class:`dtradar_rl.dqn.Policy`: greedy moves from ``algo.predict``, the same
+    """A trained d3rlpy algorithm as a :class:`dtradar_rl.train.dqn.Policy`: greedy moves from ``algo.predict``, the same
     observation preset, normaliser and twin environment, and the same obstacle shield."""
 
     algo: Any = None
@@ -468,7 +468,7 @@ def load_offline_policy(path: str | Path, device: str = "cpu") -> OfflinePolicy:
 
 def evaluate_offline(policy: OfflinePolicy, cfg: OfflineConfig,
                      datasets: dict[str, Dataset] | None = None) -> list[dict[str, Any]]:
-    """Rows of :func:`dtradar_rl.evaluate.evaluate` on every twin in ``cfg.eval_variants`` (missing ones are
+    """Rows of :func:`dtradar_rl.evaluation.evaluate.evaluate` on every twin in ``cfg.eval_variants`` (missing ones are
     skipped), unshielded and, with ``cfg.shield`` and the neighbors preset, shielded."""
     rows = evaluate_twins(policy, cfg.scene, cfg.eval_variants, label=f"{cfg.algorithm}: ", pairs=cfg.pairs,
                           seed=cfg.eval_seed, max_steps=cfg.max_steps or None, device=cfg.device, shield=cfg.shield,

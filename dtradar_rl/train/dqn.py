@@ -1,13 +1,13 @@
 """Deep Q-learning on a dataset's navigation MDP, readable top to bottom (after CleanRL's ``dqn.py``).
 
-    from dtradar_rl.dqn import config_for, train
+    from dtradar_rl.train.dqn import config_for, train
     result = train(config_for("tuned", scene="synthetic", total_env_steps=100_000))
     result.checkpoint   # runs/synthetic/dqn/model.pt, with config.json, curves.csv and curves.png beside it
 
-Four presets (:data:`~dtradar_rl.config.PRESETS`, :func:`~dtradar_rl.config.config_for`); what each reaches is
+Four presets (:data:`~dtradar_rl.task.config.PRESETS`, :func:`~dtradar_rl.task.config.config_for`); what each reaches is
 measured in the README (Navigation, Benchmarks), not here:
 
-``paper``  the paper's protocol: its Table VI start/target pair per run (:mod:`dtradar_rl.pairs`), ``paper``
+``paper``  the paper's protocol: its Table VI start/target pair per run (:mod:`dtradar_rl.task.pairs`), ``paper``
            observations (10 inputs, no target) and reward, 5 dense ReLU layers of 256, γ = 0.9, constant ε = 0.1,
            one environment, one gradient update per step, episodes until the target (safety cap 10x the shortest
            path), 500 episodes indoor / 80 outdoor.
@@ -15,17 +15,17 @@ measured in the README (Navigation, Benchmarks), not here:
            neighbours), ``geodesic`` shaped reward, Double DQN, 2 x 256 hidden units, γ = 0.5, 256 robots in the
            batched torch environment, ε decaying 1 → 0.05 over 40 % of the budget, Adam 1e-3 decaying linearly to
            1e-4, one gradient update (batch 512) per 48 environment steps: updates, not table lookups, bound the speed.
-``robust`` ``tuned`` + obstacle augmentation (domain randomisation, :mod:`dtradar_rl.batched`): at every episode
+``robust`` ``tuned`` + obstacle augmentation (domain randomisation, :mod:`dtradar_rl.envs.batched`): at every episode
            reset each robot gets 10 random extra obstacles of 1 x 1 to 2 x 2 cells that collide and read as blocked
            neighbours, with the geodesic potential replanned around them, so the agent learns to detour.
-``memory`` ``robust`` + a window of the obstacles sensed and cells visited so far (:mod:`dtradar_rl.memory`), so a
+``memory`` ``robust`` + a window of the obstacles sensed and cells visited so far (:mod:`dtradar_rl.envs.memory`), so a
            dead end, once seen, is not revisited.
 
 The loop: every robot acts ε-greedily, the batch of transitions goes into a replay buffer, finished robots are
 reset; every ``env_steps_per_update`` environment steps one Huber-loss update on a random minibatch follows, with
 targets from a target network copied every ``target_update_every`` updates; with ``expert_weight`` > 0, DQfD's
 large-margin loss towards the twin's breadth-first shortest moves is added to it (:func:`expert_margin_loss`; what
-:mod:`dtradar_rl.adapt` fine-tunes with). Checkpoints carry the config and the
+:mod:`dtradar_rl.train.adapt` fine-tunes with). Checkpoints carry the config and the
 feature normaliser; ``last.pt`` also carries optimiser, replay buffer and random states, so ``resume=True``
 continues a run exactly where it stopped.
 """
@@ -49,14 +49,14 @@ from torch import nn
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import open_atomic
 
-from .config import PRESETS, DQNConfig, config_for
-from .data import load_dataset
-from .mdp import GridMDP
-from .memory import batched_env
-from .observations import Normalizer
-from .pairs import ResolvedPair, resolve
-from .plots import plot_curves
-from .policy import (
+from dtradar_rl.task.config import PRESETS, DQNConfig, config_for
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.envs.memory import batched_env
+from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.pairs import ResolvedPair, resolve
+from dtradar_rl.viz.plots import plot_curves
+from dtradar_rl.agents.policy import (
     CHECKPOINT_FORMAT,
     QNetwork,
     load_policy,
@@ -65,7 +65,7 @@ from .policy import (
     save_torch_atomic,
     write_config,
 )
-from .runtime import auto_threads
+from dtradar_rl.task.runtime import auto_threads
 
 
 # -- replay buffer -------------------------------------------------------------------------------------------------
@@ -142,7 +142,7 @@ def epsilon(cfg: DQNConfig, env_steps: int) -> float:
 
 
 def training_pair(cfg: DQNConfig, ds: Dataset) -> ResolvedPair | None:
-    """The run's fixed (start, target) pair on ``ds`` (:mod:`dtradar_rl.pairs`), or ``None`` for random pairs."""
+    """The run's fixed (start, target) pair on ``ds`` (:mod:`dtradar_rl.task.pairs`), or ``None`` for random pairs."""
     if not cfg.fixed_pair:
         return None
     return resolve(GridMDP.from_dataset(ds), ds.grid_info, cfg.scene, cfg.start, cfg.target)
@@ -152,7 +152,7 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
           normalizer: Normalizer | None = None, callback: Callable[..., bool] | None = None) -> TrainResult:
     """Train a DQN agent on ``dataset`` (default: load ``config.dataset_name``); write checkpoints and curves.
 
-    Fine-tuning (:mod:`dtradar_rl.adapt`): ``init`` is a Q-network state dict to start from and ``normalizer`` the
+    Fine-tuning (:mod:`dtradar_rl.train.adapt`): ``init`` is a Q-network state dict to start from and ``normalizer`` the
     one it was trained with; ``callback(q, env_steps, train_s)`` runs after every batch of steps with the seconds
     spent in the training loop (set-up excluded), its own time is not counted there or in ``wall_s``, and it
     stops training by returning True."""

@@ -1,6 +1,6 @@
 """Behaviour policies that log offline-RL data, and the batched rollout that logs them.
 
-Kinds (:data:`BEHAVIOURS`), all seeded, each acting for every robot of a :class:`~dtradar_rl.batched.BatchedNavEnv`:
+Kinds (:data:`BEHAVIOURS`), all seeded, each acting for every robot of a :class:`~dtradar_rl.envs.batched.BatchedNavEnv`:
 
 - ``random``: a uniformly random move at every step.
 - ``noisy-shortest``: with probability ``shortest_prob`` a breadth-first shortest-path move towards the target
@@ -31,10 +31,10 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import unknown_name
 from dtradar_data.core.files import sha256_file
 
-from .batched import BatchedNavEnv
-from .config import ConfigError
-from .observations import Normalizer
-from .policy import Policy, load_policy
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.agents.policy import Policy, load_policy
 
 BEHAVIOURS: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy", "mixture")
 SINGLE: tuple[str, ...] = BEHAVIOURS[:3]
@@ -197,7 +197,7 @@ def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, dev
 
 @dataclass
 class BehaviourPolicy(Policy):
-    """A behaviour as a :class:`~dtradar_rl.policy.Policy`, so :func:`dtradar_rl.evaluate.rollout` measures it on
+    """A behaviour as a :class:`~dtradar_rl.agents.policy.Policy`, so :func:`dtradar_rl.evaluation.evaluate.rollout` measures it on
     any twin like a trained agent: the env it asks for gets an :class:`Actor` (its shortest-path oracle plans on the
     twin being evaluated; robot ``i`` of a mixture uses component ``i mod k``). Stochastic, seeded by ``seed``."""
 
@@ -215,7 +215,7 @@ class BehaviourPolicy(Policy):
 
     def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
         if self._actor is None:
-            raise ConfigError("a behaviour policy acts only in the env it made (use dtradar_rl.evaluate.rollout)")
+            raise ConfigError("a behaviour policy acts only in the env it made (use dtradar_rl.evaluation.evaluate.rollout)")
         return self._actor(obs)
 
 

@@ -13,8 +13,8 @@ What a user would pick without learning. At every step each robot
    along a shortest path. If the sensed obstacles cut the target off (a mislocalisation can do that) the robot
    forgets them and replans on the blueprint alone.
 
-:class:`FingerprintPlanner` has the part of :class:`~dtradar_rl.policy.Policy` the evaluation loop uses
-(``env_for``, ``act``, ``obs_preset``, ``meta``), so :func:`~dtradar_rl.evaluate.evaluate_twins` runs it unchanged.
+:class:`FingerprintPlanner` has the part of :class:`~dtradar_rl.agents.policy.Policy` the evaluation loop uses
+(``env_for``, ``act``, ``obs_preset``, ``meta``), so :func:`~dtradar_rl.evaluation.evaluate.evaluate_twins` runs it unchanged.
 It keeps per-robot state between calls and starts afresh in ``env_for`` (one batch of episodes per env).
 """
 
@@ -27,10 +27,10 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 
-from .batched import BatchedNavEnv
-from .mdp import GridMDP
-from .memory import flag_columns
-from .observations import PAPER_COLUMNS, Normalizer, build_observations
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.envs.memory import flag_columns
+from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
 
 #: Observation columns of the cell's own radio features (``neighbors`` preset).
 RADIO_COLUMNS = slice(2, len(PAPER_COLUMNS))
@@ -65,7 +65,7 @@ class FingerprintPlanner:
         self.config = None
         self._n = -1
 
-    # -- the Policy interface used by dtradar_rl.evaluate -------------------------------------------------------------
+    # -- the Policy interface used by dtradar_rl.evaluation.evaluate -------------------------------------------------------------
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
         self._start(num_envs)
         return BatchedNavEnv.from_dataset(ds, num_envs, obs="neighbors", normalizer=self.normalizer, **kwargs)
@@ -153,6 +153,6 @@ class FingerprintPlanner:
 
 def planner_for_scene(scene: str, device: str = "cpu") -> FingerprintPlanner:
     """The baseline with the blueprint of ``scene`` as its map and fingerprint table."""
-    from .data import load_dataset
+    from dtradar_rl.task.twins import load_dataset
 
     return FingerprintPlanner(load_dataset(f"{scene}/blueprint"), device=device)

@@ -1,6 +1,6 @@
 """``report.md`` of ``make paper``: the paper's tables and figures, ours beside the paper's numbers.
 
-A pure function of the :class:`~dtradar_rl.paper.Report` (no I/O), so the wording of the report is tested without
+A pure function of the :class:`~dtradar_rl.experiments.paper.Report` (no I/O), so the wording of the report is tested without
 training anything.
 """
 

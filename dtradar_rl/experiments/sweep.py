@@ -4,8 +4,8 @@
     python -m dtradar_rl sweep --scenes cubicle --seeds 0 1 --executor serial    # no Ray
     python -m dtradar_rl sweep --scenes cubicle --ray-address auto               # an existing Ray cluster
 
-Each run is the same as ``make train`` then ``make eval`` (:func:`~dtradar_rl.dqn.train`,
-:func:`~dtradar_rl.evaluate.evaluate_twins`), with its own output folder ``<out>/<scene>/seed<k>``; a Ray task asks
+Each run is the same as ``make train`` then ``make eval`` (:func:`~dtradar_rl.train.dqn.train`,
+:func:`~dtradar_rl.evaluation.evaluate.evaluate_twins`), with its own output folder ``<out>/<scene>/seed<k>``; a Ray task asks
 for ``threads`` CPUs and uses that many torch threads, so runs do not fight over cores. The results are gathered
 into ``sweep.json``, ``sweep.md`` (mean and standard deviation over seeds per scene and evaluation case) and
 ``sweep.png`` (bars with the spread).
@@ -27,10 +27,10 @@ import numpy as np
 from dtradar_data.core.errors import MissingDependencyError
 from dtradar_data.core.files import write_atomic
 
-from .config import PRESETS, ConfigError, config_for, flag
-from .dqn import train
-from .evaluate import evaluate_twins
-from .policy import load_policy
+from dtradar_rl.task.config import PRESETS, ConfigError, config_for, flag
+from dtradar_rl.train.dqn import train
+from dtradar_rl.evaluation.evaluate import evaluate_twins
+from dtradar_rl.agents.policy import load_policy
 
 METRICS = ("success_rate", "spl", "collisions")
 
@@ -156,7 +156,7 @@ def write_report(result: dict[str, Any], out: Path) -> None:
 
 
 def _plot(summary: list[dict[str, Any]], path: Path) -> None:
-    from .plots import _save, plt
+    from dtradar_rl.viz.plots import _save, plt
 
     fig, ax = plt.subplots(figsize=(max(5.0, 1.4 * len(summary) + 2), 4))
     labels = [f"{e['scene']} →\n{e['evaluated_on'].split('/')[-1]}" for e in summary]

@@ -1,4 +1,4 @@
-"""The paper's figures that :mod:`.plots` does not draw: training curves per episode with the paper's minimum beside
+"""The paper's figures that :mod:`dtradar_rl.viz.plots` does not draw: training curves per episode with the paper's minimum beside
 ours (Figs. 9, 11-16, 18-21) and the cross-quadrant bars (Fig. 17)."""
 
 from __future__ import annotations
@@ -8,14 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .plots import _save, moving_average, plt
+from dtradar_rl.viz.plots import _save, moving_average, plt
 
 
 def plot_episode_curves(episodes: Sequence[tuple], path: Path, *, shortest: int | None = None,
                         paper_min: int | None = None, title: str = "") -> Path:
     """Reward, steps and collisions per training episode (as the paper plots them), with the breadth-first optimum
     and the paper's minimum steps drawn on the steps panel. ``episodes``: rows ``(episode, env_step, reward,
-    steps, collisions, success)`` as :func:`dtradar_rl.dqn.train` writes them to ``curves.csv``."""
+    steps, collisions, success)`` as :func:`dtradar_rl.train.dqn.train` writes them to ``curves.csv``."""
     fig, axes = plt.subplots(1, 3, figsize=(15, 3.6))
     e = np.asarray(episodes, dtype=np.float64).reshape(-1, 6)
     k = max(1, len(e) // 25)

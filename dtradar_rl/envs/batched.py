@@ -1,6 +1,6 @@
 """A batched torch environment: thousands of robots stepped at once by table lookup, on CPU or CUDA.
 
-Same MDP, rewards and observations as the gymnasium env (:class:`dtradar_rl.envs.DtradarNavEnv`); a test checks
+Same MDP, rewards and observations as the gymnasium env (:class:`dtradar_rl.envs.nav_env.DtradarNavEnv`); a test checks
 they agree step for step. There is no automatic reset: :meth:`BatchedNavEnv.step` returns the next observation of
 every robot (terminal ones included, which is what a replay buffer needs) and the caller resets finished robots with
 :meth:`BatchedNavEnv.reset_where`.
@@ -44,8 +44,8 @@ import torch
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
 
-from .mdp import GridMDP, NoConnectedPairError, check_reward, potential_kind, reward_fn
-from .observations import Normalizer, ObservationTable, build_observations, check_preset
+from dtradar_rl.task.mdp import GridMDP, NoConnectedPairError, check_reward, potential_kind, reward_fn
+from dtradar_rl.task.observations import Normalizer, ObservationTable, build_observations, check_preset
 
 #: Above this many (target, cell) entries the geodesic distance table keeps only a random pool of targets.
 MAX_DISTANCE_TABLE = 32_000_000
@@ -296,8 +296,8 @@ class BatchedNavEnv:
         """``bool[num_envs, 4]``: the moves that take each robot one cell closer to its target along a breadth-first
         shortest path of the map the episode is played on (with obstacle augmentation, the robot's augmented grid).
 
-        This is the twin's own answer, known because the table is: :mod:`dtradar_rl.dqn` uses it as the expert of a
-        large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin (:mod:`dtradar_rl.adapt`).
+        This is the twin's own answer, known because the table is: :mod:`dtradar_rl.train.dqn` uses it as the expert of a
+        large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin (:mod:`dtradar_rl.train.adapt`).
         A robot with no such move (cut off from its target) gets an all-false row. Needs the ``geodesic`` reward,
         whose distance tables it reads."""
         if self.potential != "geodesic":

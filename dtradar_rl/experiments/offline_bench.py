@@ -8,10 +8,10 @@
    greedy policy of the ``epsilon-greedy`` behaviour and of the mixture's third component.
 2. Every behaviour in ``--behaviours`` logs ``--steps`` steps on the blueprint twin into the store
    (``<scene>/blueprint/<behaviour>``, reused when already logged with the same settings; see
-   :mod:`dtradar_rl.logged`). Its own success rate and mean return on those episodes are reported beside the
+   :mod:`dtradar_rl.offline.logged`). Its own success rate and mean return on those episodes are reported beside the
    algorithms trained on it.
 3. Every algorithm in ``--algorithms`` (d3rlpy DiscreteCQL, DiscreteBCQ, DiscreteBC, DQN, DoubleDQN, NFQ) trains
-   ``--n-steps`` updates on each dataset for every seed, through :func:`dtradar_rl.offline.train_offline` (same
+   ``--n-steps`` updates on each dataset for every seed, through :func:`dtradar_rl.offline.trainer.train_offline` (same
    hyper-parameters as ``make offline``), and is evaluated on the same seeded (start, target) pairs of both twins:
    success rate, SPL and collisions per episode, unshielded.
 4. ``bench.json`` (every run and the mean ± std over seeds, with the machine's load), ``bench.md`` (the table) and
@@ -33,13 +33,13 @@ import numpy as np
 from dtradar_data.core.files import write_atomic
 from dtradar_data.store.transitions import episode_stats
 
-from .behaviour import BEHAVIOURS, behaviour_policy
-from .config import ConfigError, config_for
-from .data import load_dataset
-from .evaluate import evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
-from .logged import LogConfig, log_dataset
-from .offline import ALGORITHMS, OfflineConfig, check_algorithm, train_offline
-from .policy import load_policy
+from dtradar_rl.agents.behaviours import BEHAVIOURS, behaviour_policy
+from dtradar_rl.task.config import ConfigError, config_for
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.evaluation.evaluate import evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
+from dtradar_rl.offline.logged import LogConfig, log_dataset
+from dtradar_rl.offline.trainer import ALGORITHMS, OfflineConfig, check_algorithm, train_offline
+from dtradar_rl.agents.policy import load_policy
 
 NAMES = {"cql": "DiscreteCQL", "bcq": "DiscreteBCQ", "bc": "DiscreteBC", "dqn": "DQN", "ddqn": "DoubleDQN",
          "nfq": "NFQ"}
@@ -118,7 +118,7 @@ def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, An
     path = Path(cfg.checkpoint or f"runs/{cfg.scene}/dqn/model.pt")
     if path.is_file():
         return path, {"trained_here": False}
-    from .dqn import train
+    from dtradar_rl.train.dqn import train
 
     say(f"no online DQN at {path}: training one (tuned, {cfg.online_steps} env steps)")
     t0 = time.perf_counter()

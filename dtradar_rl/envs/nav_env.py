@@ -10,9 +10,9 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError
 from dtradar_data.store.listing import list_datasets
 
-from .data import load_dataset
-from .mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
-from .observations import Normalizer, build_observations, check_preset
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.task.mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
+from dtradar_rl.task.observations import Normalizer, build_observations, check_preset
 
 SYNTHETIC_ENV_ID = "dtradar/synthetic-blueprint-v0"
 
@@ -34,13 +34,13 @@ class DtradarNavEnv(gym.Env):
 
     ## Observations
     ``Box(low, high, (D,), float32)`` (bounds: the range of the lookup tables), z-scored features of the
-    chosen preset (:mod:`dtradar_rl.observations`):
+    chosen preset (:mod:`dtradar_rl.task.observations`):
     ``paper`` (D = 10: x, y, AoA az/zen, AoD az/zen, coefficient real/imag, delay, phase; no target),
     ``goal`` (D = 12: paper + target x, y), ``neighbors`` (D = 48: paper + radio features and a has-radio flag of
     the four neighbouring cells + target x, y).
 
     ## Rewards
-    Chosen by name (:mod:`dtradar_rl.mdp`). ``paper``: ``-(dx² + dy²)`` (cell units, distance to the target after
+    Chosen by name (:mod:`dtradar_rl.task.mdp`). ``paper``: ``-(dx² + dy²)`` (cell units, distance to the target after
     the move) ``+ 5000`` on reaching the target ``- 5000`` on a collision. ``scaled``: the same terms divided to
     order one. ``euclidean`` / ``geodesic``: potential-based shaping with the straight-line / breadth-first
     distance, ``+1`` on reaching the target, ``-1`` on a collision.
@@ -187,7 +187,7 @@ def register_dataset_envs(**kwargs) -> list[str]:
     for name in ["synthetic/blueprint", "synthetic/dynamic", *built_datasets()]:
         eid = env_id(name)
         gym.registry.pop(eid, None)
-        gym.register(id=eid, entry_point="dtradar_rl.envs:DtradarNavEnv",
+        gym.register(id=eid, entry_point="dtradar_rl.envs.nav_env:DtradarNavEnv",
                      kwargs={"dataset": name, **kwargs}, disable_env_checker=True)
         ids.append(eid)
     return ids

@@ -5,7 +5,7 @@ oscillates (the failure behind most of the blueprint -> dynamic gap). Here each 
 episode, two maps of the grid:
 
 * ``sensed``: cells it has sensed as occupied: a neighbour whose radio features are missing (has-radio flag 0 in the
-  ``neighbors`` observation; an augmented obstacle reads the same, see :mod:`dtradar_rl.batched`) or off the grid;
+  ``neighbors`` observation; an augmented obstacle reads the same, see :mod:`dtradar_rl.envs.batched`) or off the grid;
 * ``visited``: cells it has stood on.
 
 The observation is the ``neighbors`` one followed by a ``(2R+1) x (2R+1)`` window of each map centred on the robot
@@ -25,10 +25,10 @@ from gymnasium import spaces
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError
 
-from .batched import BatchedNavEnv
-from .envs import DtradarNavEnv
-from .mdp import ACTION_DELTAS, GridMDP
-from .observations import (
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.envs.nav_env import DtradarNavEnv
+from dtradar_rl.task.mdp import ACTION_DELTAS, GridMDP
+from dtradar_rl.task.observations import (
     PAPER_COLUMNS,
     RADIO_FEATURES,
     Normalizer,
@@ -85,7 +85,7 @@ def _require_neighbors(obs_table: ObservationTable) -> None:
 
 
 class MemoryNavEnv(BatchedNavEnv):
-    """:class:`~dtradar_rl.batched.BatchedNavEnv` whose observation carries each robot's memory window."""
+    """:class:`~dtradar_rl.envs.batched.BatchedNavEnv` whose observation carries each robot's memory window."""
 
     def __init__(self, mdp: GridMDP, obs_table: ObservationTable, num_envs: int, *, memory_radius: int = 5, **kw):
         _require_neighbors(obs_table)

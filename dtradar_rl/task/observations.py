@@ -32,7 +32,7 @@ import numpy as np
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import unknown_name
 
-from .mdp import ACTION_DELTAS
+from dtradar_rl.task.mdp import ACTION_DELTAS
 
 #: The paper's ten inputs, in order (see the module docstring for the tenth).
 PAPER_COLUMNS: tuple[str, ...] = ("x_m", "y_m", "aoa_az_rad", "aoa_zen_rad", "aod_az_rad", "aod_zen_rad",

@@ -3,7 +3,7 @@
 An agent trained with ``--pair paper`` (or ``--start/--target``) has no target in its state, so random pairs say
 nothing about it; what the paper reports is whether, and in how many steps, it reaches *its* pair (Table VI,
 Figs. 10 and 22-24). The pair is the one recorded in the checkpoint; on another twin (the dynamic one) an end that
-became blocked, or cut off, is snapped to the nearest cell of the largest free region there (:mod:`.pairs`).
+became blocked, or cut off, is snapped to the nearest cell of the largest free region there (:mod:`dtradar_rl.task.pairs`).
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 
-from .dqn import training_pair
-from .evaluate import Rollouts, path_length, rollout
-from .mdp import GridMDP
-from .pairs import ResolvedPair, resolve
-from .policy import Policy
+from dtradar_rl.train.dqn import training_pair
+from dtradar_rl.evaluation.evaluate import Rollouts, path_length, rollout
+from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.pairs import ResolvedPair, resolve
+from dtradar_rl.agents.policy import Policy
 
 
 def policy_pair(policy: Policy, ds: Dataset) -> ResolvedPair | None:
@@ -34,7 +34,7 @@ def policy_pair(policy: Policy, ds: Dataset) -> ResolvedPair | None:
     ok = all(0 <= c[0] < mdp.nx and 0 <= c[1] < mdp.ny and not mdp.blocked[c[1], c[0]] for c in (s, t))
     if ok and mdp.connected(mdp.cell(*s), mdp.cell(*t)):
         return resolve(mdp, ds.grid_info, cfg.scene, s, t)
-    from .pairs import (
+    from dtradar_rl.task.pairs import (
         snap,  # the twin moved an obstacle onto an end: the nearest usable cell instead
     )
 
@@ -45,7 +45,7 @@ def policy_pair(policy: Policy, ds: Dataset) -> ResolvedPair | None:
 def evaluate_pair(policy: Policy, ds: Dataset, *, max_steps: int | None = None,
                   device: str = "cpu") -> tuple[dict[str, Any], ResolvedPair, Rollouts]:
     """One greedy episode of a fixed-pair policy on its pair on ``ds`` (capped like training: 10x the shortest
-    path unless ``max_steps``). Returns a results row (the columns of :func:`~dtradar_rl.evaluate.markdown_table`
+    path unless ``max_steps``). Returns a results row (the columns of :func:`~dtradar_rl.evaluation.evaluate.markdown_table`
     plus the pair), the pair and the rollout."""
     pair = policy_pair(policy, ds)
     if pair is None:

@@ -1,8 +1,8 @@
 """Trained policies and their checkpoints: the Q-network, a greedy :class:`Policy`, saving and loading ``model.pt``.
 
 A checkpoint is self-contained: weights, architecture, the training config, the observation preset and the feature
-normaliser, so a policy observes any twin the way it was trained. The online DQN (:mod:`dtradar_rl.dqn`) writes
-them; evaluation (:mod:`dtradar_rl.evaluate`) and the offline baselines (:mod:`dtradar_rl.offline`) read them.
+normaliser, so a policy observes any twin the way it was trained. The online DQN (:mod:`dtradar_rl.train.dqn`) writes
+them; evaluation (:mod:`dtradar_rl.evaluation.evaluate`) and the offline baselines (:mod:`dtradar_rl.offline.trainer`) read them.
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.files import open_atomic, write_atomic
 
-from .batched import BatchedNavEnv
-from .config import ConfigError, DQNConfig, TwinConfig
-from .memory import batched_env
-from .observations import PAPER_COLUMNS, RADIO_FEATURES, Normalizer, build_observations
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.task.config import ConfigError, DQNConfig, TwinConfig
+from dtradar_rl.envs.memory import batched_env
+from dtradar_rl.task.observations import PAPER_COLUMNS, RADIO_FEATURES, Normalizer, build_observations
 
 CHECKPOINT_FORMAT = "dtradar-dqn/1"
 

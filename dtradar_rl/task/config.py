@@ -1,7 +1,7 @@
 """Settings shared by every trainer: the twin to train on, how it is observed and rewarded, where the run goes.
 
 :class:`TwinConfig` is the base of :class:`DQNConfig` (online, this module) and
-:class:`~dtradar_rl.offline.OfflineConfig` (d3rlpy); each field's docstring is its ``--help`` line. ``validate()``
+:class:`~dtradar_rl.offline.trainer.OfflineConfig` (d3rlpy); each field's docstring is its ``--help`` line. ``validate()``
 checks every setting before the first expensive step and names the offending ``--flag``.
 """
 
@@ -16,10 +16,10 @@ import torch
 
 from dtradar_data.core.errors import DtradarError, unknown_name
 
-from .batched import AUG_POTENTIALS
-from .data import is_synthetic
-from .mdp import check_reward
-from .observations import check_preset
+from dtradar_rl.envs.batched import AUG_POTENTIALS
+from dtradar_rl.task.twins import is_synthetic
+from dtradar_rl.task.mdp import check_reward
+from dtradar_rl.task.observations import check_preset
 
 INDOOR_SCENES = ("cubicle", "meeting")
 PAIR_MODES = ("random", "paper")
@@ -64,7 +64,7 @@ class TwinConfig:
     obs: str = "neighbors"
     """observation preset: paper (10 inputs, no target), goal (+ target), neighbors (+ neighbouring cells' radio)"""
     reward: str = "geodesic"
-    """reward: paper (exact), scaled, euclidean or geodesic (shaped; see dtradar_rl.mdp)"""
+    """reward: paper (exact), scaled, euclidean or geodesic (shaped; see dtradar_rl.task.mdp)"""
     max_steps: int = 0
     """episode step limit (truncation); 0 = 4 * (nx + ny)"""
     num_envs: int = 256
@@ -76,7 +76,7 @@ class TwinConfig:
     device: str = "cpu"
     """torch device (cpu, cuda, cuda:1)"""
     threads: int = 0
-    """torch CPU threads (0 = auto: up to 2, fewer when other processes keep cores busy; see dtradar_rl.runtime)"""
+    """torch CPU threads (0 = auto: up to 2, fewer when other processes keep cores busy; see dtradar_rl.task.runtime)"""
     out: str = ""
     """output directory (default runs/<scene>/<trainer>)"""
     verbose: bool = True
@@ -128,21 +128,21 @@ class DQNConfig(TwinConfig):
     """the preset these settings started from (tuned, robust or paper); recorded in config.json"""
     aug_obstacles: int = 0
     """obstacle augmentation: extra random obstacles per robot, redrawn at every episode reset, that collide and
-    read as blocked neighbours (0 = off; see dtradar_rl.batched)"""
+    read as blocked neighbours (0 = off; see dtradar_rl.envs.batched)"""
     aug_obstacle_size: int = 2
     """largest side of an extra obstacle in cells (each is a 1..size x 1..size rectangle; 2 = 1 m at 0.5 m cells)"""
     aug_potential: str = "replan"
     """geodesic shaping with extra obstacles: replan (BFS per robot on its augmented grid) or blueprint"""
     memory_radius: int = 0
     """memory agent: append a (2R+1)^2 window of the cells sensed as occupied and visited so far this episode
-    (0 = off; needs --obs neighbors; see dtradar_rl.memory)"""
+    (0 = off; needs --obs neighbors; see dtradar_rl.envs.memory)"""
     total_env_steps: int = 600_000
     """training budget in environment steps (all robots together); the paper's is 600K"""
     episodes: int = 0
     """also stop after this many finished episodes (0 = no limit; the paper: 500 indoor, 80 outdoor)"""
     pair: str = "random"
     """start/target pairs: random (a new connected pair every episode: goal-conditioned agents) or paper (one fixed
-    pair per run, the paper's protocol: the scene's Table VI pair on the grid, see dtradar_rl.pairs; episodes then
+    pair per run, the paper's protocol: the scene's Table VI pair on the grid, see dtradar_rl.task.pairs; episodes then
     run until the target, capped at 10x the pair's shortest path unless --max-steps is set)"""
     start: tuple[int, int] | None = None
     """fixed start cell (ix iy), with --target: one pair per run as with --pair paper, instead of Table VI's"""

@@ -1,7 +1,7 @@
 """A per-cell table as a grid navigation MDP: cells, moves, connectivity, shortest paths, rewards, start/target pairs.
 
-Everything here is plain numpy and framework-free; :mod:`dtradar_rl.envs` (gymnasium) and
-:mod:`dtradar_rl.batched` (torch) are two front ends over the same :class:`GridMDP`.
+Everything here is plain numpy and framework-free; :mod:`dtradar_rl.envs.nav_env` (gymnasium) and
+:mod:`dtradar_rl.envs.batched` (torch) are two front ends over the same :class:`GridMDP`.
 
 Conventions
 -----------

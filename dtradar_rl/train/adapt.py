@@ -2,7 +2,7 @@
 
     python -m dtradar_rl adapt --scene cubicle      # runs/<scene>/dqn/model.pt fine-tuned on cubicle/dynamic
 
-The blueprint checkpoint's network and normaliser are the starting point; DQN (:func:`dtradar_rl.dqn.train`) then
+The blueprint checkpoint's network and normaliser are the starting point; DQN (:func:`dtradar_rl.train.dqn.train`) then
 trains on the changed twin with its own breadth-first shaping, little exploration, a small constant learning rate
 and the checkpoint's obstacle augmentation. The changed map is known (it was just built, and the shaping already
 reads it), so by default the update is also told the right move: a large-margin loss (DQfD, Hester et al. 2018)
@@ -28,13 +28,13 @@ from typing import Any
 
 from dtradar_data.core.files import open_atomic, write_atomic
 
-from .config import ConfigError, config_for, flag
-from .data import load_dataset
-from .dqn import train
-from .evaluate import evaluate
-from .observations import Normalizer
-from .plots import plot_adapt_curves
-from .policy import Policy, load_policy
+from dtradar_rl.task.config import ConfigError, config_for, flag
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.dqn import train
+from dtradar_rl.evaluation.evaluate import evaluate
+from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.viz.plots import plot_adapt_curves
+from dtradar_rl.agents.policy import Policy, load_policy
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,13 @@
 """Logged offline-RL datasets: log a behaviour policy on a twin into the store, and open the result as Minari or d3rlpy.
 
-    from dtradar_rl.logged import LogConfig, log_dataset, to_mdp_dataset, export_minari
+    from dtradar_rl.offline.logged import LogConfig, log_dataset, to_mdp_dataset, export_minari
     logged = log_dataset(LogConfig(scene="cubicle", behaviour="noisy-shortest"))   # cubicle/blueprint/noisy-shortest
     logged = dtradar_data.load("cubicle/blueprint/noisy-shortest")                 # the same, from the store
     mdp = to_mdp_dataset(logged)            # d3rlpy MDPDataset, every logged transition kept and aligned
     minari_id = export_minari(logged)       # minari.load_dataset("dtradar/cubicle-blueprint-noisy-shortest-v0")
 
 Storage, names, versions and cards are :mod:`dtradar_data.store.transitions` (no torch there); the behaviour
-policies and the rollout are :mod:`dtradar_rl.behaviour`. This module joins them: :func:`log_dataset` computes the
+policies and the rollout are :mod:`dtradar_rl.agents.behaviours`. This module joins them: :func:`log_dataset` computes the
 version from the logging inputs *first*, so logging the same name with the same settings again only loads the stored
 version.
 
@@ -53,11 +53,11 @@ from dtradar_data.store.transitions import (
     write_logged,
 )
 
-from .behaviour import BEHAVIOURS, BehaviourSpec, roll
-from .config import ConfigError, TwinConfig
-from .data import load_dataset
-from .observations import Normalizer, build_observations
-from .runtime import auto_threads
+from dtradar_rl.agents.behaviours import BEHAVIOURS, BehaviourSpec, roll
+from dtradar_rl.task.config import ConfigError, TwinConfig
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.task.runtime import auto_threads
 
 
 @dataclass(frozen=True)
@@ -108,7 +108,7 @@ def parent_version(ds: Dataset) -> str:
 
 
 def settings_of(cfg: LogConfig, ds: Dataset) -> dict[str, Any]:
-    from .mdp import GridMDP
+    from dtradar_rl.task.mdp import GridMDP
 
     max_steps = cfg.max_steps or GridMDP.from_dataset(ds).max_steps
     return {"num_envs": cfg.num_envs, "obs": cfg.obs, "reward": cfg.reward, "max_steps": int(max_steps),

@@ -26,9 +26,9 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
 
-from .data import load_dataset
-from .mdp import GridMDP
-from .policy import Policy
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.agents.policy import Policy
 
 
 @dataclass
