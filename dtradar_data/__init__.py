@@ -8,7 +8,7 @@
 Layers, each importing only those below it (checked by import-linter in ``make test``)::
 
     cli                     the ``python -m dtradar_data`` commands
-    publish | build         Hub, committed cards, load-with-fallback | the resumable ray-tracing pipeline
+    publish | pipeline      Hub, committed cards, load-with-fallback | the resumable ray-tracing pipeline
     store   | rt            versions, local store, cards, listing    | LLVM discovery, Sionna tracer, path -> cell
     geometry                meshes, Mitsuba XML, occupancy, floor plans
     scenes                  the scene model, materials, scene files

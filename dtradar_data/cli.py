@@ -16,11 +16,11 @@ from typing import Annotated
 
 import tyro
 
-from dtradar_data.build import pipeline
-from dtradar_data.build.pipeline import BuildConfig
 from dtradar_data.core.boundary import DEBUG_HELP, EXIT_FAILED_CHECK, run_cli
 from dtradar_data.core.files import human_size
 from dtradar_data.core.layout import data_root
+from dtradar_data.pipeline import builder
+from dtradar_data.pipeline.builder import BuildConfig
 from dtradar_data.publish import cards, hub, logged_hub
 from dtradar_data.rt import llvm
 from dtradar_data.rt.tracer import smoke_test
@@ -214,7 +214,7 @@ class CheckCmd:
 
 
 def run_build(cfg: BuildConfig) -> int:
-    for ds in pipeline.build(cfg):
+    for ds in builder.build(cfg):
         tag = ds.meta.get("tag")
         print(f"{ds.name}@{tag or ds.version}: version {ds.version}, {ds.table.num_rows} cells, {ds.path}")
     return 0

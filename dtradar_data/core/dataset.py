@@ -1,6 +1,6 @@
 """A loaded dataset: one version of one ``scene/variant`` per-cell table, plus its metadata.
 
-The object is a read-only view; building and storing live in :mod:`dtradar_data.build` and
+The object is a read-only view; building and storing live in :mod:`dtradar_data.pipeline` and
 :mod:`dtradar_data.store`. ``Dataset.from_table`` wraps an in-memory table (tests, synthetic data) the same way.
 """
 

@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from dtradar_data import cli
-from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.store import local as store
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
@@ -63,7 +63,7 @@ def test_verify_passes_then_fails_after_a_flipped_byte(root, capsys):
 
 
 def test_build_calls_the_pipeline_with_the_parsed_config(root, capsys, monkeypatch):
-    pipeline = pytest.importorskip("dtradar_data.build.pipeline")
+    builder = pytest.importorskip("dtradar_data.pipeline.builder")
     seen = []
 
     def fake_build(config):
@@ -71,7 +71,7 @@ def test_build_calls_the_pipeline_with_the_parsed_config(root, capsys, monkeypat
         put()
         return [store.load("cubicle/blueprint")]
 
-    monkeypatch.setattr(pipeline, "build", fake_build)
+    monkeypatch.setattr(builder, "build", fake_build)
     assert cli.main(["build", "--scene", "cubicle", "--variant", "blueprint", "--rt.max-depth", "3"]) == 0
     assert seen[0].scene == "cubicle" and seen[0].variant == "blueprint" and seen[0].rt.max_depth == 3
     assert f"cubicle/blueprint@v0: version {V0}" in capsys.readouterr().out

@@ -9,8 +9,8 @@ import pytest
 from huggingface_hub import DatasetCard
 
 from dtradar_data import cli
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_SCHEMA
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish import cards
 from dtradar_data.store import card
 from dtradar_data.store import local as store

@@ -12,8 +12,8 @@ import pytest
 from huggingface_hub import CommitOperationAdd, CommitOperationDelete, constants
 
 import dtradar_data
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import CorruptDatasetError, HubError
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish import hub
 from dtradar_data.store import local as store
 

@@ -6,7 +6,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.rt.compare import compare
 
 

@@ -9,7 +9,6 @@ import pyarrow.parquet as pq
 import pytest
 
 import dtradar_data
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import (
     CorruptDatasetError,
     DatasetNotFoundError,
@@ -18,6 +17,7 @@ from dtradar_data.core.errors import (
     UnknownNameError,
 )
 from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, RADIO_COLUMNS
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.store import local as store
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"

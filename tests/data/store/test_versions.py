@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import RevisionNotFoundError
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.store import local as store
 from dtradar_data.store import versions
 

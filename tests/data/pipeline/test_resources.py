@@ -2,9 +2,9 @@
 
 import pytest
 
-from dtradar_data.build import pipeline, resources
-from dtradar_data.build.pipeline import BuildConfig
-from dtradar_data.build.resources import InsufficientResourcesError, estimate_memory
+from dtradar_data.pipeline import builder, resources
+from dtradar_data.pipeline.builder import BuildConfig
+from dtradar_data.pipeline.resources import InsufficientResourcesError, estimate_memory
 from dtradar_data.rt.settings import RTSettings
 
 
@@ -13,13 +13,13 @@ def no_tracing(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("traced although the build could not fit")
 
-    monkeypatch.setattr(pipeline, "trace_grid", refuse)
+    monkeypatch.setattr(builder, "trace_grid", refuse)
 
 
 def test_too_little_memory_fails_before_tracing_naming_the_path_buffer(root, monkeypatch, no_tracing):
     monkeypatch.setattr(resources, "available_memory", lambda: 512 * 2**20)
     with pytest.raises(InsufficientResourcesError, match="max-num-paths-per-src") as err:
-        pipeline.build(BuildConfig(scene="cubicle", variant="all"))
+        builder.build(BuildConfig(scene="cubicle", variant="all"))
     assert "0.5 GiB are available" in str(err.value)
     assert not (root / "datasets").exists()
 
@@ -27,7 +27,7 @@ def test_too_little_memory_fails_before_tracing_naming_the_path_buffer(root, mon
 def test_too_little_disk_fails_before_tracing(root, monkeypatch, no_tracing):
     monkeypatch.setattr(resources.shutil, "disk_usage", lambda p: type("U", (), {"free": 1_000})())
     with pytest.raises(InsufficientResourcesError, match="MiB of disk"):
-        pipeline.build(BuildConfig(scene="dallas-q3", variant="blueprint"))
+        builder.build(BuildConfig(scene="dallas-q3", variant="blueprint"))
 
 
 def test_a_city_quadrant_needs_the_larger_outdoor_path_buffer_in_the_estimate():

@@ -22,8 +22,8 @@ import pyarrow as pa
 import shapely
 from shapely.geometry import Polygon
 
-from dtradar_data.build.batches import trace_batch
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.pipeline.batches import trace_batch
 from dtradar_data.rt import features
 
 RULE = 1  # bump when retrace_mask changes what it selects (it is part of the version)

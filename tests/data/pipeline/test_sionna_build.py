@@ -7,7 +7,7 @@ pytestmark = pytest.mark.sionna
 
 def test_a_bundled_sionna_scene_builds_a_small_grid_and_loads_by_its_dataset_name(root):
     import dtradar_data
-    from dtradar_data.build.pipeline import BuildConfig, build
+    from dtradar_data.pipeline.builder import BuildConfig, build
     from dtradar_data.rt.settings import RTSettings
 
     cfg = BuildConfig(scene="sionna:simple_street_canyon", grid=(-30.0, -20.0, 5.0, 6, 9), tx=(0.0, 0.0, 20.0),

@@ -10,9 +10,9 @@ from dataclasses import replace
 
 import pytest
 
-from dtradar_data.build import pipeline
-from dtradar_data.build.pipeline import BuildConfig, build_inputs, build_one, scene_config
 from dtradar_data.core.layout import work_root
+from dtradar_data.pipeline import builder
+from dtradar_data.pipeline.builder import BuildConfig, build_inputs, build_one, scene_config
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.store.versions import version_id
@@ -68,7 +68,7 @@ def test_a_worker_killed_mid_build_is_replaced_and_the_build_finishes_unchanged(
     on_ray = build_one(small_cubicle, cfg)
     killer.join()
     assert killed, "no worker was running mid-build to kill"
-    serial = pipeline.trace_grid(small_cubicle, spec_cfg.rt, None, progress=False)[0]
+    serial = builder.trace_grid(small_cubicle, spec_cfg.rt, None, progress=False)[0]
     assert on_ray.table.equals(serial)
 
 

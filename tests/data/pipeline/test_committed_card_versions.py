@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from dtradar_data.build.pipeline import BuildConfig, build_inputs, scene_config
+from dtradar_data.pipeline.builder import BuildConfig, build_inputs, scene_config
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.store.versions import version_id
 

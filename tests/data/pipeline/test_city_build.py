@@ -7,7 +7,7 @@ pytestmark = pytest.mark.sionna
 
 def test_a_dallas_quadrant_builds_and_loads_by_name_with_its_city_card_and_overview(root):
     import dtradar_data
-    from dtradar_data.build.pipeline import BuildConfig, build
+    from dtradar_data.pipeline.builder import BuildConfig, build
     from dtradar_data.rt.settings import RTSettings
 
     cfg = BuildConfig(scene="dallas-q3", variant="blueprint", cell_m=20.0, coverage_samples=50_000, progress=False,

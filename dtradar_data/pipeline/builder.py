@@ -22,11 +22,6 @@ import numpy as np
 from filelock import FileLock
 from tqdm.auto import tqdm
 
-from dtradar_data.build import differential
-from dtradar_data.build.batches import batch_path, load_batch, save_batch, trace_batch
-from dtradar_data.build.coverage import COVERAGE_SUBCELLS, render_coverage_png
-from dtradar_data.build.executors import import_ray, trace_on_ray
-from dtradar_data.build.resources import check_resources
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_data.core.ids import DatasetId, format_id
@@ -35,6 +30,11 @@ from dtradar_data.core.schema import SCHEMA_VERSION
 from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.meshscene import ground_height
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.pipeline import differential
+from dtradar_data.pipeline.batches import batch_path, load_batch, save_batch, trace_batch
+from dtradar_data.pipeline.coverage import COVERAGE_SUBCELLS, render_coverage_png
+from dtradar_data.pipeline.executors import import_ray, trace_on_ray
+from dtradar_data.pipeline.resources import check_resources
 from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
@@ -89,7 +89,7 @@ class BuildConfig:
     """With --executor ray: Ray workers (one scene each); 0 = one per CPU of the cluster."""
     differential: bool = False
     """Dynamic twins: start from the newest stored blueprint and re-trace only the cells whose radio features the
-    changed objects can affect (see dtradar_data.build.differential); the card records the parent version."""
+    changed objects can affect (see dtradar_data.pipeline.differential); the card records the parent version."""
     retrace_radius_m: float = 1.0
     """With --differential: also re-trace cells within this distance of a changed object or of its line of sight."""
 
@@ -133,7 +133,7 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
     """Trace every free cell of ``spec``'s grid. Returns ``(cells, paths, blocked, tracer)``.
 
     With ``work_dir``, each finished batch is saved there and reused on the next call (resumable). ``executor="ray"``
-    traces the missing batches as Ray tasks first (:mod:`dtradar_data.build.executors`; needs ``work_dir``), then
+    traces the missing batches as Ray tasks first (:mod:`dtradar_data.pipeline.executors`; needs ``work_dir``), then
     assembles the table from the work folder exactly as a serial build does.
     """
     blocked = occupancy(spec)

@@ -13,7 +13,7 @@ pytestmark = pytest.mark.sionna
 
 @pytest.fixture
 def config():
-    from dtradar_data.build.pipeline import BuildConfig
+    from dtradar_data.pipeline.builder import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     return BuildConfig(scene="cubicle", rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),
@@ -31,7 +31,7 @@ def small_cubicle():
 
 def test_a_built_dataset_loads_by_name_with_every_column_and_a_coverage_map(root, config, small_cubicle):
     import dtradar_data
-    from dtradar_data.build.pipeline import build_one
+    from dtradar_data.pipeline.builder import build_one
 
     ds = build_one(small_cubicle, config)
     loaded = dtradar_data.load("cubicle/blueprint")
@@ -51,7 +51,7 @@ def test_a_built_dataset_loads_by_name_with_every_column_and_a_coverage_map(root
 def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_new_one(root, config, small_cubicle,
                                                                                        capsys):
     import dtradar_data
-    from dtradar_data.build.pipeline import build_one
+    from dtradar_data.pipeline.builder import build_one
 
     first = build_one(small_cubicle, config)
     again = build_one(small_cubicle, config)
@@ -64,14 +64,14 @@ def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_n
 
 
 def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, monkeypatch):
-    from dtradar_data.build import pipeline
+    from dtradar_data.pipeline import builder
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(pipeline, "render_coverage_png", boom)
+    monkeypatch.setattr(builder, "render_coverage_png", boom)
     with pytest.raises(RuntimeError, match="disk full"):
-        pipeline.build_one(small_cubicle, config)
+        builder.build_one(small_cubicle, config)
     assert not (root / "datasets" / "cubicle" / "blueprint").exists() or not any(
         p.is_dir() for p in (root / "datasets" / "cubicle" / "blueprint").iterdir())
     # the traced batches survive, so the next attempt does not trace again
@@ -79,7 +79,7 @@ def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, 
     assert work, "finished batches are kept for the retry"
     monkeypatch.undo()
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root))
-    ds = pipeline.build_one(small_cubicle, config)
+    ds = builder.build_one(small_cubicle, config)
     from dtradar_data.geometry.occupancy import occupancy
 
     assert ds.table.num_rows == 24
@@ -128,7 +128,7 @@ height_m = 0.8
 
 def test_a_users_scene_file_builds_by_path_and_loads_by_its_name(root, tmp_path, config):
     import dtradar_data
-    from dtradar_data.build.pipeline import build
+    from dtradar_data.pipeline.builder import build
 
     path = tmp_path / "my-room.toml"
     path.write_text(TINY_ROOM)
@@ -143,22 +143,22 @@ def test_two_builds_of_one_version_at_once_both_finish_with_one_version_traced_o
                                                                                   monkeypatch):
     import threading
 
-    from dtradar_data.build import pipeline
+    from dtradar_data.pipeline import builder
 
     traced = []
-    real_trace = pipeline.trace_grid
+    real_trace = builder.trace_grid
 
     def counting_trace(*args, **kwargs):
         traced.append(threading.get_ident())
         return real_trace(*args, **kwargs)
 
-    monkeypatch.setattr(pipeline, "trace_grid", counting_trace)
+    monkeypatch.setattr(builder, "trace_grid", counting_trace)
     cfg = replace(config, coverage_map=False)
     results, errors = [], []
 
     def run():
         try:
-            results.append(pipeline.build_one(small_cubicle, cfg))
+            results.append(builder.build_one(small_cubicle, cfg))
         except BaseException as e:  # noqa: BLE001 - the assertion below reports it
             errors.append(e)
 

@@ -1,8 +1,8 @@
 """Trace batches on Ray: a local Ray started on demand (one worker per core) or an existing cluster.
 
 Each worker is a Ray actor that builds the scene once (:class:`~dtradar_data.rt.tracer.RayTracer`) and traces many
-batches with the same :func:`~dtradar_data.build.batches.trace_batch` as a serial build; it returns the batch's
-arrays to the driver, which writes them to the build's work folder (:func:`~dtradar_data.build.batches.save_batch`,
+batches with the same :func:`~dtradar_data.pipeline.batches.trace_batch` as a serial build; it returns the batch's
+arrays to the driver, which writes them to the build's work folder (:func:`~dtradar_data.pipeline.batches.save_batch`,
 atomic). So nodes of a cluster need the package, not a shared disk; a batch is written once, whole, by one process;
 and the table is assembled from the work folder exactly as after a serial build (same bytes, same version).
 
@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dtradar_data.build.batches import batch_path, save_batch, trace_batch
 from dtradar_data.core.errors import MissingDependencyError
+from dtradar_data.pipeline.batches import batch_path, save_batch, trace_batch
 
 RAY_INSTALL = "pip install 'dtradar[ray]'  (or: pip install 'ray>=2.40')"
 TASK_RETRIES = 3

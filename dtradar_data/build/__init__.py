@@ -1,2 +1,0 @@
-"""Building datasets: the resumable scene -> ray tracing -> Parquet pipeline (:mod:`.pipeline`), coverage maps
-(:mod:`.coverage`) and synthetic tables for tests without a ray tracer (:mod:`.synthetic`)."""
