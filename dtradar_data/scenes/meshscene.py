@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tomllib
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
+from pydantic import BeforeValidator, Field, ValidationError
 
 from dtradar_data.core.errors import (
     SceneFileError,
@@ -43,7 +43,7 @@ from dtradar_data.core.errors import (
 from dtradar_data.core.files import installed_file
 from dtradar_data.core.grid import Grid
 from dtradar_data.core.ids import SCENE_RE
-from dtradar_data.scenes.indoor.reader import Num, Pos, PosInt, SceneName, Text
+from dtradar_data.scenes.fields import Num, Pos, PosInt, SceneFileModel, SceneName, Text
 from dtradar_data.scenes.model import (
     OUTDOOR_RT_DEFAULTS,
     PATTERNS,
@@ -217,10 +217,6 @@ def mesh_scene(xml: Path, label: str, ground: list[str] | None = None) -> MeshSc
 
 
 # ------------------------------------------------------------------------------------------- the scene file
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
 def _vec3(value: Any) -> tuple[float, float, float]:
     if not (isinstance(value, (list, tuple)) and len(value) == 3
             and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
@@ -231,7 +227,7 @@ def _vec3(value: Any) -> tuple[float, float, float]:
 Vec3 = Annotated[tuple[float, float, float], BeforeValidator(_vec3)]
 
 
-class MeshSceneMeta(_Model):
+class MeshSceneMeta(SceneFileModel):
     name: SceneName
     title: Text
     description: Text = "A scene built on a Mitsuba/Sionna XML file."
@@ -240,12 +236,12 @@ class MeshSceneMeta(_Model):
     attribution: Text = "the XML scene's authors"
 
 
-class XmlSection(_Model):
+class XmlSection(SceneFileModel):
     path: Text
     ground: list[Text] | None = None
 
 
-class GridSection(_Model):
+class GridSection(SceneFileModel):
     x0_m: Num
     y0_m: Num
     cell_m: Pos
@@ -253,7 +249,7 @@ class GridSection(_Model):
     ny: PosInt
 
 
-class TxSection(_Model):
+class TxSection(SceneFileModel):
     position_m: Vec3
     look_at_m: Vec3 | None = None
     num_rows: PosInt = 8
@@ -263,12 +259,12 @@ class TxSection(_Model):
     power_dbm: Num = 0.0
 
 
-class RobotSection(_Model):
+class RobotSection(SceneFileModel):
     rx_height_m: Pos = 1.5
     robot_height_m: Pos = 1.5
 
 
-class MeshSceneDocument(_Model):
+class MeshSceneDocument(SceneFileModel):
     format: int = Field(FORMAT, ge=FORMAT, le=FORMAT)
     scene: MeshSceneMeta
     xml: XmlSection

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tomllib
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, BeforeValidator, Field, ValidationError
 
 from dtradar_data.core import layout
 from dtradar_data.core.errors import (
@@ -53,11 +53,12 @@ from dtradar_data.scenes.city.streets import (
     place_vehicles,
     quadrant_rect,
 )
-from dtradar_data.scenes.indoor.reader import (
+from dtradar_data.scenes.fields import (
     Material,
     Num,
     Pos,
     PosInt,
+    SceneFileModel,
     SceneName,
     Text,
 )
@@ -94,17 +95,13 @@ Vec2 = Annotated[tuple[float, float], BeforeValidator(_vec(2))]
 Vec3 = Annotated[tuple[float, float, float], BeforeValidator(_vec(3))]
 
 
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class CitySceneMeta(_Model):
+class CitySceneMeta(SceneFileModel):
     name: SceneName
     title: Text
     description: Text
 
 
-class CitySection(_Model):
+class CitySection(SceneFileModel):
     nw_lat_lon: LatLon
     se_lat_lon: LatLon
     crs: Text
@@ -114,16 +111,16 @@ class CitySection(_Model):
     surface_height_m: Pos = 0.02
 
 
-class CityGrid(_Model):
+class CityGrid(SceneFileModel):
     cell_m: Pos
 
 
-class CityRobot(_Model):
+class CityRobot(SceneFileModel):
     rx_height_m: Pos = 1.5
     robot_height_m: Pos = 1.5
 
 
-class CityTx(_Model):
+class CityTx(SceneFileModel):
     num_rows: PosInt = 8
     num_cols: PosInt = 2
     pattern: Literal[PATTERNS] = "tr38901"  # type: ignore[valid-type]
@@ -132,24 +129,24 @@ class CityTx(_Model):
     clearance_m: Num = Field(default=3.0, ge=0)
 
 
-class CityRt(_Model):
+class CityRt(SceneFileModel):
     """Ray-tracing settings the city needs instead of the (indoor) RTSettings defaults."""
 
     samples_per_src: PosInt | None = None
     max_num_paths_per_src: PosInt | None = None
 
 
-class Quadrant(_Model):
+class Quadrant(SceneFileModel):
     tx_m: Vec3
 
 
-class RoadModel(_Model):
+class RoadModel(SceneFileModel):
     name: Text
     from_m: Vec2
     to_m: Vec2
 
 
-class CityDynamic(_Model):
+class CityDynamic(SceneFileModel):
     quadrant: Literal["q1", "q2", "q3", "q4"]
     seed: int = 0
     cars: int = Field(default=0, ge=0)
@@ -157,7 +154,7 @@ class CityDynamic(_Model):
     roads: list[RoadModel] | Literal["auto"] = "auto"
 
 
-class CityDocument(_Model):
+class CityDocument(SceneFileModel):
     format: Literal[1]
     scene: CitySceneMeta
     city: CitySection

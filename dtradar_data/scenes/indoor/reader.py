@@ -28,19 +28,29 @@ raises :class:`~dtradar_data.core.errors.SceneFileError` naming the file, the ob
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
 import tomllib
-from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
-from pydantic_core import PydanticCustomError
+from pydantic import BeforeValidator, ValidationError
 
 from dtradar_data.core.errors import SceneFileError, did_you_mean
 from dtradar_data.core.grid import Grid
-from dtradar_data.scenes.materials import ITU_MATERIALS
+from dtradar_data.scenes.fields import (
+    Material,
+    Num,
+    ObjName,
+    Pos,
+    PosInt,
+    SceneFileModel,
+    SceneName,
+    Text,
+    Vec3,
+    choice,
+    name_check,
+)
 from dtradar_data.scenes.model import (
     PATTERNS,
     POLARIZATIONS,
@@ -52,84 +62,10 @@ from dtradar_data.scenes.model import (
 
 FORMAT = 1
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
-NAME_CHARS = "lower-case letters, digits, '-' and '_'"
-
-
-# ------------------------------------------------------------------------------------------- field types
-def _fail(problem: str, hint: str) -> PydanticCustomError:
-    return PydanticCustomError("dtradar", "{problem}", {"problem": problem, "hint": hint})
-
-
-def _finite(value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise _fail("must be a finite number, got {!r}".format(value), "write a number, e.g. `1.0`")
-    return float(value)
-
-
-def _positive(value: Any) -> float:
-    value = _finite(value)
-    if value <= 0:
-        raise _fail(f"must be > 0, got {value!r}", "give a positive size in metres")
-    return value
-
-
-def _positive_int(value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
-        raise _fail(f"must be a positive integer, got {value!r}", "write e.g. `8`")
-    return value
-
-
-def _text(value: Any) -> str:
-    if not isinstance(value, str) or not value.strip():
-        raise _fail(f"must be a non-empty string, got {value!r}", 'write `"..."`')
-    return value.strip()
-
-
-def _choice(choices: tuple[str, ...], what: str):
-    def check(value: Any) -> str:
-        value = _text(value)
-        if value not in choices:
-            close = did_you_mean(value, choices)
-            raise _fail(f"{value!r} is not {what}" + (f"; {close}" if close else ""), "use one of: " + ", ".join(choices))
-        return value
-    return check
-
-
-def _name(kind_of_name: str, allow_dash: bool):
-    chars = NAME_CHARS if allow_dash else "lower-case letters, digits and '_'"
-
-    def check(value: Any) -> str:
-        value = _text(value)
-        ok = value[0].isalnum() and all(c.islower() or c.isdigit() or c == "_" or (allow_dash and c == "-")
-                                        for c in value) and value.isascii()
-        if not ok or (not allow_dash and not value[0].isalpha()):
-            raise _fail(f"{value!r} is not a valid {kind_of_name}", f"use {chars} (e.g. 'chair_01')")
-        return value
-    return check
-
-
-def _vec3(value: Any) -> tuple[float, float, float]:
-    if not (isinstance(value, list) and len(value) == 3):
-        raise _fail(f"must be a list of three numbers [x, y, z], got {value!r}", "write e.g. `[1.0, 2.0, 2.9]`")
-    return tuple(_finite(v) for v in value)  # type: ignore[return-value]
-
-
-Num = Annotated[float, BeforeValidator(_finite)]
-Pos = Annotated[float, BeforeValidator(_positive)]
-PosInt = Annotated[int, BeforeValidator(_positive_int)]
-Text = Annotated[str, BeforeValidator(_text)]
-Material = Annotated[str, BeforeValidator(_choice(ITU_MATERIALS, "an ITU material"))]
-SceneName = Annotated[str, BeforeValidator(_name("scene name", allow_dash=True))]
-ObjName = Annotated[str, BeforeValidator(_name("name", allow_dash=False))]
-Vec3 = Annotated[tuple[float, float, float], BeforeValidator(_vec3)]
 
 
 # ------------------------------------------------------------------------------------------- document models
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class SceneMeta(_Model):
+class SceneMeta(SceneFileModel):
     name: SceneName
     title: Text
     description: Text
@@ -138,7 +74,7 @@ class SceneMeta(_Model):
     attribution: Text
 
 
-class RoomModel(_Model):
+class RoomModel(SceneFileModel):
     width_m: Pos
     length_m: Pos
     height_m: Pos
@@ -150,7 +86,7 @@ class RoomModel(_Model):
     ceiling_thickness_m: Pos | None = None
 
 
-class GridModel(_Model):
+class GridModel(SceneFileModel):
     cell_m: Pos
     nx: PosInt
     ny: PosInt
@@ -158,22 +94,22 @@ class GridModel(_Model):
     y0_m: Num | None = None
 
 
-class TxModel(_Model):
+class TxModel(SceneFileModel):
     position_m: Vec3
     look_at_m: Vec3 | None = None
     num_rows: PosInt = 8
     num_cols: PosInt = 2
-    pattern: Annotated[str, BeforeValidator(_choice(PATTERNS, "an antenna pattern"))] = "tr38901"
-    polarization: Annotated[str, BeforeValidator(_choice(POLARIZATIONS, "a polarization"))] = "VH"
+    pattern: Annotated[str, BeforeValidator(choice(PATTERNS, "an antenna pattern"))] = "tr38901"
+    polarization: Annotated[str, BeforeValidator(choice(POLARIZATIONS, "a polarization"))] = "VH"
     power_dbm: Num = 0.0
 
 
-class RobotModel(_Model):
+class RobotModel(SceneFileModel):
     rx_height_m: Pos
     robot_height_m: Pos
 
 
-class KindDefaults(_Model):
+class KindDefaults(SceneFileModel):
     material: Material | None = None
     width_m: Pos | None = None
     length_m: Pos | None = None
@@ -182,7 +118,7 @@ class KindDefaults(_Model):
     yaw_deg: Num | None = None
 
 
-class ObjectModel(_Model):
+class ObjectModel(SceneFileModel):
     name: ObjName
     kind: ObjName
     x_m: Num
@@ -195,7 +131,7 @@ class ObjectModel(_Model):
     yaw_deg: Num = 0.0
 
 
-class MoveModel(_Model):
+class MoveModel(SceneFileModel):
     name: Text
     x_m: Num | None = None
     y_m: Num | None = None
@@ -203,21 +139,21 @@ class MoveModel(_Model):
     yaw_deg: Num | None = None
 
 
-class DynamicModel(_Model):
+class DynamicModel(SceneFileModel):
     description: Text
     add: list[dict[str, Any]] = []
     move: list[MoveModel] = []
     remove: list[Text] = []
 
 
-class RoomDocument(_Model):
+class RoomDocument(SceneFileModel):
     format: int
     scene: SceneMeta
     room: RoomModel
     grid: GridModel
     tx: TxModel
     robot: RobotModel
-    kinds: dict[Annotated[str, BeforeValidator(_name("kind name", allow_dash=False))], KindDefaults] = {}
+    kinds: dict[Annotated[str, BeforeValidator(name_check("kind name", allow_dash=False))], KindDefaults] = {}
     objects: list[dict[str, Any]]
     dynamic: DynamicModel | None = None
 
