@@ -13,6 +13,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from dtradar_data.core.errors import MissingDependencyError
+
 
 def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
     h = hashlib.sha256()
@@ -78,8 +80,6 @@ def installed_file(dist: str, rel: str, what: str) -> Path:
     """A file shipped inside an installed distribution (``rel`` from its site-packages root), found through package
     metadata so nothing is imported; :class:`MissingDependencyError` says how to install or repair it."""
     from importlib import metadata
-
-    from dtradar_data.core.errors import MissingDependencyError
 
     try:
         path = Path(str(metadata.distribution(dist).locate_file(rel)))

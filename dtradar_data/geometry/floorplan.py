@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dtradar_data.geometry.meshscene import base_footprints
 from dtradar_data.geometry.occupancy import footprints, occupancy
+from dtradar_data.geometry.xml_meshes import base_footprints
 from dtradar_data.scenes.model import Prism, SceneSpec
 
 # Colours loosely follow the material's look (Sionna's own palette is for 3-D renders and too dark for a plan view).

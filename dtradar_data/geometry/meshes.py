@@ -8,7 +8,7 @@ trimesh + numpy only: this module never imports Sionna or Mitsuba, so it tests w
   are *not* welded across parts, so every part stays a closed 2-manifold even where two touch).
 - :func:`write_mitsuba_scene` writes ``meshes/<material>.ply`` (binary little endian, written by hand so the bytes
   depend only on the spec) and ``scene.xml`` in the Sionna RT 2.x format (for a spec built on an external XML, that
-  scene with the spec's objects added: :mod:`.meshscene`).
+  scene with the spec's objects added: :mod:`.xml_meshes`).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from shapely.geometry import Polygon
 
 from dtradar_data.core.errors import unknown_name
 from dtradar_data.core.files import installed_file
+from dtradar_data.geometry.xml_meshes import merged_scene_xml
 from dtradar_data.scenes.model import Box, Prism, SceneSpec
 
 # Slab thickness per material for Sionna's transmission model (it treats every surface a ray crosses as a slab of the
@@ -161,8 +162,6 @@ def write_mitsuba_scene(spec: SceneSpec, out_dir: Path) -> Path:
     lines += ["</scene>", ""]
     text = "\n".join(lines)
     if spec.base is not None:  # built on an external XML: its shapes as they are, our objects added
-        from dtradar_data.geometry.meshscene import merged_scene_xml
-
         text = merged_scene_xml(spec.base, text)
     xml_path = out_dir / "scene.xml"
     _write_if_changed(xml_path, text.encode("utf-8"))

@@ -13,7 +13,7 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from dtradar_data.geometry.meshscene import base_footprints
+from dtradar_data.geometry.xml_meshes import base_footprints
 from dtradar_data.scenes.model import Box, SceneSpec
 
 OCCUPANCY_FLOOR_CLEARANCE_M = 0.05  # ignore objects wholly below this (rugs, cables): the robot drives over them
@@ -61,7 +61,7 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
     mounted TV above the robot does not block; a table (0.75 m) does; a cell is blocked if a chair clips its corner.
     Prisms (buildings) block a cell when together they cover at least half of it (:data:`BUILDING_BLOCK_FRACTION`,
     exact polygon intersection with shapely); parking-lot and road surfaces lie below 0.05 m and never block. A
-    scene built on an XML file adds its footprints at robot height (:func:`.meshscene.base_footprints`) under the
+    scene built on an XML file adds its footprints at robot height (:func:`.xml_meshes.base_footprints`) under the
     same half-cover rule; its ground never blocks.
     """
     g = spec.grid

@@ -28,8 +28,8 @@ from dtradar_data.core.ids import DatasetId, format_id
 from dtradar_data.core.layout import work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
 from dtradar_data.geometry.floorplan import save_city_overview_png
-from dtradar_data.geometry.meshscene import ground_height
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.geometry.xml_meshes import ground_height
 from dtradar_data.pipeline import differential
 from dtradar_data.pipeline.batches import batch_path, load_batch, save_batch, trace_batch
 from dtradar_data.pipeline.coverage import COVERAGE_SUBCELLS, render_coverage_png

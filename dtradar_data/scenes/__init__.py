@@ -4,7 +4,7 @@ A scene is named by a built-in name (``cubicle``, ``meeting``: TOML files in :mo
 city quadrants ``dallas-q1`` ... ``houston-q4``: one TOML file per city in :mod:`dtradar_data.scenes.city`) or by the
 path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A build may also name a whole city
 (``dallas``): :func:`build_targets` expands it to its quadrants. Scenes built on a Mitsuba/Sionna XML
-(:mod:`dtradar_data.scenes.meshscene`): Sionna's bundled cities (``sionna:munich``, dataset ``sionna-munich``), a
+(:mod:`dtradar_data.scenes.xml_scene`): Sionna's bundled cities (``sionna:munich``, dataset ``sionna-munich``), a
 user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section.
 """
 
@@ -23,7 +23,8 @@ from dtradar_data.scenes.city.reader import (
     read_city_file,
 )
 from dtradar_data.scenes.indoor.reader import load_room_file
-from dtradar_data.scenes.meshscene import (
+from dtradar_data.scenes.model import SceneSpec
+from dtradar_data.scenes.xml_scene import (
     is_mesh_scene_file,
     is_sionna_name,
     load_mesh_scene_file,
@@ -32,7 +33,6 @@ from dtradar_data.scenes.meshscene import (
     sionna_dataset_scenes,
     sionna_scene_names,
 )
-from dtradar_data.scenes.model import SceneSpec
 
 __all__ = ["SceneSpec", "available_scenes", "sionna_scene_names", "build_targets", "builtin_names", "city_names", "scene_file", "is_scene_path",
            "load_scene_spec"]

@@ -159,7 +159,7 @@ class SceneSpec:
     room: Room | None = None
     prisms: tuple[Prism, ...] = ()
     base: MeshScene | None = None
-    """An external Mitsuba/Sionna XML scene the objects are added to (:mod:`dtradar_data.scenes.meshscene`)."""
+    """An external Mitsuba/Sionna XML scene the objects are added to (:mod:`dtradar_data.scenes.xml_scene`)."""
     provenance: dict[str, Any] = field(default_factory=dict, compare=False)
     """Where the geometry came from (a city's footprint source, download time, processing report). Recorded in the
     dataset's metadata, not in the digest: the geometry itself is."""

@@ -18,7 +18,7 @@ Three ways to name one:
       [robot]  [rx_height_m = 1.5, robot_height_m = 1.5]
 
 The XML is parsed here only for what identifies it (its shapes' files, hashed into the spec's digest) and for which
-shapes are the ground; meshes, occupancy and footprints are :mod:`dtradar_data.geometry.meshscene`'s business. Bundled
+shapes are the ground; meshes, occupancy and footprints are :mod:`dtradar_data.geometry.xml_meshes`'s business. Bundled
 files are found through package metadata, never by importing Sionna (only ``dtradar_data.rt`` may).
 """
 

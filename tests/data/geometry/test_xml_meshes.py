@@ -7,8 +7,8 @@ import numpy as np
 
 from dtradar_data.geometry.floorplan import save_floorplan_png
 from dtradar_data.geometry.meshes import write_mitsuba_scene
-from dtradar_data.geometry.meshscene import base_footprints, ground_height
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.geometry.xml_meshes import base_footprints, ground_height
 from dtradar_data.scenes import load_scene_spec
 
 
