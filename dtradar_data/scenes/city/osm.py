@@ -26,7 +26,6 @@ import math
 import os
 import socket
 import sys
-import tempfile
 import xml.sax
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -38,14 +37,16 @@ from dtradar_data.core.errors import (
     MissingDependencyError,
     SceneFileError,
 )
+from dtradar_data.core.files import write_atomic
+from dtradar_data.core.layout import data_root
 from dtradar_data.scenes.city.footprints import (
     CITY_BOXES,
     CityFootprints,
     FootprintsEmptyError,
     FootprintsUnavailableError,
     LonLatBox,
-    footprints_from_geojson,
 )
+from dtradar_data.scenes.city.geojson import footprints_from_geojson
 
 __all__ = ["OSM_TAGS", "OSM_LICENCE", "OSM_ATTRIBUTION", "ENV_OFFLINE", "ENV_OVERPASS_URL", "DEFAULT_OVERPASS_URL",
            "read_osm_xml", "download_osm", "default_cache_dir", "cache_paths", "is_offline", "resolve_overpass_url",
@@ -169,8 +170,6 @@ def resolve_overpass_url(url: str | None = None) -> str:
 
 def default_cache_dir() -> Path:
     """``<data root>/osm`` (``$DTRADAR_DATA_ROOT``, default ``~/.cache/dtradar``)."""
-    from dtradar_data.core.layout import data_root
-
     return data_root() / "osm"
 
 
@@ -179,20 +178,6 @@ def cache_paths(box: LonLatBox, cache_dir: str | Path) -> tuple[Path, Path]:
     tags = hashlib.sha256(json.dumps(OSM_TAGS, sort_keys=True).encode()).hexdigest()[:8]
     stem = f"overpass_{box.west:.6f}_{box.south:.6f}_{box.east:.6f}_{box.north:.6f}_{tags}"
     return Path(cache_dir) / f"{stem}.geojson", Path(cache_dir) / f"{stem}.meta.json"
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
 
 
 def _read_cache(geojson_path: Path, meta_path: Path) -> tuple[dict, dict] | None:
@@ -318,6 +303,6 @@ def download_osm(box: LonLatBox, crs: str, cache_dir: str | Path | None = None, 
             "tags": OSM_TAGS, "osmnx_version": ox.__version__, "feature_count": len(doc["features"]),
             "licence": OSM_LICENCE, "attribution": OSM_ATTRIBUTION, "geojson_sha256": hashlib.sha256(raw).hexdigest()}
     cache_dir.mkdir(parents=True, exist_ok=True)
-    _write_atomic(geojson_path, raw)
-    _write_atomic(meta_path, json.dumps(meta, indent=2, sort_keys=True).encode())  # last: marks the entry complete
+    write_atomic(geojson_path, raw)
+    write_atomic(meta_path, json.dumps(meta, indent=2, sort_keys=True).encode())  # last: marks the entry complete
     return _footprints_from_cache(json.loads(raw), meta, geojson_path, box, crs)  # exactly what a cache read sees

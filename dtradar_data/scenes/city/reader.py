@@ -15,7 +15,7 @@ A city is one file (``dallas.toml``, ``houston.toml`` beside this module are com
 Each quadrant is its own dataset, ``<city>-qN/blueprint`` (and ``<city>-qN/dynamic`` for the dynamic quadrant): its
 grid covers the quadrant, the geometry is the whole city (buildings outside the quadrant still reflect), the
 transmitter is the quadrant's. The local frame is the footprints' (UTM metres around the box centre, see
-:mod:`~dtradar_data.scenes.city.footprints`); quadrants tile the box around the centre, their grids meeting at it.
+:mod:`~dtradar_data.scenes.city.frame`); quadrants tile the box around the centre, their grids meeting at it.
 ``footprints`` is ``packaged:<file>``, ``osm`` (download or cache) or a file path; ``make dataset ... OSM=path``
 replaces it for one build.
 """
@@ -39,12 +39,9 @@ from dtradar_data.core.errors import (
     unknown_name,
 )
 from dtradar_data.core.grid import Grid
-from dtradar_data.scenes.city.footprints import (
-    CityFootprints,
-    LonLatBox,
-    load_footprints,
-    local_extent,
-)
+from dtradar_data.scenes.city.footprints import CityFootprints, LonLatBox
+from dtradar_data.scenes.city.frame import local_extent
+from dtradar_data.scenes.city.sources import load_footprints
 from dtradar_data.scenes.city.streets import (
     QUADRANT_SIGNS,
     Road,

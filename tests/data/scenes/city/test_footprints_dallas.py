@@ -8,20 +8,18 @@ import re
 import pytest
 from shapely.geometry import LinearRing, Polygon
 
-from dtradar_data.scenes.city.footprints import (
-    CITY_BOXES,
+from dtradar_data.scenes.city.footprints import CITY_BOXES, MATERIALS, CityFootprints
+from dtradar_data.scenes.city.frame import local_extent
+from dtradar_data.scenes.city.packaged import (
     DALLAS_ATTRIBUTION,
     DALLAS_FILE,
     DALLAS_LICENCE,
     DALLAS_NOTICE_FILE,
-    HEIGHT_RANGE_M,
-    MATERIALS,
-    CityFootprints,
-    load_footprints,
-    local_extent,
     packaged_files,
     packaged_path,
 )
+from dtradar_data.scenes.city.sources import load_footprints
+from dtradar_data.scenes.city.tags import HEIGHT_RANGE_M
 
 
 @pytest.fixture(scope="module")

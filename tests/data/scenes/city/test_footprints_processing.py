@@ -11,21 +11,17 @@ from pyproj import Transformer
 from shapely.geometry import LinearRing
 
 from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError, SceneFileError, UnknownNameError
-from dtradar_data.scenes.city.footprints import (
-    CITY_BOXES,
+from dtradar_data.scenes.city.footprints import CITY_BOXES, FootprintsEmptyError, LonLatBox
+from dtradar_data.scenes.city.frame import local_transform, utm_crs_for
+from dtradar_data.scenes.city.geojson import MIN_AREA_M2, read_geojson
+from dtradar_data.scenes.city.sources import load_footprints
+from dtradar_data.scenes.city.tags import (
     DEFAULT_HEIGHT_M,
-    MIN_AREA_M2,
     ROAD_WIDTH_M,
-    FootprintsEmptyError,
-    LonLatBox,
     building_height,
     building_material,
-    load_footprints,
-    local_transform,
     parse_length_m,
-    read_geojson,
     road_width,
-    utm_crs_for,
 )
 
 BOX, CRS = CITY_BOXES["houston"]

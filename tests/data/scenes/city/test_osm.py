@@ -20,15 +20,9 @@ from urllib.parse import parse_qs
 import pytest
 
 from dtradar_data.core.errors import CorruptDatasetError, DtradarError
-from dtradar_data.scenes.city.footprints import (
-    CITY_BOXES,
-    FootprintsEmptyError,
-    FootprintsUnavailableError,
-    download_osm,
-    load_footprints,
-    read_osm_xml,
-)
-from dtradar_data.scenes.city.osm import cache_paths
+from dtradar_data.scenes.city.footprints import CITY_BOXES, FootprintsEmptyError, FootprintsUnavailableError
+from dtradar_data.scenes.city.osm import cache_paths, download_osm, read_osm_xml
+from dtradar_data.scenes.city.sources import load_footprints
 
 ox = pytest.importorskip("osmnx")
 
