@@ -22,7 +22,7 @@ from dtradar_data.core.errors import DtradarError, RayTracerUnavailableError
 from dtradar_data.publish.loading import load
 from dtradar_data.rt import llvm as _llvm
 from dtradar_data.store.listing import list_datasets
-from dtradar_data.store.transitions import LoggedDataset, list_logged
+from dtradar_data.store.logged import LoggedDataset, list_logged
 
 # Point Dr.Jit at a libLLVM >= 16 now, before anything imports mitsuba/drjit (they read it once, at import).
 # An explicit DRJIT_LIBLLVM_PATH wins; with none found, the ray tracer raises a typed error when first used.

@@ -24,7 +24,8 @@ from dtradar_data.pipeline.builder import BuildConfig
 from dtradar_data.publish import cards, hub, logged_hub
 from dtradar_data.rt import llvm
 from dtradar_data.rt.tracer import smoke_test
-from dtradar_data.store import listing, local, transitions
+from dtradar_data.store import listing, local
+from dtradar_data.store.logged import is_logged_name, list_logged, verify_logged
 
 #: A positional dataset id argument, shown as NAME in --help (the Makefile passes it positionally).
 Name = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="NAME")]
@@ -58,7 +59,7 @@ class ListCmd:
             shown = f"{latest.tag} {latest.version[:12]}" if latest else "-"
             print(f"{r.name:<{w}} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
                   f"{human_size(latest.size_bytes) if latest else '-':>10}")
-        logged = transitions.list_logged()
+        logged = list_logged()
         if logged:  # offline-RL datasets logged on the twins (scene/variant/behaviour)
             print(f"\n{'logged dataset':<40} {'tag':<5} {'version':<18} {'steps':>8} {'episodes':>8} {'success':>8}")
             for e in logged:
@@ -118,7 +119,7 @@ class VerifyCmd:
     """Only this tag or version hash."""
 
     def run(self) -> int:
-        results = (transitions.verify_logged(self.name, self.revision) if transitions.is_logged_name(self.name)
+        results = (verify_logged(self.name, self.revision) if is_logged_name(self.name)
                    else listing.verify(self.name, self.revision))
         bad = 0
         for version, problems in results.items():
@@ -178,7 +179,7 @@ class PublishCmd:
     """Create the repo as private if it does not exist."""
 
     def run(self) -> int:
-        publish = logged_hub.publish if transitions.is_logged_name(self.name) else hub.publish
+        publish = logged_hub.publish if is_logged_name(self.name) else hub.publish
         result = publish(self.name, self.revision, repo_id=self.repo, private=self.private)
         print(result.describe())
         return 0
@@ -196,7 +197,7 @@ class PullCmd:
     """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>."""
 
     def run(self) -> int:
-        pull = logged_hub.pull if transitions.is_logged_name(self.name) else hub.pull
+        pull = logged_hub.pull if is_logged_name(self.name) else hub.pull
         path = pull(self.name, self.revision, repo_id=self.repo)
         print(f"pulled into {path}")
         return 0

@@ -1,10 +1,19 @@
-"""Dataset ids: ``<scene>/<variant>[@<revision>]``, one grammar with a parse/format pair.
+"""Dataset ids: one grammar, two forms, each with a parse/format pair.
+
+* an RT dataset: ``<scene>/<variant>[@<revision>]``, e.g. ``cubicle/blueprint@v0`` (:func:`parse_id`,
+  :func:`format_id`);
+* a logged (offline-RL) dataset: ``<scene>/<variant>/<behaviour>[@<revision>]``, e.g.
+  ``cubicle/blueprint/noisy-shortest``: the parent RT dataset the transitions were logged on, then the behaviour's
+  name (``[a-z0-9][a-z0-9_-]*``; by default the behaviour policy's kind) (:func:`parse_logged_id`,
+  :func:`format_logged_id`). Two slashes tell it from an RT dataset (one slash), so :func:`dtradar_data.load`
+  accepts both (:func:`is_logged_name`).
 
 Modelled on Minari (``namespace/name-v0``) and huggingface_hub (``repo@revision``):
 
 * ``scene``    — ``[a-z0-9][a-z0-9_-]*``, e.g. ``cubicle``, ``meeting``, ``dallas-q3``;
 * ``variant``  — ``blueprint`` (static objects) or ``dynamic`` (blueprint + movable objects);
-* ``revision`` — optional: a tag ``v0``, ``v1``, ... or a version hash (hex, a prefix of at least 7 characters).
+* ``revision`` — optional: a tag ``v0``, ``v1``, ... or a version hash (hex, a prefix of at least 7 characters);
+  without one, the newest version.
 
 ``parse_id`` checks the grammar and, given the ``known`` scenes, that the scene is one of them; unknown names fail with
 a "did you mean ...?" built from the known ``scene/variant`` names. Which scenes are known (built-in ones and those
@@ -16,6 +25,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from dtradar_data.core.errors import UnknownNameError, did_you_mean, unknown_name
 
@@ -26,6 +36,7 @@ TAG_RE = re.compile(r"v(0|[1-9][0-9]*)")
 HASH_RE = re.compile(r"[0-9a-f]{7,64}")
 MIN_HASH_PREFIX = 7
 GRAMMAR = "<scene>/<variant>[@<revision>], e.g. 'cubicle/blueprint' or 'cubicle/dynamic@v0'"
+LOGGED_GRAMMAR = "<scene>/<variant>/<behaviour>[@<revision>], e.g. 'cubicle/blueprint/noisy-shortest'"
 
 
 @dataclass(frozen=True)
@@ -61,6 +72,19 @@ def names_of(scenes: Iterable[str]) -> list[str]:
     return [f"{s}/{v}" for s in sorted(set(scenes)) for v in VARIANTS]
 
 
+def _split_revision(text: str, what: str) -> tuple[str, str | None]:
+    """``name@revision`` -> ``(name, revision or None)``, the revision checked (both forms share it)."""
+    name, sep, revision = text.strip().partition("@")
+    if sep and not revision:
+        raise UnknownNameError(f"{what} {text!r} has an empty revision after '@'",
+                               hint="write a tag (v0, v1, ...) or a version hash after '@', or drop the '@'")
+    if revision and not (is_tag(revision) or is_hash(revision)):
+        raise UnknownNameError(
+            f"revision {revision!r} in {text!r} is neither a tag nor a version hash",
+            hint=f"use a tag like 'v0' or at least {MIN_HASH_PREFIX} lowercase hex characters of a version hash")
+    return name, revision or None
+
+
 def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
     """Parse ``scene/variant[@revision]``.
 
@@ -70,17 +94,9 @@ def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
     check_known = known is not None
     if not isinstance(text, str):
         raise UnknownNameError(f"dataset id must be a string, got {type(text).__name__}", hint=f"use {GRAMMAR}")
-    raw = text.strip()
-    name, sep, revision = raw.partition("@")
+    name, revision = _split_revision(text, "dataset id")
     scenes = sorted(set(known or ()))
     candidates = names_of(scenes)
-    if sep and not revision:
-        raise UnknownNameError(f"dataset id {text!r} has an empty revision after '@'",
-                               hint="write a tag (v0, v1, ...) or a version hash after '@', or drop the '@'")
-    if revision and not (is_tag(revision) or is_hash(revision)):
-        raise UnknownNameError(
-            f"revision {revision!r} in {text!r} is neither a tag nor a version hash",
-            hint=f"use a tag like 'v0' or at least {MIN_HASH_PREFIX} lowercase hex characters of a version hash")
     parts = name.split("/")
     if len(parts) != 2 or not SCENE_RE.fullmatch(parts[0]) or not parts[1]:
         # "cubicle" alone is the most common slip: suggest both of its variants.
@@ -92,10 +108,64 @@ def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
     scene, variant = parts
     if variant not in VARIANTS or (check_known and scene not in scenes):
         raise unknown_name("dataset", name, candidates if check_known else [f"{scene}/{v}" for v in VARIANTS])
-    return DatasetId(scene, variant, revision or None)
+    return DatasetId(scene, variant, revision)
 
 
 def format_id(dataset_id: DatasetId) -> str:
     """The inverse of :func:`parse_id`: ``parse_id(format_id(d)) == d``."""
     suffix = f"@{dataset_id.revision}" if dataset_id.revision else ""
     return f"{dataset_id.scene}/{dataset_id.variant}{suffix}"
+
+
+# ------------------------------------------------------------------------------------------- logged datasets
+@dataclass(frozen=True)
+class LoggedId:
+    """A parsed logged-dataset id; ``revision`` None means the newest version."""
+
+    scene: str
+    variant: str
+    behaviour: str
+    revision: str | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.scene}/{self.variant}/{self.behaviour}"
+
+    @property
+    def parent(self) -> str:
+        """The RT dataset the transitions were logged on."""
+        return f"{self.scene}/{self.variant}"
+
+    def with_revision(self, revision: str | None) -> LoggedId:
+        return LoggedId(self.scene, self.variant, self.behaviour, revision)
+
+    def __str__(self) -> str:
+        return format_logged_id(self)
+
+
+def is_logged_name(text: Any) -> bool:
+    """Whether ``text`` has the shape of a logged-dataset id (three ``/``-separated parts before any ``@``)."""
+    return isinstance(text, (str, LoggedId)) and (isinstance(text, LoggedId) or text.partition("@")[0].count("/") == 2)
+
+
+def parse_logged_id(text: str | LoggedId) -> LoggedId:
+    """Parse ``scene/variant/behaviour[@revision]``; :class:`UnknownNameError` with the grammar otherwise."""
+    if isinstance(text, LoggedId):
+        return text
+    if not isinstance(text, str):
+        raise UnknownNameError(f"logged dataset id must be a string, got {type(text).__name__}",
+                               hint=f"use {LOGGED_GRAMMAR}")
+    name, revision = _split_revision(text, "logged dataset id")
+    parts = name.split("/")
+    if len(parts) != 3 or not all(SCENE_RE.fullmatch(p) for p in parts):
+        raise UnknownNameError(f"malformed logged dataset id {text!r}",
+                               hint=f"use {LOGGED_GRAMMAR} (an RT dataset is {GRAMMAR})")
+    scene, variant, behaviour = parts
+    if variant not in VARIANTS:
+        raise UnknownNameError(f"unknown variant {variant!r} in {text!r}", hint=f"use one of: {', '.join(VARIANTS)}")
+    return LoggedId(scene, variant, behaviour, revision)
+
+
+def format_logged_id(lid: LoggedId) -> str:
+    """The inverse of :func:`parse_logged_id`."""
+    return lid.name + (f"@{lid.revision}" if lid.revision else "")

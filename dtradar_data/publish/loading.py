@@ -6,11 +6,12 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError, RevisionNotFoundError
 from dtradar_data.core.ids import DatasetId
 from dtradar_data.publish import hub, logged_hub
-from dtradar_data.store import local, transitions
+from dtradar_data.store import local
+from dtradar_data.store.logged import LoggedDataset, is_logged_name, load_logged
 
 
 def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = False, verify: bool = True,
-         from_hub: bool = False, repo_id: str | None = None) -> Dataset | transitions.LoggedDataset:
+         from_hub: bool = False, repo_id: str | None = None) -> Dataset | LoggedDataset:
     """Load a dataset version: the newest without ``revision`` (or ``@rev`` in ``name``), else a tag or hash.
 
     ``paths=True`` also reads the per-path table into ``Dataset.paths_table``; ``verify`` re-hashes the files read
@@ -18,17 +19,17 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
     store (see :func:`dtradar_data.publish.hub.pull`).
 
     A logged offline-RL dataset, ``scene/variant/behaviour[@revision]``, returns a
-    :class:`~dtradar_data.store.transitions.LoggedDataset` (``from_hub`` as above, see
+    :class:`~dtradar_data.store.logged.LoggedDataset` (``from_hub`` as above, see
     :mod:`dtradar_data.publish.logged_hub`).
     """
-    if transitions.is_logged_name(name):
+    if is_logged_name(name):
         try:
-            return transitions.load_logged(name, revision, verify=verify)
+            return load_logged(name, revision, verify=verify)
         except (DatasetNotFoundError, RevisionNotFoundError):
             if not from_hub:
                 raise
         logged_hub.pull(name, revision, repo_id=repo_id)
-        return transitions.load_logged(name, revision, verify=verify)
+        return load_logged(name, revision, verify=verify)
     try:
         return local.load(name, revision, paths=paths, verify=verify)
     except (DatasetNotFoundError, RevisionNotFoundError):

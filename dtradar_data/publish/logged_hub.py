@@ -25,30 +25,39 @@ from dtradar_data.core.errors import (
 )
 from dtradar_data.core.ids import is_tag
 from dtradar_data.publish import hub
-from dtradar_data.store import transitions as T
+from dtradar_data.store.logged import (
+    TRANSITIONS_FILE,
+    LoggedId,
+    check_version_dir,
+    install_logged,
+    parse_logged_id,
+    refs_path,
+    resolve_logged,
+)
+from dtradar_data.store.versions import read_refs
 
-FILES = (T.TRANSITIONS_FILE, P.META_FILE, P.CARD_FILE)
+FILES = (TRANSITIONS_FILE, P.META_FILE, P.CARD_FILE)
 
 
-def default_repo(lid: T.LoggedId) -> str:
+def default_repo(lid: LoggedId) -> str:
     return f"dtradar/dtradar-{lid.scene}-{lid.variant}-{lid.behaviour}"
 
 
-def publish(name: str | T.LoggedId, revision: str | None = None, *, repo_id: str | None = None,
+def publish(name: str | LoggedId, revision: str | None = None, *, repo_id: str | None = None,
             private: bool = False, api: Any = None) -> hub.PublishResult:
     """Upload one stored logged version (verified first) as one commit tagged with its tag and version."""
     from huggingface_hub import CommitOperationAdd
 
     if repo_id is not None:
         hub.check_repo_id(repo_id)
-    lid, version, vdir = T.resolve_logged(name, revision)
+    lid, version, vdir = resolve_logged(name, revision)
     repo_id = repo_id or default_repo(lid)
     try:
-        T.check_version_dir(vdir)
+        check_version_dir(vdir)
     except CorruptDatasetError as exc:
         raise CorruptDatasetError(f"refusing to publish damaged {lid.name}@{version}: {exc.message}",
                                   hint="log it again first") from exc
-    tag = T.read_refs(T._refs_path(lid)).tag_of(version)
+    tag = read_refs(refs_path(lid)).tag_of(version)
     ops = [CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in FILES if (vdir / f).is_file()]
     return hub.push_version(repo_id, ops, name=lid.name, tag=tag, version=version, what="logged dataset",
                             private=private, api=api)
@@ -62,15 +71,15 @@ def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
                                   endpoint=hub.endpoint(), local_files_only=hub.offline(), allow_patterns=list(FILES)))
 
 
-def pull(name: str | T.LoggedId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
+def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
     """Make ``name@revision`` available locally: return it if stored, else download, verify and install it."""
     if repo_id is not None:
         hub.check_repo_id(repo_id)
-    lid = T.parse_logged_id(name)
+    lid = parse_logged_id(name)
     revision = revision or lid.revision
     if revision is not None:
         with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
-            return T.resolve_logged(lid.with_revision(None), revision)[2]
+            return resolve_logged(lid.with_revision(None), revision)[2]
     repo_id = repo_id or default_repo(lid)
     P.work_root().mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix="pull-logged-", dir=P.work_root()))
@@ -83,12 +92,12 @@ def pull(name: str | T.LoggedId, revision: str | None = None, *, repo_id: str | 
             if (got / f).is_file():
                 shutil.move(str(got / f), version_dir / f)
         try:
-            T.check_version_dir(version_dir)
+            check_version_dir(version_dir)
         except CorruptDatasetError as exc:
             raise CorruptDatasetError(f"the download of {lid.name} from {repo_id!r} failed verification: "
                                       f"{exc.message}", hint="retry; if it persists the Hub copy is damaged") from exc
         preferred = revision if revision and is_tag(revision) else hub._card_tag(version_dir / P.CARD_FILE)
-        return T.install_logged(lid, version_dir, preferred_tag=preferred)
+        return install_logged(lid, version_dir, preferred_tag=preferred)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
 

@@ -4,7 +4,8 @@
 - :mod:`.local` — atomic writes of one version, checked reads, ``load``;
 - :mod:`.listing` — every dataset and version, full verification, history;
 - :mod:`.catalog` — which dataset names exist (built-in scenes and stored ones);
-- :mod:`.card` — the dataset card of a version, a pure function of its metadata.
+- :mod:`.card` — the dataset card of a version, a pure function of its metadata;
+- :mod:`.logged` — logged (offline-RL) datasets: transition tables stored, versioned and carded the same way.
 """
 
 from dtradar_data.store.catalog import as_id, known_names, known_scenes

@@ -1,9 +1,18 @@
-"""Dataset id grammar: <scene>/<variant>[@<revision>], with did-you-mean on unknown names."""
+"""Dataset id grammar: <scene>/<variant>[@<revision>], with did-you-mean on unknown names, and its second form
+for logged datasets, <scene>/<variant>/<behaviour>[@<revision>]."""
 
 import pytest
 
 from dtradar_data.core.errors import UnknownNameError
-from dtradar_data.core.ids import DatasetId, format_id, parse_id
+from dtradar_data.core.ids import (
+    DatasetId,
+    LoggedId,
+    format_id,
+    format_logged_id,
+    is_logged_name,
+    parse_id,
+    parse_logged_id,
+)
 from dtradar_data.store.catalog import as_id, known_scenes
 
 KNOWN = ["cubicle", "meeting", "dallas-q3"]
@@ -56,3 +65,18 @@ def test_scenes_stored_in_the_data_root_are_known(tmp_path, monkeypatch):
     (tmp_path / "datasets" / "imported" / "blueprint").mkdir(parents=True)
     assert "imported" in known_scenes()
     assert as_id("imported/blueprint").scene == "imported"
+
+
+@pytest.mark.parametrize("text", ["cubicle/blueprint/noisy-shortest", "cubicle/dynamic/mixture@v3",
+                                  "dallas-q3/blueprint/random@0123abcd"])
+def test_logged_ids_are_the_second_form_of_the_same_grammar(text):
+    lid = parse_logged_id(text)
+    assert isinstance(lid, LoggedId) and format_logged_id(lid) == text == str(lid)
+    assert is_logged_name(text) and not is_logged_name(lid.parent) and parse_id(lid.parent).name == lid.parent
+
+
+@pytest.mark.parametrize("bad", ["cubicle/blueprint/x@", "cubicle/blueprint/x@latest", "cubicle/blueprint/x@abc",
+                                 "cubicle/planned/x", "cubicle/blueprint/X", "cubicle/blueprint"])
+def test_both_forms_reject_the_same_revisions_and_names(bad):
+    with pytest.raises(UnknownNameError):
+        parse_logged_id(bad)

@@ -11,7 +11,7 @@ from huggingface_hub import constants
 import dtradar_data
 from dtradar_data.core.errors import CorruptDatasetError, HubError
 from dtradar_data.publish import logged_hub
-from dtradar_data.store import transitions as T
+from dtradar_data.store import logged as T
 
 NAME = "tiny/blueprint/noisy-shortest"
 META = {"observations": {"preset": "goal"}, "behaviour_text": "test", "normalizer": {}}

@@ -1,5 +1,5 @@
 """Logged (offline-RL) datasets in the store: the name grammar, the transition table's invariants, versions, cards,
-load / list / verify and typed errors for damaged or malformed data. numpy and pyarrow only, like the module."""
+load / list / verify and typed errors for damaged or malformed data. numpy and pyarrow only, like the package."""
 
 import json
 
@@ -9,7 +9,8 @@ import pytest
 
 import dtradar_data
 from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError, SchemaMismatchError, UnknownNameError
-from dtradar_data.store import transitions as T
+from dtradar_data.core.files import sha256_file
+from dtradar_data.store import logged as T
 
 NAME = "tiny/blueprint/noisy-shortest"
 
@@ -124,7 +125,7 @@ def test_a_changed_or_unreadable_file_is_a_typed_error_and_verify_names_it(root)
     # a file with valid hashes but broken content (re-hashed by hand) fails the table check, not silently
     pq.write_table(T.transitions_table(**columns()).drop(["reward"]), f)
     meta = json.loads((vdir / "meta.json").read_text())
-    meta["files"][T.TRANSITIONS_FILE]["sha256"] = T.sha256_file(f)
+    meta["files"][T.TRANSITIONS_FILE]["sha256"] = sha256_file(f)
     (vdir / "meta.json").write_text(json.dumps(meta))
     with pytest.raises(SchemaMismatchError, match="reward"):
         dtradar_data.load(NAME)
