@@ -67,7 +67,8 @@ def choice(choices: tuple[str, ...], what: str) -> Callable[[Any], str]:
         value = _text(value)
         if value not in choices:
             close = did_you_mean(value, choices)
-            raise fail(f"{value!r} is not {what}" + (f"; {close}" if close else ""), "use one of: " + ", ".join(choices))
+            raise fail(f"{value!r} is not {what}" + (f"; {close}" if close else ""),
+                       "use one of: " + ", ".join(choices))
         return value
     return check
 
