@@ -2,7 +2,7 @@
 
 For each scene: load the newest stored blueprint (the parent), then trace the dynamic twin twice, warm (a few cells
 are traced first so neither run pays the JIT compile): in full, and differentially (only the cells the changed
-objects can affect, :mod:`dtradar_data.build.differential`; the parent's other rows kept). Reported: cells
+objects can affect, :mod:`dtradar_data.pipeline.differential`; the parent's other rows kept). Reported: cells
 re-traced, both trace times and their ratio, the strongest-path agreement (:mod:`dtradar_data.rt.compare`) of the
 differential twin with the full one (overall, in the re-traced cells, in the kept ones) and the absolute total-gain
 differences; as a noise floor, the same agreement for the parent reused unchanged and (``--seed-floor``) for a
@@ -17,7 +17,6 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import time
 from pathlib import Path
 
@@ -27,15 +26,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from dtradar_data.build import differential
-from dtradar_data.build.pipeline import (
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.files import write_atomic
+from dtradar_data.core.machine import describe, machine
+from dtradar_data.pipeline import differential
+from dtradar_data.pipeline.builder import (
     BuildConfig,
     differential_parent,
     scene_config,
     trace_grid,
 )
-from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.files import write_atomic
 from dtradar_data.rt.compare import compare
 from dtradar_data.rt.tracer import RayTracer
 from dtradar_data.scenes import load_scene_spec
@@ -115,11 +115,11 @@ def plot(spec, blocked, mask, c, path: Path, row: dict) -> None:
     os.replace(tmp, path)
 
 
-def markdown(rows: list[dict], machine: str) -> str:
+def markdown(rows: list[dict], described: str) -> str:
     def pct(s):
         return f"{100 * s['agreement']:.1f} %"
 
-    lines = [f"Differential vs full re-trace of each dynamic twin ({machine}).", "",
+    lines = [f"Differential vs full re-trace of each dynamic twin ({described}).", "",
              "| twin | re-traced | trace time full → differential | agreement with the full re-trace: all / "
              "re-traced / kept cells | median / p95 abs. gain diff | parent reused unchanged | another full trace "
              "(seed + 1) |", "|---|---:|---:|---|---:|---:|---:|"]
@@ -141,15 +141,15 @@ def main() -> None:
                     help="skip the second full trace with another seed")
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
-    machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}"
+    host = machine()  # before the runs: the load they start under
     rows = []
     for scene in args.scenes:
         row = bench_scene(scene, args.radius_m, args.seed_floor, args.out)
         rows.append(row)
-        md = markdown([row], machine)
+        md = markdown([row], describe(host))
         write_atomic(args.out / f"bench_differential_{scene}.md", md)
-        write_atomic(args.out / f"bench_differential_{scene}.json", json.dumps({**row, "machine": machine},
-                                                                                indent=2) + "\n")
+        write_atomic(args.out / f"bench_differential_{scene}.json",
+                     json.dumps({**row, "machine": describe(host), "machine_details": host}, indent=2) + "\n")
         print(md, flush=True)
 
 

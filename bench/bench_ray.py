@@ -14,14 +14,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
-from dtradar_data.build.pipeline import BuildConfig, scene_config, trace_grid
+from dtradar_data.core.machine import describe, machine
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.pipeline.builder import BuildConfig, scene_config, trace_grid
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.store.versions import library_versions
 
@@ -74,12 +74,14 @@ def main() -> None:
                      "ray_workers": used, "ray_s": round(ray_s, 2), "ray_cells_per_s": round(free / ray_s, 1),
                      "speedup": round(serial_s / ray_s, 2), "identical_tables": bool(on_ray.equals(serial)),
                      "per_worker_cells_per_s": round(free / ray_s / used, 1)})
-    machine = f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU (LLVM backend)"
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    result = {"machine": machine, "load_average_at_end": load, "rows": rows, "library_versions": library_versions()}
+    host = machine()
+    described = f"{describe(host)}, no GPU (LLVM backend)"
+    load = host["load_average"][0] if host["load_average"] else None
+    result = {"machine": described, "load_average_at_end": load, "machine_details": host, "rows": rows,
+              "library_versions": library_versions()}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "bench_ray.json").write_text(json.dumps(result, indent=2) + "\n")
-    lines = [f"# Serial vs Ray tracing ({machine})", "",
+    lines = [f"# Serial vs Ray tracing ({described})", "",
              "| dataset | free cells | batches | serial cells/s | Ray workers | Ray cells/s | speed-up | identical | "
              "projected cells/s on 4 / 16 machines of this kind |", "|---|---:|---:|---:|---:|---:|---:|---|---|"]
     for r in rows:

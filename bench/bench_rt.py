@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 
+from dtradar_data.core.machine import describe, machine
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.rt import features
 from dtradar_data.rt.compare import agreement
@@ -114,6 +114,7 @@ def main() -> None:
                      "speedup_vs_reference": round(ref_s / dt, 2)})
         print(rows[-1])
     ok = [r for r in rows if r["agreement"] >= 0.95 and r["cells_per_s"] >= 300]
+    host = machine()  # after the runs: the load they were measured under
     result = {
         "scene": spec.name, "cell_m": spec.grid.cell_m, "free_cells": int(len(points)), "reference_samples": args.reference,
         "reference_path_buffer": args.reference_buffer, "path_buffer": base.max_num_paths_per_src,
@@ -122,7 +123,7 @@ def main() -> None:
         "max_depth": base.max_depth, "rows": rows,
         "meets_goal_300_cells_per_s_at_95pct": [r["samples_per_src"] for r in ok],
         "paper_ms_per_decision_rt": 16.0,
-        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} CPU cores, no GPU (LLVM backend)",
+        "machine": f"{describe(host)}, no GPU (LLVM backend)", "machine_details": host,
         "library_versions": library_versions(),
     }
     args.out.mkdir(parents=True, exist_ok=True)
