@@ -7,7 +7,11 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: setup test test-all dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic clean-venv
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic
+
+# List the targets (the first line of the comment above each one); `make` alone does the same.
+help:
+	@awk '/^# / { if (c == "") c = substr($$0, 3); next } /^[a-z][a-z-]*:/ { n = $$1; sub(/:.*/, "", n); printf "  %-14s %s\n", n, c; c = ""; next } { c = "" }' $(MAKEFILE_LIST)
 
 # One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
 setup:
@@ -17,9 +21,25 @@ setup:
 	$(PY) -m pip install -e '.[all]'
 	$(PY) -m dtradar_data check
 
-test:
+# The default checks: lint and format check (ruff), the docs site (mkdocs --strict), then the tests.
+test: lint docs
 	$(PY) -m pytest -q
 
+# ruff: lint rules and the format check configured in pyproject.toml.
+lint:
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+
+# Rewrite files in ruff's format and apply ruff's safe fixes.
+format:
+	$(PY) -m ruff format .
+	$(PY) -m ruff check --fix .
+
+# The documentation site (mkdocs + mkdocstrings, offline) into site/; warnings (dead links, missing modules) fail.
+docs:
+	$(PY) -m mkdocs build --strict --quiet
+
+# Every test, the slow ones included.
 test-all:
 	$(PY) -m pytest -q -m ''
 
@@ -27,41 +47,51 @@ test-all:
 dataset:
 	$(PY) -m dtradar_data build --scene $(SCENE) --variant $(VARIANT) $(if $(OSM),--osm $(OSM)) $(ARGS)
 
+# Both indoor twins (cubicle and meeting), both variants.
 datasets:
 	$(MAKE) dataset SCENE=cubicle
 	$(MAKE) dataset SCENE=meeting
 
+# Every dataset in the data root, with its versions.
 list:
 	$(PY) -m dtradar_data list
 
+# One dataset's card summary, e.g. make info NAME=cubicle/dynamic.
 info:
 	$(PY) -m dtradar_data info $(NAME)
 
+# Re-hash a stored dataset's files against its version (exit 1 when damaged).
 verify:
 	$(PY) -m dtradar_data verify $(NAME)
 
+# Re-render the committed dataset cards under cards/.
 cards:
 	$(PY) -m dtradar_data cards $(ARGS)
 
+# Push a stored version to the Hugging Face Hub, e.g. make publish NAME=cubicle/blueprint ARGS="--repo you/dtradar".
 publish:
 	$(PY) -m dtradar_data publish $(NAME) $(ARGS)
 
+# Pull a version from the Hugging Face Hub into the data root.
 pull:
 	$(PY) -m dtradar_data pull $(NAME) $(ARGS)
 
+# Train the default agent on $(SCENE)'s blueprint twin -> runs/$(SCENE)/dqn/model.pt (ARGS="--preset paper" etc.).
 train:
 	$(PY) -m dtradar_rl train --scene $(SCENE) $(ARGS)
 
+# Evaluate runs/$(SCENE)/dqn/model.pt on the blueprint and dynamic twins, beside the classical planner.
 eval:
 	$(PY) -m dtradar_rl eval --scene $(SCENE) $(ARGS)
 
-# Offline RL with d3rlpy on logged transitions, e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
+# Offline RL with d3rlpy on a named logged dataset (--logged NAME, else <scene>/blueprint/<behaviour>, logged or
+# reused), e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
 offline:
 	$(PY) -m dtradar_rl offline --scene $(SCENE) $(ARGS)
 
+BEHAVIOUR ?= noisy-shortest
 # A logged offline-RL dataset <scene>/blueprint/<behaviour> in the store (+ Minari copy), e.g.
 # make logged SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt"
-BEHAVIOUR ?= noisy-shortest
 logged:
 	$(PY) -m dtradar_rl log --scene $(SCENE) --behaviour $(BEHAVIOUR) $(ARGS)
 
@@ -69,8 +99,8 @@ logged:
 offline-bench:
 	$(PY) -m dtradar_rl offline-bench --scene $(SCENE) $(ARGS)
 
-# Train + evaluate several scenes x seeds as Ray tasks (one per core), gathered into one table with mean and spread.
 SEEDS   ?= 0 1 2
+# Train + evaluate several scenes x seeds as Ray tasks (one per core), gathered into one table with mean and spread.
 sweep:
 	$(PY) -m dtradar_rl sweep $(if $(SCENES),--scenes $(SCENES)) --seeds $(SEEDS) $(ARGS)
 
@@ -83,11 +113,14 @@ adapt:
 paper:
 	$(PY) -m dtradar_rl paper $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
+# Both main benchmarks: ray tracing and navigation.
 bench: bench-rt bench-rl
 
+# Ray-tracing speed and accuracy against a reference trace -> results/bench_rt.*
 bench-rt:
 	$(PY) bench/bench_rt.py $(ARGS)
 
+# Our DQN against Stable-Baselines3 DQN on the same twins, side by side -> results/bench_rl.*
 bench-rl:
 	$(PY) bench/bench_rl.py $(ARGS)
 

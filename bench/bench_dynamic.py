@@ -3,7 +3,7 @@
 For each scene and seed: train the ``robust`` and ``memory`` presets on the blueprint (``--steps``, default the
 paper's 600 K; a run whose ``model.pt`` exists under ``--runs`` is reused), evaluate them zero-shot on the blueprint and the dynamic twin beside
 the fingerprint + breadth-first planner (:mod:`dtradar_rl.agents.planner`), then fine-tune the memory agent on the dynamic
-twin for ``--seconds`` against training from scratch (:mod:`dtradar_rl.train.adapt`). Writes
+twin for ``--seconds`` against training from scratch (:mod:`dtradar_rl.experiments.adapt`). Writes
 ``results/bench_dynamic.{json,md}`` (mean and spread over seeds) and ``results/bench_dynamic_adapt_<scene>.png``.
 
     python bench/bench_dynamic.py --scenes cubicle meeting --seeds 0 1 2
@@ -21,14 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from dtradar_data.core.files import write_atomic
-from dtradar_rl.train.adapt import AdaptConfig, adapt, first_time_at
-from dtradar_rl.task.config import config_for
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.dqn import train
-from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.agents.planner import FingerprintPlanner
+from dtradar_rl.evaluation.evaluate import evaluate
+from dtradar_rl.experiments.adapt import AdaptConfig, adapt, first_time_at
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import config_for
+from dtradar_rl.train.dqn import train
 from dtradar_rl.viz.plots import plot_adapt_seeds
-from dtradar_rl.agents.policy import load_policy
 
 
 def machine_state() -> str:

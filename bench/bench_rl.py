@@ -29,15 +29,16 @@ import tyro
 
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.files import write_atomic
+from dtradar_rl.agents.policy import Policy
 from dtradar_rl.envs.batched import BatchedNavEnv
-from dtradar_rl.task.config import config_for
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.dqn import train
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.evaluation.evaluate import evaluate, markdown_table
 from dtradar_rl.task.observations import Normalizer
-from dtradar_rl.agents.policy import Policy, load_policy
 from dtradar_rl.task.runtime import auto_threads
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import config_for
+from dtradar_rl.train.dqn import train
 
 PAPER_TRAIN_S = 46 * 60.0
 PAPER_DECISION_MS = 17.0

@@ -1,8 +1,11 @@
 """dtradar_rl: navigation agents on dtradar datasets (after DT-RaDaR, arXiv 2411.12284).
 
-A per-cell table becomes a grid MDP (:mod:`dtradar_rl.task.mdp`); agents observe radio features by preset (:mod:`dtradar_rl.task.observations`)
-through a gymnasium env (:mod:`dtradar_rl.envs.nav_env`) or a batched torch env (:mod:`dtradar_rl.envs.batched`); DQN (:mod:`dtradar_rl.train.dqn`) trains on the
-blueprint twin and :mod:`dtradar_rl.evaluation.evaluate` measures success, SPL, collisions and latency on blueprint and dynamic twins.
+Role folders, each importing only the ones before it: :mod:`~dtradar_rl.task` (a per-cell table as a grid MDP,
+observations, pairs, the base config) → :mod:`~dtradar_rl.envs` (gymnasium and batched torch envs) and
+:mod:`~dtradar_rl.viz` → :mod:`~dtradar_rl.agents` (Q-network, ``Policy``, planner) → :mod:`~dtradar_rl.train`
+(DQN) → :mod:`~dtradar_rl.evaluation` (success, SPL, collisions, latency on blueprint and dynamic twins) →
+:mod:`~dtradar_rl.offline` (logged datasets, d3rlpy) → :mod:`~dtradar_rl.experiments` (paper, sweeps, benchmarks)
+→ :mod:`~dtradar_rl.cli`.
 
     from dtradar_rl import config_for, train, load_policy, evaluate, load_dataset
     result = train(config_for("tuned", scene="synthetic"))
@@ -14,14 +17,17 @@ Never imports Sionna.
 from __future__ import annotations
 
 _EXPORTS = {
-    "GridMDP": ".mdp", "ACTIONS": ".mdp", "REWARDS": ".mdp",
-    "OBS_PRESETS": ".observations", "Normalizer": ".observations", "build_observations": ".observations",
-    "DtradarNavEnv": ".envs", "register_dataset_envs": ".envs",
-    "BatchedNavEnv": ".batched",
-    "DQNConfig": ".config", "config_for": ".config", "PRESETS": ".config", "train": ".dqn",
-    "Policy": ".policy", "load_policy": ".policy", "OfflineConfig": ".offline", "train_offline": ".offline",
-    "evaluate": ".evaluate", "spl": ".evaluate", "cross_matrix": ".evaluate",
-    "load_dataset": ".data",
+    "GridMDP": "dtradar_rl.task.mdp", "ACTIONS": "dtradar_rl.task.mdp", "REWARDS": "dtradar_rl.task.mdp",
+    "OBS_PRESETS": "dtradar_rl.task.observations", "Normalizer": "dtradar_rl.task.observations",
+    "build_observations": "dtradar_rl.task.observations", "load_dataset": "dtradar_rl.task.twins",
+    "DtradarNavEnv": "dtradar_rl.envs.nav_env", "register_dataset_envs": "dtradar_rl.envs.registration",
+    "BatchedNavEnv": "dtradar_rl.envs.batched",
+    "Policy": "dtradar_rl.agents.policy",
+    "DQNConfig": "dtradar_rl.train.config", "config_for": "dtradar_rl.train.config", "PRESETS": "dtradar_rl.train.config",
+    "train": "dtradar_rl.train.dqn", "load_policy": "dtradar_rl.train.checkpoints",
+    "evaluate": "dtradar_rl.evaluation.evaluate", "spl": "dtradar_rl.evaluation.evaluate",
+    "cross_matrix": "dtradar_rl.evaluation.evaluate",
+    "OfflineConfig": "dtradar_rl.offline.config", "train_offline": "dtradar_rl.offline.trainer",
 }
 __all__ = sorted(_EXPORTS)
 
@@ -30,5 +36,5 @@ def __getattr__(name: str):
     if name in _EXPORTS:
         import importlib
 
-        return getattr(importlib.import_module(_EXPORTS[name], __name__), name)
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
     raise AttributeError(f"module 'dtradar_rl' has no attribute {name!r}")

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from dtradar_data import cli as data_cli
-from dtradar_data.build import pipeline
-from dtradar_data.build.pipeline import BuildConfig, build_inputs
-from dtradar_data.build.synthetic import synthetic_dataset
+from dtradar_data.pipeline import builder as pipeline
+from dtradar_data.pipeline.builder import BuildConfig, build_inputs
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.core import layout
 from dtradar_data.core.errors import (
     CorruptDatasetError,

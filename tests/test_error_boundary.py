@@ -14,11 +14,12 @@ from dtradar_data.core.boundary import EXIT_BROKEN_PIPE, EXIT_BUG, EXIT_ERROR, E
 from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.store import listing
 from dtradar_rl import cli as rl_cli
+from dtradar_rl.evaluation import jobs as eval_jobs
 
 # (the CLI, a command line, the module attribute the command calls first)
 COMMANDS = {
     "dtradar_data list": (data_cli.main, ["list"], listing, "list_datasets"),
-    "dtradar_rl eval": (rl_cli.main, ["eval", "--scene", "synthetic"], rl_cli, "load_policy"),
+    "dtradar_rl eval": (rl_cli.main, ["eval", "--scene", "synthetic"], eval_jobs, "load_policy"),
 }
 
 

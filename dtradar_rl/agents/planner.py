@@ -26,10 +26,9 @@ import numpy as np
 import torch
 
 from dtradar_data.core.dataset import Dataset
-
 from dtradar_rl.envs.batched import BatchedNavEnv
-from dtradar_rl.task.mdp import GridMDP
 from dtradar_rl.envs.memory import flag_columns
+from dtradar_rl.task.mdp import GridMDP
 from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
 
 #: Observation columns of the cell's own radio features (``neighbors`` preset).

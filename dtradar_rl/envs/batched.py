@@ -43,7 +43,6 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
-
 from dtradar_rl.task.mdp import GridMDP, NoConnectedPairError, check_reward, potential_kind, reward_fn
 from dtradar_rl.task.observations import Normalizer, ObservationTable, build_observations, check_preset
 
@@ -297,7 +296,7 @@ class BatchedNavEnv:
         shortest path of the map the episode is played on (with obstacle augmentation, the robot's augmented grid).
 
         This is the twin's own answer, known because the table is: :mod:`dtradar_rl.train.dqn` uses it as the expert of a
-        large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin (:mod:`dtradar_rl.train.adapt`).
+        large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin (:mod:`dtradar_rl.experiments.adapt`).
         A robot with no such move (cut off from its target) gets an all-false row. Needs the ``geodesic`` reward,
         whose distance tables it reads."""
         if self.potential != "geodesic":

@@ -24,7 +24,6 @@ from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError
-
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.task.mdp import ACTION_DELTAS, GridMDP

@@ -1,4 +1,4 @@
-"""The gymnasium environment of a dataset, and its registration under ``dtradar/<scene>-<variant>-v0`` ids."""
+"""The gymnasium environment of a dataset (one robot); its ids are :mod:`dtradar_rl.envs.registration`."""
 
 from __future__ import annotations
 
@@ -8,13 +8,9 @@ from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError
-from dtradar_data.store.listing import list_datasets
-
-from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.task.mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
 from dtradar_rl.task.observations import Normalizer, build_observations, check_preset
-
-SYNTHETIC_ENV_ID = "dtradar/synthetic-blueprint-v0"
+from dtradar_rl.task.twins import load_dataset
 
 
 class InvalidActionError(DtradarError, ValueError):
@@ -162,32 +158,3 @@ class DtradarNavEnv(gym.Env):
         img[self.mdp.blocked] = (60, 60, 60)
         img[ty, tx], img[y, x] = (0, 170, 0), (220, 0, 0)
         return np.repeat(np.repeat(img[::-1], 8, 0), 8, 1)
-
-
-# -- registration ------------------------------------------------------------------------------------------------
-def built_datasets() -> list[str]:
-    """Names ``scene/variant`` of the datasets built in the data root."""
-    return [entry.name for entry in list_datasets() if entry.built]
-
-
-
-def env_id(name: str) -> str:
-    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-v0"``."""
-    scene, _, variant = name.partition("/")
-    return f"dtradar/{scene}-{variant or 'blueprint'}-v0"
-
-
-def register_dataset_envs(**kwargs) -> list[str]:
-    """Register one env id per built dataset, plus ``dtradar/synthetic-{blueprint,dynamic}-v0``; returns the ids.
-
-    ``kwargs`` (``obs``, ``reward``, ...) become the default arguments of every id; ``gym.make`` can override them.
-    Datasets are loaded when an env is made, not here. Registering again replaces the ids.
-    """
-    ids = []
-    for name in ["synthetic/blueprint", "synthetic/dynamic", *built_datasets()]:
-        eid = env_id(name)
-        gym.registry.pop(eid, None)
-        gym.register(id=eid, entry_point="dtradar_rl.envs.nav_env:DtradarNavEnv",
-                     kwargs={"dataset": name, **kwargs}, disable_env_checker=True)
-        ids.append(eid)
-    return ids

@@ -25,10 +25,9 @@ import torch
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
-
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.task.mdp import GridMDP
 from dtradar_rl.agents.policy import Policy
+from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.twins import load_dataset
 
 
 @dataclass

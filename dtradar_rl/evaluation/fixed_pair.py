@@ -13,12 +13,10 @@ from typing import Any
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-
-from dtradar_rl.train.dqn import training_pair
+from dtradar_rl.agents.policy import Policy
 from dtradar_rl.evaluation.evaluate import Rollouts, path_length, rollout
 from dtradar_rl.task.mdp import GridMDP
-from dtradar_rl.task.pairs import ResolvedPair, resolve
-from dtradar_rl.agents.policy import Policy
+from dtradar_rl.task.pairs import ResolvedPair, resolve, training_pair
 
 
 def policy_pair(policy: Policy, ds: Dataset) -> ResolvedPair | None:

@@ -31,15 +31,17 @@ from typing import Any
 import numpy as np
 
 from dtradar_data.core.files import write_atomic
-from dtradar_data.store.transitions import episode_stats
-
-from dtradar_rl.agents.behaviours import BEHAVIOURS, behaviour_policy
-from dtradar_rl.task.config import ConfigError, config_for
-from dtradar_rl.task.twins import load_dataset
+from dtradar_data.store.logged import episode_stats
 from dtradar_rl.evaluation.evaluate import evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
+from dtradar_rl.offline.behaviours import BEHAVIOURS, behaviour_policy
+from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.logged import LogConfig, log_dataset
-from dtradar_rl.offline.trainer import ALGORITHMS, OfflineConfig, check_algorithm, train_offline
-from dtradar_rl.agents.policy import load_policy
+from dtradar_rl.offline.trainer import train_offline
+from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.runs import dqn_checkpoint
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import config_for
 
 NAMES = {"cql": "DiscreteCQL", "bcq": "DiscreteBCQ", "bc": "DiscreteBC", "dqn": "DQN", "ddqn": "DoubleDQN",
          "nfq": "NFQ"}
@@ -115,7 +117,7 @@ def machine() -> dict[str, Any]:
 
 
 def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, Any]]:
-    path = Path(cfg.checkpoint or f"runs/{cfg.scene}/dqn/model.pt")
+    path = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
     if path.is_file():
         return path, {"trained_here": False}
     from dtradar_rl.train.dqn import train
@@ -192,7 +194,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     needs_dqn = any(b in ("epsilon-greedy", "mixture") for b in cfg.behaviours)
     online: dict[str, Any] = {}
     ckpt = Path(cfg.checkpoint) if cfg.checkpoint else None
-    if needs_dqn or cfg.checkpoint or Path(f"runs/{cfg.scene}/dqn/model.pt").is_file():
+    if needs_dqn or cfg.checkpoint or dqn_checkpoint(cfg.scene).is_file():
         ckpt, info = _online_checkpoint(cfg, say)
         policy = load_policy(ckpt, cfg.device)
         rows = [r for r, _, _ in evaluate_twins(policy, cfg.scene, cfg.variants, pairs=cfg.pairs, seed=2024,

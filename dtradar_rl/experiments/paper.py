@@ -28,17 +28,17 @@ import torch
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.files import write_atomic
-
-from dtradar_rl.task.config import ConfigError, DQNConfig, check_device, config_for
-from dtradar_rl.task.twins import is_synthetic, load_dataset
-from dtradar_rl.train.dqn import train
 from dtradar_rl.evaluation.evaluate import cross_matrix
-from dtradar_rl.viz.figures import plot_bars, plot_episode_curves
 from dtradar_rl.evaluation.fixed_pair import evaluate_pair
-from dtradar_rl.task.pairs import paper_pair
 from dtradar_rl.experiments.paper_report import render
+from dtradar_rl.task.config import ConfigError, check_device
+from dtradar_rl.task.pairs import paper_pair
+from dtradar_rl.task.twins import is_synthetic, load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import DQNConfig, config_for
+from dtradar_rl.train.dqn import train
+from dtradar_rl.viz.figures import plot_bars, plot_episode_curves
 from dtradar_rl.viz.plots import plot_matrix, plot_paths
-from dtradar_rl.agents.policy import load_policy
 
 DEFAULT_SCENES = ("cubicle", "meeting", "dallas-q1", "dallas-q2", "dallas-q3", "dallas-q4",
                   "houston-q1", "houston-q2", "houston-q3", "houston-q4")

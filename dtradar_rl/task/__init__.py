@@ -1,0 +1,10 @@
+"""The task: a twin's per-cell table as a grid MDP, what a robot observes, start/target pairs, the base config,
+where runs go. Everything above (envs, agents, trainers) builds on these."""
+
+from dtradar_rl.task.config import ConfigError, TwinConfig
+from dtradar_rl.task.mdp import ACTIONS, REWARDS, GridMDP
+from dtradar_rl.task.observations import OBS_PRESETS, Normalizer, build_observations
+from dtradar_rl.task.twins import load_dataset
+
+__all__ = ["ACTIONS", "OBS_PRESETS", "REWARDS", "ConfigError", "GridMDP", "Normalizer", "TwinConfig",
+           "build_observations", "load_dataset"]

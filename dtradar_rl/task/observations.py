@@ -31,7 +31,6 @@ import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import unknown_name
-
 from dtradar_rl.task.mdp import ACTION_DELTAS
 
 #: The paper's ten inputs, in order (see the module docstring for the tenth).

@@ -22,9 +22,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.grid import Grid
-
 from dtradar_rl.task.mdp import GridMDP
 
 
@@ -165,5 +165,13 @@ def resolve(mdp: GridMDP, grid: Grid, scene: str, start: tuple[int, int] | None 
     return ResolvedPair(s, t, source, raw[0], raw[1], moved, shortest, max(CAP_FACTOR * shortest, mdp.max_steps))
 
 
-__all__ = ["TABLE_VI", "CAP_FACTOR", "PaperPair", "ResolvedPair", "PairError", "paper_pair", "to_grid", "snap",
+def training_pair(cfg, ds: Dataset) -> ResolvedPair | None:
+    """The fixed (start, target) pair of a run's config (``fixed_pair``, ``scene``, ``start``, ``target``: a
+    :class:`~dtradar_rl.train.config.DQNConfig`) on ``ds``, or ``None`` when it trains on random pairs."""
+    if not cfg.fixed_pair:
+        return None
+    return resolve(GridMDP.from_dataset(ds), ds.grid_info, cfg.scene, cfg.start, cfg.target)
+
+
+__all__ = ["TABLE_VI", "CAP_FACTOR", "training_pair", "PaperPair", "ResolvedPair", "PairError", "paper_pair", "to_grid", "snap",
            "stand_in", "resolve", "largest_region"]

@@ -4,7 +4,7 @@ Names
 -----
 ``"<scene>/<variant>[@<revision>]"``  a dataset in the data root (``dtradar_data.load``), e.g. ``cubicle/blueprint``.
 ``"synthetic/<variant>"``            a synthetic cubicle-sized 42 x 18 table (0.25 m cells, free-space line-of-sight
-                                     radio features from :mod:`dtradar_data.build.synthetic`) with desk-like obstacles; the
+                                     radio features from :mod:`dtradar_data.pipeline.synthetic`) with desk-like obstacles; the
                                      ``dynamic`` variant adds a chair and two people, like the paper's dynamic twin.
 ``"synthetic-<nx>x<ny>/<variant>"``  the same generator at another size (tests use tiny ones).
 """
@@ -15,10 +15,10 @@ import re
 
 import numpy as np
 
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, unknown_name
 from dtradar_data.core.ids import VARIANTS
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish.loading import load
 
 _SYNTH = re.compile(r"^synthetic(?:-(\d+)x(\d+))?$")

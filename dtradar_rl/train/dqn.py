@@ -1,11 +1,11 @@
 """Deep Q-learning on a dataset's navigation MDP, readable top to bottom (after CleanRL's ``dqn.py``).
 
-    from dtradar_rl.train.dqn import config_for, train
+    from dtradar_rl.train import config_for, train
     result = train(config_for("tuned", scene="synthetic", total_env_steps=100_000))
     result.checkpoint   # runs/synthetic/dqn/model.pt, with config.json, curves.csv and curves.png beside it
 
-Four presets (:data:`~dtradar_rl.task.config.PRESETS`, :func:`~dtradar_rl.task.config.config_for`); what each reaches is
-measured in the README (Navigation, Benchmarks), not here:
+Four presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`); what each reaches is
+measured in the docs (Navigation, Benchmarks), not here:
 
 ``paper``  the paper's protocol: its Table VI start/target pair per run (:mod:`dtradar_rl.task.pairs`), ``paper``
            observations (10 inputs, no target) and reward, 5 dense ReLU layers of 256, γ = 0.9, constant ε = 0.1,
@@ -25,7 +25,7 @@ The loop: every robot acts ε-greedily, the batch of transitions goes into a rep
 reset; every ``env_steps_per_update`` environment steps one Huber-loss update on a random minibatch follows, with
 targets from a target network copied every ``target_update_every`` updates; with ``expert_weight`` > 0, DQfD's
 large-margin loss towards the twin's breadth-first shortest moves is added to it (:func:`expert_margin_loss`; what
-:mod:`dtradar_rl.train.adapt` fine-tunes with). Checkpoints carry the config and the
+:mod:`dtradar_rl.experiments.adapt` fine-tunes with). Checkpoints carry the config and the
 feature normaliser; ``last.pt`` also carries optimiser, replay buffer and random states, so ``resume=True``
 continues a run exactly where it stopped.
 """
@@ -48,75 +48,22 @@ from torch import nn
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import open_atomic
-
-from dtradar_rl.task.config import PRESETS, DQNConfig, config_for
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.task.mdp import GridMDP
-from dtradar_rl.envs.memory import batched_env
-from dtradar_rl.task.observations import Normalizer
-from dtradar_rl.task.pairs import ResolvedPair, resolve
-from dtradar_rl.viz.plots import plot_curves
-from dtradar_rl.agents.policy import (
+from dtradar_rl.agents.checkpoints import (
     CHECKPOINT_FORMAT,
-    QNetwork,
-    load_policy,
     read_checkpoint,
     save_checkpoint,
     save_torch_atomic,
     write_config,
 )
+from dtradar_rl.agents.policy import QNetwork
+from dtradar_rl.envs.memory import batched_env
+from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.pairs import training_pair
 from dtradar_rl.task.runtime import auto_threads
-
-
-# -- replay buffer -------------------------------------------------------------------------------------------------
-class ReplayBuffer:
-    """A ring buffer of transitions ``(obs, action, reward, next_obs, terminated, expert)`` as preallocated tensors
-    (``expert``: ``bool[4]``, the moves a breadth-first shortest path would take; kept, and allocated, only when
-    :meth:`add` is given them, else ``None``)."""
-
-    def __init__(self, capacity: int, obs_dim: int, device: torch.device):
-        self.capacity, self.ptr, self.size = capacity, 0, 0
-        self.obs = torch.zeros((capacity, obs_dim), device=device)
-        self.next_obs = torch.zeros((capacity, obs_dim), device=device)
-        self.action = torch.zeros(capacity, dtype=torch.long, device=device)
-        self.reward = torch.zeros(capacity, device=device)
-        self.terminated = torch.zeros(capacity, device=device)
-        self.expert: torch.Tensor | None = None
-
-    def add(self, obs, action, reward, next_obs, terminated, expert=None) -> None:
-        n = obs.shape[0]
-        idx = (self.ptr + torch.arange(n, device=obs.device)) % self.capacity
-        self.obs[idx], self.next_obs[idx] = obs, next_obs
-        self.action[idx], self.reward[idx], self.terminated[idx] = action, reward, terminated.float()
-        if expert is not None:
-            if self.expert is None:
-                self.expert = torch.zeros((self.capacity, 4), dtype=torch.bool, device=self.obs.device)
-            self.expert[idx] = expert
-        self.ptr = (self.ptr + n) % self.capacity
-        self.size = min(self.size + n, self.capacity)
-
-    def sample(self, batch_size: int, gen: torch.Generator):
-        idx = torch.randint(self.size, (batch_size,), generator=gen, device=self.obs.device)
-        return (self.obs[idx], self.action[idx], self.reward[idx], self.next_obs[idx], self.terminated[idx],
-                None if self.expert is None else self.expert[idx])
-
-    def state_dict(self) -> dict[str, Any]:
-        n = self.size
-        state = {"ptr": self.ptr, "size": n, "obs": self.obs[:n].clone(), "next_obs": self.next_obs[:n].clone(),
-                 "action": self.action[:n].clone(), "reward": self.reward[:n].clone(),
-                 "terminated": self.terminated[:n].clone()}
-        if self.expert is not None:
-            state["expert"] = self.expert[:n].clone()
-        return state
-
-    def load_state_dict(self, s: dict[str, Any]) -> None:
-        n = s["size"]
-        self.ptr, self.size = s["ptr"], n
-        for k in ("obs", "next_obs", "action", "reward", "terminated"):
-            getattr(self, k)[:n] = s[k]
-        if "expert" in s:
-            self.expert = torch.zeros((self.capacity, 4), dtype=torch.bool, device=self.obs.device)
-            self.expert[:n] = s["expert"]
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.config import DQNConfig
+from dtradar_rl.train.replay import ReplayBuffer
+from dtradar_rl.viz.plots import plot_curves
 
 
 # -- training ------------------------------------------------------------------------------------------------------
@@ -141,18 +88,11 @@ def epsilon(cfg: DQNConfig, env_steps: int) -> float:
     return cfg.eps_start + frac * (cfg.eps_end - cfg.eps_start)
 
 
-def training_pair(cfg: DQNConfig, ds: Dataset) -> ResolvedPair | None:
-    """The run's fixed (start, target) pair on ``ds`` (:mod:`dtradar_rl.task.pairs`), or ``None`` for random pairs."""
-    if not cfg.fixed_pair:
-        return None
-    return resolve(GridMDP.from_dataset(ds), ds.grid_info, cfg.scene, cfg.start, cfg.target)
-
-
 def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, Any] | None = None,
           normalizer: Normalizer | None = None, callback: Callable[..., bool] | None = None) -> TrainResult:
     """Train a DQN agent on ``dataset`` (default: load ``config.dataset_name``); write checkpoints and curves.
 
-    Fine-tuning (:mod:`dtradar_rl.train.adapt`): ``init`` is a Q-network state dict to start from and ``normalizer`` the
+    Fine-tuning (:mod:`dtradar_rl.experiments.adapt`): ``init`` is a Q-network state dict to start from and ``normalizer`` the
     one it was trained with; ``callback(q, env_steps, train_s)`` runs after every batch of steps with the seconds
     spent in the training loop (set-up excluded), its own time is not counted there or in ``wall_s``, and it
     stops training by returning True."""
@@ -350,5 +290,4 @@ def write_curves(episodes: list[tuple], out: Path) -> tuple[Path, Path]:
     return csv_path, png_path
 
 
-__all__ = ["DQNConfig", "PRESETS", "config_for", "train", "TrainResult", "ReplayBuffer", "epsilon", "load_policy",
-           "expert_margin_loss"]
+__all__ = ["TrainResult", "epsilon", "expert_margin_loss", "train"]

@@ -2,8 +2,9 @@ import json
 
 import pytest
 
-from dtradar_rl.train.adapt import AdaptConfig, adapt, first_time_at
-from dtradar_rl.task.config import ConfigError, config_for
+from dtradar_rl.experiments.adapt import AdaptConfig, adapt, first_time_at
+from dtradar_rl.task.config import ConfigError
+from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
 
 

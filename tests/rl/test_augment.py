@@ -5,16 +5,17 @@ import numpy as np
 import pytest
 import torch
 
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, UnknownNameError
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_rl.envs.batched import BatchedNavEnv
-from dtradar_rl.task.config import PRESETS, ConfigError, config_for
-from dtradar_rl.task.twins import load_dataset, synthetic_blocked
-from dtradar_rl.train.dqn import train
 from dtradar_rl.envs.nav_env import DtradarNavEnv
+from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer
-from dtradar_rl.agents.policy import load_policy
+from dtradar_rl.task.twins import load_dataset, synthetic_blocked
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import PRESETS, config_for
+from dtradar_rl.train.dqn import train
 
 
 @pytest.fixture(scope="module", autouse=True)

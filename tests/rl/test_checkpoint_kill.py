@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from dtradar_rl.agents.policy import read_checkpoint
+from dtradar_rl.agents.checkpoints import read_checkpoint
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
 
@@ -24,7 +24,7 @@ WRITER = textwrap.dedent("""
 
     import torch
 
-    from dtradar_rl.agents.policy import save_torch_atomic
+    from dtradar_rl.agents.checkpoints import save_torch_atomic
 
     path, first, pause_at = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
 

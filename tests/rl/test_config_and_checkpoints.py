@@ -6,9 +6,11 @@ import dataclasses
 import pytest
 import torch
 
-from dtradar_rl.task.config import ConfigError, DQNConfig, config_for
-from dtradar_rl.offline.trainer import OfflineConfig
-from dtradar_rl.agents.policy import CheckpointError, load_policy, read_checkpoint, save_torch_atomic
+from dtradar_rl.agents.checkpoints import CheckpointError, read_checkpoint, save_torch_atomic
+from dtradar_rl.offline.config import OfflineConfig
+from dtradar_rl.task.config import ConfigError
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import DQNConfig, config_for
 
 
 @pytest.mark.parametrize("changes, flag", [

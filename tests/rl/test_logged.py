@@ -9,14 +9,18 @@ import torch
 
 import dtradar_data
 from dtradar_data.core.errors import SchemaMismatchError
-from dtradar_rl.agents.behaviours import BehaviourSpec
-from dtradar_rl.task.config import ConfigError, config_for
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.offline.logged import LogConfig, d3rlpy_arrays, export_minari, from_minari, log_dataset, to_mdp_dataset
+from dtradar_rl.agents.checkpoints import save_checkpoint
+from dtradar_rl.agents.policy import QNetwork
+from dtradar_rl.offline.behaviours import BehaviourSpec
+from dtradar_rl.offline.config import OfflineConfig
+from dtradar_rl.offline.formats import d3rlpy_arrays, export_minari, from_minari, to_mdp_dataset
+from dtradar_rl.offline.logged import LogConfig, log_dataset
+from dtradar_rl.offline.trainer import train_offline
+from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
-from dtradar_rl.offline.trainer import OfflineConfig, train_offline
-from dtradar_rl.agents.policy import QNetwork, save_checkpoint
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.config import config_for
 
 SMALL = "synthetic-10x8"
 CFG = LogConfig(scene=SMALL, behaviour="noisy-shortest", steps=1200, num_envs=12, max_steps=15, seed=2,

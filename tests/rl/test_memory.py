@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 import torch
 
-from dtradar_rl.task.config import config_for
-from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.envs.memory import MemoryGymEnv, MemoryLayout, MemoryNavEnv
 from dtradar_rl.task.observations import OBS_DIMS, Normalizer
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.config import config_for
 
 
 @pytest.fixture(scope="module")
@@ -70,9 +70,9 @@ def test_the_memory_preset_is_robust_plus_a_memory_window_and_needs_neighbour_ob
 
 
 def test_a_tiny_memory_agent_trains_saves_and_evaluates(tmp_path):
-    from dtradar_rl.train.dqn import train
     from dtradar_rl.evaluation.evaluate import evaluate
-    from dtradar_rl.agents.policy import load_policy
+    from dtradar_rl.train.checkpoints import load_policy
+    from dtradar_rl.train.dqn import train
 
     cfg = config_for("memory", scene="synthetic-12x8", total_env_steps=1_000, num_envs=16, learning_starts=200,
                      memory_radius=2, out=str(tmp_path), verbose=False, threads=1)

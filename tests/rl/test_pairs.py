@@ -9,14 +9,15 @@ import torch
 from dtradar_data.core.grid import Grid
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.scenes import load_scene_spec
-from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.cli import main
-from dtradar_rl.task.config import ConfigError, config_for
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.dqn import train, training_pair
+from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.mdp import GridMDP
-from dtradar_rl.agents.policy import load_policy
-from dtradar_rl.task.pairs import CAP_FACTOR, TABLE_VI, PairError, largest_region, resolve, to_grid
+from dtradar_rl.task.pairs import CAP_FACTOR, TABLE_VI, PairError, largest_region, resolve, to_grid, training_pair
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import config_for
+from dtradar_rl.train.dqn import train
 
 
 @pytest.mark.parametrize("scene", ["cubicle", "meeting"])

@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.agents.planner import FingerprintPlanner
 from dtradar_rl.evaluation.evaluate import evaluate, metrics_from_rollouts, rollout
 from dtradar_rl.task.mdp import GridMDP
-from dtradar_rl.agents.planner import FingerprintPlanner
+from dtradar_rl.task.twins import load_dataset
 
 
 @pytest.mark.parametrize("variant", ["blueprint", "dynamic"])

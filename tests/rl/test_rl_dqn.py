@@ -7,11 +7,12 @@ import pytest
 import torch
 
 from dtradar_data.core.errors import UnknownNameError
-from dtradar_rl.task.config import ConfigError, DQNConfig, config_for
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.dqn import train
+from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.mdp import GridMDP
-from dtradar_rl.agents.policy import load_policy
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import DQNConfig, config_for
+from dtradar_rl.train.dqn import train
 
 TINY = dict(scene="synthetic-4x3", obs="goal", reward="geodesic", num_envs=32, total_env_steps=16_000,
             hidden=(64, 64), batch_size=128, learning_starts=1_000, env_steps_per_update=4, target_update_every=100,

@@ -6,12 +6,13 @@ import pytest
 import torch
 from gymnasium.utils.env_checker import check_env
 
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import UnknownNameError
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_rl.envs.batched import BatchedNavEnv
-from dtradar_rl.task.twins import load_dataset, synthetic_blocked
-from dtradar_rl.envs.nav_env import DtradarNavEnv, register_dataset_envs
+from dtradar_rl.envs.nav_env import DtradarNavEnv
+from dtradar_rl.envs.registration import register_dataset_envs
 from dtradar_rl.task.observations import OBS_DIMS, PAPER_COLUMNS, Normalizer, build_observations
+from dtradar_rl.task.twins import load_dataset, synthetic_blocked
 
 
 @pytest.fixture(scope="module")

@@ -76,9 +76,9 @@ def test_shield_never_moves_into_a_sensed_obstacle(tmp_path):
     assert main(["train", "--scene", "synthetic-6x5", "--total-env-steps", "1000", "--num-envs", "16",
                  "--hidden", "16", "--learning-starts", "500", "--out", str(tmp_path), "--no-verbose",
                  "--threads", "1"]) == 0
-    from dtradar_rl.task.twins import load_dataset
     from dtradar_rl.evaluation.evaluate import evaluate
-    from dtradar_rl.agents.policy import load_policy
+    from dtradar_rl.task.twins import load_dataset
+    from dtradar_rl.train.checkpoints import load_policy
 
     policy = load_policy(tmp_path / "model.pt")
     metrics, _ = evaluate(policy, load_dataset("synthetic-6x5/dynamic"), pairs=50, latency=False, shield=True)
@@ -89,7 +89,7 @@ def test_shield_needs_the_neighbors_preset(tmp_path):
     assert main(["train", "--scene", "synthetic-6x5", "--obs", "goal", "--total-env-steps", "600",
                  "--num-envs", "16", "--hidden", "8", "--learning-starts", "500", "--out", str(tmp_path),
                  "--no-verbose", "--threads", "1"]) == 0
-    from dtradar_rl.agents.policy import load_policy
+    from dtradar_rl.train.checkpoints import load_policy
 
     with pytest.raises(DtradarError, match="neighbors"):
         load_policy(tmp_path / "model.pt").shield_columns()

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dtradar_data.build.synthetic import synthetic_dataset
 from dtradar_data.core.errors import UnknownNameError
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.task.mdp import GridMDP, NoConnectedPairError, default_max_steps, reward_fn
 

@@ -5,8 +5,8 @@ import json
 import pytest
 
 from dtradar_rl.cli import main
-from dtradar_rl.task.config import ConfigError
 from dtradar_rl.experiments.sweep import SweepConfig, summarise, sweep
+from dtradar_rl.task.config import ConfigError
 
 TINY = dict(scenes=("synthetic-8x6",), preset="tuned", total_env_steps=3_000, pairs=20)
 

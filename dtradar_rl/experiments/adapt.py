@@ -27,22 +27,23 @@ from pathlib import Path
 from typing import Any
 
 from dtradar_data.core.files import open_atomic, write_atomic
-
-from dtradar_rl.task.config import ConfigError, config_for, flag
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.dqn import train
+from dtradar_rl.agents.policy import Policy
 from dtradar_rl.evaluation.evaluate import evaluate
+from dtradar_rl.task.config import ConfigError, JobConfig, flag
 from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.runs import dqn_checkpoint, run_dir
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.config import config_for
+from dtradar_rl.train.dqn import train
 from dtradar_rl.viz.plots import plot_adapt_curves
-from dtradar_rl.agents.policy import Policy, load_policy
 
 
 @dataclass(frozen=True)
-class AdaptConfig:
-    """Fine-tune a blueprint agent on a changed twin; success against seconds, beside training from scratch."""
+class AdaptConfig(JobConfig):
+    """Fine-tune a blueprint agent on a changed twin; success against seconds, beside training from scratch
+    (``--out`` default: runs/<scene>/adapt)."""
 
-    scene: str = "cubicle"
-    """scene whose changed twin the agent adapts to"""
     variant: str = "dynamic"
     """the changed twin"""
     checkpoint: str = ""
@@ -55,8 +56,6 @@ class AdaptConfig:
     """seeded (start, target) pairs of each evaluation"""
     pair_seed: int = 2024
     """seed of the pairs (the same as make eval)"""
-    seed: int = 0
-    """seed of the network updates, the environment and exploration"""
     eps: float = 0.05
     """exploration rate while fine-tuning (the start is already a good policy)"""
     lr: float = 3e-5
@@ -79,14 +78,9 @@ class AdaptConfig:
     """also fine-tune with plain DQN (no expert loss) for the same seconds, to show what the expert loss buys"""
     scratch: bool = True
     """also train the checkpoint's preset from scratch on the changed twin for the same seconds"""
-    threads: int = 0
-    """torch CPU threads (0 = auto)"""
-    out: str = ""
-    """output directory (default runs/<scene>/adapt)"""
-    verbose: bool = True
-    """print each evaluation"""
 
     def validate(self) -> AdaptConfig:
+        super().validate()
         for name in ("seconds", "eval_every_s", "lr"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{flag(name)} must be > 0, got {getattr(self, name)}")
@@ -143,8 +137,8 @@ def _curve(cfg: AdaptConfig, label: str, train_cfg, ds, init: Policy | None, out
 def adapt(cfg: AdaptConfig) -> AdaptResult:
     """Fine-tune (and, with ``scratch``, train from scratch) on ``<scene>/<variant>``; write the curves."""
     cfg = cfg.validate()
-    ckpt = Path(cfg.checkpoint or f"runs/{cfg.scene}/dqn/model.pt")
-    out = Path(cfg.out or f"runs/{cfg.scene}/adapt")
+    ckpt = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
+    out = Path(cfg.out or run_dir(cfg.scene, "adapt"))
     start = load_policy(ckpt)
     ds = load_dataset(f"{cfg.scene}/{cfg.variant}")
     base = start.config

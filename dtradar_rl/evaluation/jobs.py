@@ -1,0 +1,160 @@
+"""The evaluation jobs: ``make eval`` (a checkpoint on the twins of its scene, beside the classical planner) and
+``cross`` (train-on-i x evaluate-on-j over several scenes), each with its config; tables, JSON and path plots.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dtradar_data.core.errors import DatasetNotFoundError, unknown_name
+from dtradar_data.core.ids import VARIANTS
+from dtradar_rl.agents.planner import planner_for_scene
+from dtradar_rl.evaluation.evaluate import cross_matrix, evaluate_twins, write_results
+from dtradar_rl.evaluation.fixed_pair import evaluate_pair
+from dtradar_rl.task.config import Config, ConfigError, check_device
+from dtradar_rl.task.runs import dqn_checkpoint, run_dir
+from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.viz.figures import plot_bars
+from dtradar_rl.viz.plots import plot_matrix, plot_paths
+
+
+@dataclass(frozen=True)
+class EvalConfig(Config):
+    """Evaluate a trained policy on the twins of its scene (blueprint -> blueprint, blueprint -> dynamic)."""
+
+    scene: str = "cubicle"
+    """scene whose twins are evaluated (synthetic = the 42x18 stand-in)"""
+    checkpoint: str = ""
+    """model.pt to evaluate (default runs/<scene>/dqn/model.pt)"""
+    variants: tuple[str, ...] = ("blueprint", "dynamic")
+    """twins to evaluate on"""
+    pairs: int = 500
+    """seeded (start, target) pairs per twin"""
+    seed: int = 2024
+    """seed of the pairs"""
+    max_steps: int = 0
+    """episode step limit (0 = 4 * (nx + ny))"""
+    shield: bool = True
+    """also report the policy with the obstacle shield (moves into neighbours sensed as occupied are masked;
+    neighbors preset only)"""
+    planner: bool = True
+    """also report the classical baseline (fingerprint localisation + breadth-first replanning on the blueprint;
+    see dtradar_rl.agents.planner)"""
+    plot_paths: int = 6
+    """navigation paths drawn over the coverage map per twin"""
+    out: str = ""
+    """output directory (default runs/<scene>/eval)"""
+    device: str = "cpu"
+    """torch device"""
+
+    def validate(self) -> EvalConfig:
+        """Every setting, before a policy is loaded or a file written; messages name the --flag."""
+        self.check_at_least(1, "pairs")
+        self.check_at_least(0, "max_steps", "plot_paths")
+        if not self.variants:
+            raise ConfigError("--variants is empty", hint="e.g. --variants blueprint dynamic")
+        for v in self.variants:
+            if v not in VARIANTS:
+                raise unknown_name("variant (--variants)", v, VARIANTS)
+        check_device(self.device)
+        return self
+
+
+@dataclass(frozen=True)
+class CrossConfig(Config):
+    """Train-on-i x evaluate-on-j matrix over a list of datasets (the cities' cross-quadrant heatmap)."""
+
+    scenes: tuple[str, ...] = ("synthetic",)
+    """scenes with a trained policy each (e.g. dallas-q1 dallas-q2 dallas-q3 dallas-q4)"""
+    variant: str = "blueprint"
+    """twin of each scene to evaluate on"""
+    checkpoint_pattern: str = str(dqn_checkpoint("{scene}"))
+    """where each scene's policy is ({scene} is replaced)"""
+    pairs: int = 300
+    """seeded (start, target) pairs per cell of the matrix"""
+    seed: int = 2024
+    """seed of the pairs"""
+    out: str = str(run_dir("cross"))
+    """output directory"""
+
+    def validate(self) -> CrossConfig:
+        self.check_at_least(1, "pairs")
+        if not self.scenes:
+            raise ConfigError("--scenes is empty", hint="name at least one scene with a trained policy")
+        if len(self.scenes) > 1 and "{scene}" not in self.checkpoint_pattern:
+            raise ConfigError(f"--checkpoint-pattern {self.checkpoint_pattern!r} has no {{scene}}: every scene "
+                              "would get the same policy", hint="e.g. runs/{scene}/dqn/model.pt")
+        if self.variant not in VARIANTS:
+            raise unknown_name("variant (--variant)", self.variant, VARIANTS)
+        return self
+
+
+def run_eval(cfg: EvalConfig) -> str:
+    ckpt = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
+    out = Path(cfg.out or run_dir(cfg.scene, "eval"))
+    policy = load_policy(ckpt, cfg.device)
+    if getattr(policy.config, "fixed_pair", False):
+        return _eval_pair(cfg, policy, ckpt, out)
+    rows = []
+    for row, ds, roll in evaluate_twins(policy, cfg.scene, cfg.variants, pairs=cfg.pairs, seed=cfg.seed,
+                                        max_steps=cfg.max_steps or None, device=cfg.device, shield=cfg.shield):
+        rows.append(row)
+        k = min(cfg.plot_paths, len(roll.paths))
+        out.mkdir(parents=True, exist_ok=True)
+        png = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}.png"
+        plot_paths(ds, roll.paths[:k], out / png,
+                   successes=list(roll.success[:k]),
+                   title=f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}")
+    if cfg.planner:
+        rows += [row for row, _, _ in evaluate_twins(planner_for_scene(cfg.scene, cfg.device), cfg.scene, cfg.variants,
+                                                     label="planner: ", pairs=cfg.pairs, seed=cfg.seed,
+                                                     max_steps=cfg.max_steps or None, device=cfg.device, shield=False)]
+    config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
+    md = write_results(rows, out, config)
+    print(md, end="")
+    print(f"results: {out / 'results.json'}, {out / 'results.md'}")
+    return md
+
+
+def _eval_pair(cfg: EvalConfig, policy, ckpt: Path, out: Path) -> str:
+    """A fixed-pair agent (the paper's protocol) is evaluated on its own pair on each twin, not on random pairs."""
+    rows = []
+    for variant in cfg.variants:
+        try:
+            ds = load_dataset(f"{cfg.scene}/{variant}")
+        except DatasetNotFoundError as e:
+            print(f"skipping {cfg.scene}/{variant}: {e.message}")
+            continue
+        row, pair, roll = evaluate_pair(policy, ds, max_steps=cfg.max_steps or None, device=cfg.device)
+        rows.append(row)
+        out.mkdir(parents=True, exist_ok=True)
+        verdict = f"reached in {int(row['steps'])} steps" if row["success_rate"] else "not reached"
+        plot_paths(ds, roll.paths, out / f"paths_{variant}.png", successes=list(roll.success),
+                   title=f"{ds.name}: pair {pair.start} -> {pair.target} {verdict}, shortest {pair.shortest}")
+    config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
+    md = write_results(rows, out, config)
+    print(md, end="")
+    print(f"results: {out / 'results.json'}, {out / 'results.md'}")
+    return md
+
+
+def run_cross(cfg: CrossConfig) -> None:
+    policies = {s: load_policy(cfg.checkpoint_pattern.format(scene=s)) for s in cfg.scenes}
+    datasets = {s: load_dataset(f"{s}/{cfg.variant}") for s in cfg.scenes}
+    m = cross_matrix(policies, datasets, pairs=cfg.pairs, seed=cfg.seed)
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for key in ("success", "spl"):
+        plot_matrix(np.array(m[key]), m["rows"], m["cols"], out / f"cross_{key}.png", title=f"{key} (train x eval)")
+        plot_bars(m[key], m["rows"], m["cols"], out / f"cross_{key}_bars.png", ylabel=key)
+    rows = [{"case": f"{r} -> {c}", "pairs": cfg.pairs, "success_rate": m["success"][i][j], "spl": m["spl"][i][j]}
+            for i, r in enumerate(m["rows"]) for j, c in enumerate(m["cols"])]
+    print(write_results(rows, out, {"cross": dataclasses.asdict(cfg), "matrix": m}, name="cross"), end="")
+
+
+__all__ = ["CrossConfig", "EvalConfig", "run_cross", "run_eval"]

@@ -1,0 +1,85 @@
+"""The offline baselines' settings: which d3rlpy algorithm, on which logged data, with which hyper-parameters.
+
+:class:`OfflineConfig` extends :class:`~dtradar_rl.offline.behaviours.BehaviourConfig` (the twin, and the behaviour
+that logs on it when no stored ``--logged`` dataset is named).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from dtradar_data.core.errors import unknown_name
+from dtradar_rl.offline.behaviours import BehaviourConfig
+from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.runs import run_dir
+
+OFFLINE_FORMAT = "dtradar-offline/1"
+#: Algorithm names and the d3rlpy config class each one uses.
+ALGORITHMS: dict[str, str] = {"cql": "DiscreteCQLConfig", "bcq": "DiscreteBCQConfig", "bc": "DiscreteBCConfig",
+                              "dqn": "DQNConfig", "ddqn": "DoubleDQNConfig", "nfq": "NFQConfig"}
+
+
+@dataclass(frozen=True)
+class OfflineConfig(BehaviourConfig):
+    """Offline RL with d3rlpy: log a behaviour policy on a twin, train on the log, evaluate on the twins."""
+
+    algorithm: str = "cql"
+    """d3rlpy algorithm: cql (DiscreteCQL), bcq (DiscreteBCQ), bc (DiscreteBC), dqn (DQN, offline), ddqn
+    (DoubleDQN, offline), nfq (NFQ: fitted Q, no target network)"""
+    reward: str = "geodesic"
+    """reward logged with each transition: paper, scaled, euclidean or geodesic (see dtradar_rl.task.mdp)"""
+    transitions: int = 100_000
+    """environment steps to log when no --logged dataset is given (all robots together; rounded up to whole steps of
+    num-envs robots): the log is the stored dataset <scene>/<variant>/<behaviour>, reused when one with the same
+    inputs exists"""
+    n_steps: int = 10_000
+    """d3rlpy gradient updates"""
+    batch_size: int = 256
+    """minibatch size of one update"""
+    lr: float = 3e-4
+    """Adam learning rate (d3rlpy's Atari default, 6.25e-5, is too slow for a short run)"""
+    gamma: float = 0.5
+    """discount factor of the Q-learning algorithms (not used by bc)"""
+    target_update_interval: int = 500
+    """updates between target-network syncs (cql, bcq, dqn; d3rlpy's default is 8000)"""
+    bc_beta: float = 0.5
+    """bc (and the imitation part of bcq): weight of the penalty on squared policy logits (d3rlpy's default)"""
+    cql_alpha: float = 1.0
+    """cql: weight of the conservative term"""
+    bcq_flexibility: float = 0.3
+    """bcq: actions whose behaviour probability is below this fraction of the likeliest are not taken"""
+    eval_variants: tuple[str, ...] = ("blueprint", "dynamic")
+    """twins of the scene to evaluate on after training (empty = no evaluation)"""
+    pairs: int = 500
+    """seeded (start, target) pairs per evaluated twin"""
+    eval_seed: int = 2024
+    """seed of the evaluation pairs (the same as `make eval`)"""
+    shield: bool = True
+    """also report the policy with the obstacle shield (neighbors preset only)"""
+    logged: str = ""
+    """train on this stored logged dataset (e.g. cubicle/blueprint/mixture@v0, see `dtradar_rl log`); default: log
+    (or reuse) <scene>/<variant>/<behaviour> with --behaviour, --transitions and --seed"""
+    out: str = ""
+    """output directory (default runs/<scene>/offline/<algorithm>)"""
+
+    @property
+    def out_dir(self) -> Path:
+        return Path(self.out or run_dir(self.scene, "offline", self.algorithm))
+
+    def validate(self) -> OfflineConfig:
+        super().validate()
+        check_algorithm(self.algorithm)
+        self.check_at_least(1, "transitions", "n_steps", "batch_size", "target_update_interval", "pairs")
+        self.check_within(0, 1, "gamma", "bcq_flexibility", open_interval=True)
+        if not self.lr > 0:
+            raise ConfigError(f"--lr must be > 0, got {self.lr}")
+        self.check_at_least(0, "bc_beta", "cql_alpha")
+        return self
+
+
+def check_algorithm(name: str) -> str:
+    """Return ``name`` if it is a known offline algorithm, else raise :class:`UnknownNameError` with a suggestion."""
+    if name not in ALGORITHMS:
+        raise unknown_name("offline algorithm", name, ALGORITHMS)
+    return name

@@ -1,0 +1,158 @@
+"""The online DQN's settings and its four presets (``tuned``, ``robust``, ``memory``, ``paper``).
+
+:class:`DQNConfig` extends :class:`~dtradar_rl.task.config.TwinConfig`; :func:`config_for` gives a preset with
+overrides. What each preset reaches on each twin is measured in the docs (Navigation), not here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from dtradar_data.core.errors import unknown_name
+from dtradar_rl.envs.batched import AUG_POTENTIALS
+from dtradar_rl.task.config import INDOOR_SCENES, ConfigError, TwinConfig
+from dtradar_rl.task.runs import run_dir
+from dtradar_rl.task.twins import is_synthetic
+
+PAIR_MODES = ("random", "paper")
+
+
+@dataclass(frozen=True)
+class DQNConfig(TwinConfig):
+    """Deep Q-learning on the navigation MDP of one dataset (defaults: the ``tuned`` preset)."""
+
+    preset: str = "tuned"
+    """the preset these settings started from (tuned, robust or paper); recorded in config.json"""
+    aug_obstacles: int = 0
+    """obstacle augmentation: extra random obstacles per robot, redrawn at every episode reset, that collide and
+    read as blocked neighbours (0 = off; see dtradar_rl.envs.batched)"""
+    aug_obstacle_size: int = 2
+    """largest side of an extra obstacle in cells (each is a 1..size x 1..size rectangle; 2 = 1 m at 0.5 m cells)"""
+    aug_potential: str = "replan"
+    """geodesic shaping with extra obstacles: replan (BFS per robot on its augmented grid) or blueprint"""
+    memory_radius: int = 0
+    """memory agent: append a (2R+1)^2 window of the cells sensed as occupied and visited so far this episode
+    (0 = off; needs --obs neighbors; see dtradar_rl.envs.memory)"""
+    total_env_steps: int = 600_000
+    """training budget in environment steps (all robots together); the paper's is 600K"""
+    episodes: int = 0
+    """also stop after this many finished episodes (0 = no limit; the paper: 500 indoor, 80 outdoor)"""
+    pair: str = "random"
+    """start/target pairs: random (a new connected pair every episode: goal-conditioned agents) or paper (one fixed
+    pair per run, the paper's protocol: the scene's Table VI pair on the grid, see dtradar_rl.task.pairs; episodes then
+    run until the target, capped at 10x the pair's shortest path unless --max-steps is set)"""
+    start: tuple[int, int] | None = None
+    """fixed start cell (ix iy), with --target: one pair per run as with --pair paper, instead of Table VI's"""
+    target: tuple[int, int] | None = None
+    """fixed target cell (ix iy), with --start"""
+    lr: float = 1e-3
+    """Adam learning rate"""
+    lr_end: float = 1e-4
+    """learning rate at the end of the budget, reached linearly (negative = constant lr)"""
+    gamma: float = 0.5
+    """discount factor (the paper: 0.9; with the geodesic reward every step is informative, so a short horizon
+    learns faster and keeps the shortest-path optimum)"""
+    batch_size: int = 512
+    """minibatch size of one gradient update"""
+    buffer_size: int = 200_000
+    """replay buffer capacity (transitions)"""
+    learning_starts: int = 10_000
+    """environment steps collected before the first update"""
+    env_steps_per_update: int = 48
+    """environment steps per gradient update (1 = an update every step, as in the paper)"""
+    target_update_every: int = 250
+    """copy the online network into the target network every this many updates"""
+    double_dqn: bool = True
+    """Double DQN targets (the online network picks the next action, the target network values it)"""
+    eps_start: float = 1.0
+    """initial exploration rate"""
+    eps_end: float = 0.05
+    """final exploration rate"""
+    eps_decay_fraction: float = 0.4
+    """fraction of the budget over which exploration decays linearly from eps_start to eps_end"""
+    expert_weight: float = 0.0
+    """weight of a large-margin loss towards the training twin's breadth-first shortest moves (DQfD; 0 = off, plain
+    DQN). The twin's map is known, as the geodesic reward already uses it; make adapt uses it to fine-tune fast"""
+    expert_margin: float = 1.0
+    """margin by which the expert loss wants a shortest move's value above every other move's"""
+    max_grad_norm: float = 10.0
+    """gradient-norm clipping (0 = off)"""
+    checkpoint_every: int = 200_000
+    """write last.pt every this many environment steps (0 = only at the end)"""
+    save_replay: bool = True
+    """include the replay buffer in last.pt, so a resumed run is exact"""
+    resume: bool = False
+    """continue from <out>/last.pt up to the (possibly raised) budget (exploration follows the new budget)"""
+
+    @property
+    def out_dir(self) -> Path:
+        return Path(self.out or run_dir(self.scene, "dqn"))
+
+    @property
+    def fixed_pair(self) -> bool:
+        """One (start, target) pair for the whole run (the paper's protocol) rather than a new one per episode."""
+        return self.pair == "paper" or self.start is not None
+
+    def validate(self) -> DQNConfig:
+        super().validate()
+        if self.preset not in PRESETS:
+            raise unknown_name("training preset", self.preset, PRESETS)
+        self.check_at_least(1, "total_env_steps", "batch_size", "buffer_size", "env_steps_per_update",
+                            "target_update_every", "aug_obstacle_size")
+        self.check_at_least(0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every", "memory_radius")
+        if self.memory_radius and self.obs != "neighbors":
+            raise ConfigError(f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
+                              f"radio features), got --obs {self.obs}")
+        if self.pair not in PAIR_MODES:
+            raise unknown_name("pair mode (--pair)", self.pair, PAIR_MODES)
+        if (self.start is None) != (self.target is None):
+            raise ConfigError("--start and --target go together", hint="give both cells (ix iy), or neither")
+        if self.fixed_pair and self.aug_obstacles:
+            raise ConfigError("obstacle augmentation draws a new pair at every reset; it does not combine with a "
+                              "fixed pair", hint="use --pair random, or --aug-obstacles 0")
+        if self.aug_potential not in AUG_POTENTIALS:
+            raise unknown_name("augmentation potential", self.aug_potential, AUG_POTENTIALS)
+        if not self.lr > 0:
+            raise ConfigError(f"--lr must be > 0, got {self.lr}", hint="the presets use 1e-3")
+        if self.lr_end == 0:
+            raise ConfigError("--lr-end 0 stops learning at the end of the budget",
+                              hint="use a positive end rate, or a negative one for a constant --lr")
+        if self.expert_weight < 0 or not self.expert_margin > 0:
+            raise ConfigError(f"--expert-weight must be >= 0 and --expert-margin > 0, got {self.expert_weight} and "
+                              f"{self.expert_margin}")
+        if self.expert_weight > 0 and self.reward != "geodesic":
+            raise ConfigError(f"--expert-weight reads the breadth-first distances of the geodesic reward, got "
+                              f"--reward {self.reward}", hint="use --reward geodesic, or --expert-weight 0")
+        if self.max_grad_norm < 0:
+            raise ConfigError(f"--max-grad-norm must be >= 0 (0 = off), got {self.max_grad_norm}")
+        self.check_within(0, 1, "gamma", open_interval=True)
+        self.check_within(0, 1, "eps_start", "eps_end", "eps_decay_fraction")
+        return self
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "tuned": {},
+    "robust": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan"},
+    "memory": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan", "memory_radius": 5},
+    # The episodes decide the paper's budget; total_env_steps is only a backstop far above what they use.
+    "paper": dict(obs="paper", reward="paper", pair="paper", num_envs=1, episodes=500, total_env_steps=10_000_000,
+                  hidden=(256,) * 5, lr=1e-3, lr_end=-1.0,
+                  gamma=0.9,
+                  batch_size=64, buffer_size=100_000, learning_starts=1_000, env_steps_per_update=1,
+                  target_update_every=500, double_dqn=False, eps_start=0.1, eps_end=0.1),
+}
+
+
+def config_for(preset: str = "tuned", **overrides) -> DQNConfig:
+    """The config of a preset, with ``overrides``; the paper preset uses 80 episodes for outdoor scenes."""
+    if preset not in PRESETS:
+        raise unknown_name("training preset", preset, PRESETS)
+    values = {**PRESETS[preset], "preset": preset}
+    scene = overrides.get("scene", DQNConfig.scene)
+    if preset == "paper" and scene.split("-")[0] not in INDOOR_SCENES and not is_synthetic(scene):
+        values["episodes"] = 80
+    return DQNConfig(**{**values, **overrides}).validate()
+
+
