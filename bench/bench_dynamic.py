@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import time
 from pathlib import Path
@@ -24,6 +23,7 @@ from dtradar_data.core.files import write_atomic
 from dtradar_rl.agents.planner import FingerprintPlanner
 from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.experiments.adapt import AdaptConfig, adapt, first_time_at
+from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
@@ -32,8 +32,7 @@ from dtradar_rl.viz.plots import plot_adapt_seeds
 
 
 def machine_state() -> str:
-    load1, load5, _ = os.getloadavg()
-    return f"{os.cpu_count()} cores, load average {load1:.1f} (1 min) / {load5:.1f} (5 min)"
+    return describe(machine())
 
 
 def spread(values: list[float]) -> str:

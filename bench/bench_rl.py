@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import platform
 import sys
 import time
 from dataclasses import dataclass
@@ -34,7 +33,7 @@ from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.evaluation.evaluate import evaluate, markdown_table
 from dtradar_rl.task.observations import Normalizer
-from dtradar_rl.task.runtime import auto_threads
+from dtradar_rl.task.runtime import auto_threads, describe, machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
@@ -203,8 +202,7 @@ def main(cfg: BenchConfig) -> dict:
 
     report = {
         "dataset": {"name": ds.name, "version": ds.version, "synthetic": synthetic, "grid": list(ds.shape)[::-1]},
-        "machine": {"cpus": os.cpu_count(), "torch_threads": threads, "load_1min_before": load_before,
-                    "torch": torch.__version__, "python": platform.python_version()},
+        "machine": {**machine(), "torch_threads": threads, "load_1min_before": load_before},
         "env_steps_per_s": thr,
         "batched_vs_gymnasium": {k: v / thr["gymnasium"] for k, v in thr.items() if k != "gymnasium"},
         "decision_latency_ms": m_bp.latency_ms, "paper_decision_ms": PAPER_DECISION_MS,
@@ -234,7 +232,7 @@ def main(cfg: BenchConfig) -> dict:
 def render_markdown(r: dict) -> str:
     d, t, sb3 = r["dataset"], r["train"], r["sb3"]
     src = "synthetic 42x18 stand-in (no ray-traced table built yet)" if d["synthetic"] else f"real twin {d['name']}"
-    lines = [(f"## RL benchmark ({src}; {r['machine']['cpus']} CPUs, torch {r['machine']['torch_threads']} threads, "
+    lines = [(f"## RL benchmark ({src}; {describe(r['machine'])}, torch {r['machine']['torch_threads']} threads, "
               f"1-min load before start {r['machine']['load_1min_before']:.2f})"), "",
              "| measure | ours | reference | ratio |", "|---|---|---|---|"]
     thr = r["env_steps_per_s"]

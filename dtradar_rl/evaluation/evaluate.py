@@ -29,6 +29,9 @@ from dtradar_rl.agents.policy import Policy
 from dtradar_rl.task.mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
 
+#: The headline metrics every summary over seeds reports (sweeps, the offline benchmark).
+METRICS: tuple[str, ...] = ("success_rate", "spl", "collisions")
+
 
 @dataclass
 class Rollouts:

@@ -21,8 +21,6 @@
 from __future__ import annotations
 
 import json
-import os
-import platform
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -32,20 +30,20 @@ import numpy as np
 
 from dtradar_data.core.files import write_atomic
 from dtradar_data.store.logged import episode_stats
-from dtradar_rl.evaluation.evaluate import evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
+from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
 from dtradar_rl.offline.behaviours import BEHAVIOURS, behaviour_policy
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.trainer import train_offline
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.runs import dqn_checkpoint
+from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
 
 NAMES = {"cql": "DiscreteCQL", "bcq": "DiscreteBCQ", "bc": "DiscreteBC", "dqn": "DQN", "ddqn": "DoubleDQN",
          "nfq": "NFQ"}
-METRICS = ("success_rate", "spl", "collisions")
 
 
 @dataclass(frozen=True)
@@ -104,16 +102,6 @@ class OfflineBenchConfig:
             if getattr(self, name) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} must be >= 1")
         return self
-
-
-def machine() -> dict[str, Any]:
-    """Where it ran: cores and the load average (the benchmark shares the machine with other jobs)."""
-    try:
-        load = list(os.getloadavg())
-    except OSError:
-        load = None
-    return {"cpus": os.cpu_count(), "load_avg_1_5_15": load, "platform": platform.platform(),
-            "python": platform.python_version()}
 
 
 def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, Any]]:
@@ -281,13 +269,13 @@ def markdown(result: dict[str, Any]) -> str:
             lines.append(f"| {beh} | {result['algorithms'][e['algorithm']]} | " + " | ".join(cells)
                          + f" | {e['train_s']['mean']:.1f} |")
     mach = result["machine"]
-    lines += ["", f"Machine: {mach['start']['cpus']} CPU cores, load average (1/5/15 min) at start "
+    lines += ["", f"Machine: {describe(mach['start'])}; load average (1/5/15 min) at start "
                   f"{_load(mach['start'])}, at end {_load(mach['end'])}; total wall time {result['wall_s']:.0f} s."]
     return "\n".join(lines) + "\n"
 
 
 def _load(m: dict[str, Any]) -> str:
-    la = m.get("load_avg_1_5_15")
+    la = m.get("load_average")
     return "/".join(f"{x:.1f}" for x in la) if la else "-"
 
 
@@ -332,4 +320,4 @@ def plot(result: dict[str, Any], path: Path) -> Path:
     return path
 
 
-__all__ = ["ALGORITHMS", "OfflineBenchConfig", "aggregate", "machine", "markdown", "plot", "run_bench"]
+__all__ = ["ALGORITHMS", "OfflineBenchConfig", "aggregate", "markdown", "plot", "run_bench"]

@@ -15,15 +15,12 @@ from __future__ import annotations
 import csv
 import json
 import os
-import platform
 import re
 import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
-
-import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError
@@ -33,6 +30,7 @@ from dtradar_rl.evaluation.fixed_pair import evaluate_pair
 from dtradar_rl.experiments.paper_report import render
 from dtradar_rl.task.config import ConfigError, check_device
 from dtradar_rl.task.pairs import paper_pair
+from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import is_synthetic, load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DQNConfig, config_for
@@ -113,16 +111,10 @@ class _Progress:
 
 
 def machine_info() -> dict[str, Any]:
-    """The machine the times were measured on, named as a reader can compare it."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
-    except OSError:
-        pass
-    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
-    return {"cpu": cpu, "cores": os.cpu_count(), "gpu": gpu, "torch": torch.__version__,
-            "python": platform.python_version(), "load_avg_start": round(os.getloadavg()[0], 2)}
+    """The machine the times were measured on (:func:`dtradar_rl.task.runtime.machine`), with the 1-minute load
+    at the start."""
+    m = machine()
+    return {**m, "load_avg_start": (m["load_average"] or [0.0])[0]}
 
 
 def expected_twins(scene: str) -> list[str]:

@@ -1,9 +1,24 @@
-"""How many CPU threads a small torch network should use on this machine right now."""
+"""The machine a job runs on: its description for every report and benchmark, and how many CPU threads a small
+torch network should use on it right now."""
 
 from __future__ import annotations
 
 import os
 import time
+from typing import Any
+
+import torch
+
+from dtradar_data.core.machine import describe
+from dtradar_data.core.machine import machine as _host
+
+
+def machine() -> dict[str, Any]:
+    """:func:`dtradar_data.core.machine.machine` (CPU, cores, load, memory, platform, Python) plus what torch sees:
+    ``gpu`` (the first CUDA device's name, or None), ``torch`` and ``torch_threads``. The one description every
+    report and benchmark of dtradar_rl records; :func:`describe` turns it into one line."""
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
+    return {**_host(), "gpu": gpu, "torch": torch.__version__, "torch_threads": torch.get_num_threads()}
 
 
 def idle_cores(interval_s: float = 0.25) -> float:
@@ -30,3 +45,6 @@ def auto_threads(max_threads: int = 2) -> int:
     (the threads wait on each other), while on an idle machine 2 threads are ~1.5x faster than 1.
     """
     return max(1, min(max_threads, int(round(idle_cores()))))
+
+
+__all__ = ["auto_threads", "describe", "idle_cores", "machine"]

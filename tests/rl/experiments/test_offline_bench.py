@@ -20,7 +20,7 @@ def test_a_tiny_benchmark_runs_end_to_end_in_seconds(root, tmp_path):
         {(b, a) for b in cfg.behaviours for a in cfg.algorithms}
     assert all(e["blueprint"]["success_rate"]["n"] == 2 and "dynamic" in e for e in result["summary"])
     saved = json.loads((tmp_path / "bench" / "bench.json").read_text())
-    assert len(saved["runs"]) == 4 and saved["machine"]["start"]["cpus"] >= 1
+    assert len(saved["runs"]) == 4 and saved["machine"]["start"]["cores"] >= 1
     md = (tmp_path / "bench" / "bench.md").read_text()
     assert "DiscreteBC" in md and "NFQ" in md and " ± " in md and "behaviour itself" in md
     assert (tmp_path / "bench" / "bench.png").stat().st_size > 1000
