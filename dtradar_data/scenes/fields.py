@@ -38,7 +38,7 @@ def fail(problem: str, hint: str) -> PydanticCustomError:
 
 def _finite(value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise fail("must be a finite number, got {!r}".format(value), "write a number, e.g. `1.0`")
+        raise fail(f"must be a finite number, got {value!r}", "write a number, e.g. `1.0`")
     return float(value)
 
 
