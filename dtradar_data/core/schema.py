@@ -6,7 +6,7 @@ propagation path (blocked cells always have none).
 
 Angles follow Sionna: ``*_zen_rad`` is the **zenith** angle θ ∈ [0, π] measured from +z (not elevation);
 ``*_az_rad`` is the azimuth φ ∈ (-π, π] measured from +x towards +y. "Strongest" means the path with the largest
-|a|² after the antenna-port reduction documented in :mod:`dtradar_data.features`.
+|a|² after the antenna-port reduction documented in :mod:`dtradar_data.rt.features`.
 
 Changing a schema means bumping ``SCHEMA_VERSION`` and checking in a new golden file
 (``dtradar_data/core/golden/cells_v{N}.json``); ``tests/data/test_schema.py`` enforces both.

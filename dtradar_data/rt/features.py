@@ -31,7 +31,7 @@ CELL_RADIO_KEYS = ("num_paths", "los", "path_gain_db", "a_re", "a_im", "phase_ra
 
 
 def reduce_cells(batch) -> dict[str, np.ndarray]:
-    """Per-receiver features of a :class:`~dtradar_data.raytrace.PathBatch` (NaN where a receiver has no path)."""
+    """Per-receiver features of a :class:`~dtradar_data.rt.tracer.PathBatch` (NaN where a receiver has no path)."""
     if batch.valid.shape[1] == 0:  # no receiver of the batch has a path (a far city corner): Sionna gives P = 0
         batch = _one_empty_path(batch)
     valid = batch.valid
