@@ -49,9 +49,12 @@ def stats(c: dict, where: np.ndarray) -> dict:
     sel = c["free"] & where
     g = c["gain_diff_db"][sel]
     g = g[~np.isnan(g)]
-    return {"cells": int(sel.sum()), "agreement": float(c["agree"][sel].mean()) if sel.any() else float("nan"),
-            "gain_median_db": float(np.median(g)) if g.size else float("nan"),
-            "gain_p95_db": float(np.percentile(g, 95)) if g.size else float("nan")}
+    return {
+        "cells": int(sel.sum()),
+        "agreement": float(c["agree"][sel].mean()) if sel.any() else float("nan"),
+        "gain_median_db": float(np.median(g)) if g.size else float("nan"),
+        "gain_p95_db": float(np.percentile(g, 95)) if g.size else float("nan"),
+    }
 
 
 def bench_scene(scene: str, radius_m: float, seed_floor: bool, out: Path) -> dict:
@@ -69,7 +72,8 @@ def bench_scene(scene: str, radius_m: float, seed_floor: bool, out: Path) -> dic
     full_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     diff_cells, diff_paths, _, _, record = differential.differential_trace(
-        parent, parent_spec, spec, rt, radius_m=radius_m, per_path=True, tracer_factory=lambda: RayTracer(spec, rt))
+        parent, parent_spec, spec, rt, radius_m=radius_m, per_path=True, tracer_factory=lambda: RayTracer(spec, rt)
+    )
     diff_s = time.perf_counter() - t0
     mask, _ = differential.retrace_mask(parent_spec, spec, parent.table, radius_m=radius_m)
     retraced = mask.ravel()
@@ -78,17 +82,29 @@ def bench_scene(scene: str, radius_m: float, seed_floor: bool, out: Path) -> dic
     diff = as_dataset("differential", parent, diff_cells, diff_paths)
     c = compare(full, diff)
     floor = compare(full, parent)
-    row = {"scene": scene, "free_cells": record["free_cells"], "retraced_cells": record["retraced_cells"],
-           "reasons": record["reasons"], "radius_m": record["radius_m"], "parent": record["parent"],
-           "full_s": round(full_s, 2), "differential_s": round(diff_s, 2), "speedup": round(full_s / diff_s, 2),
-           "differential_vs_full": {"all": stats(c, np.ones_like(retraced)), "retraced": stats(c, retraced),
-                                    "kept": stats(c, ~retraced)},
-           "parent_reused_vs_full": stats(floor, np.ones_like(retraced))}
+    row = {
+        "scene": scene,
+        "free_cells": record["free_cells"],
+        "retraced_cells": record["retraced_cells"],
+        "reasons": record["reasons"],
+        "radius_m": record["radius_m"],
+        "parent": record["parent"],
+        "full_s": round(full_s, 2),
+        "differential_s": round(diff_s, 2),
+        "speedup": round(full_s / diff_s, 2),
+        "differential_vs_full": {
+            "all": stats(c, np.ones_like(retraced)),
+            "retraced": stats(c, retraced),
+            "kept": stats(c, ~retraced),
+        },
+        "parent_reused_vs_full": stats(floor, np.ones_like(retraced)),
+    }
     if seed_floor:
         other = dataclasses.replace(rt, seed=rt.seed + 1)
         cells2, paths2, _, _ = trace_grid(spec, other, per_path=True, progress=False)
-        row["full_other_seed_vs_full"] = stats(compare(full, as_dataset("seed", parent, cells2, paths2)),
-                                               np.ones_like(retraced))
+        row["full_other_seed_vs_full"] = stats(
+            compare(full, as_dataset("seed", parent, cells2, paths2)), np.ones_like(retraced)
+        )
     plot(spec, blocked, mask, c, out / f"bench_differential_{scene}.png", row)
     return row
 
@@ -103,9 +119,13 @@ def plot(spec, blocked, mask, c, path: Path, row: dict) -> None:
     cmap = matplotlib.colors.ListedColormap(["#f2f2f2", "#9ecae1", "#404040", "#d62728"])
     ax.imshow(img, origin="lower", cmap=cmap, vmin=0, vmax=3, interpolation="nearest")
     a = row["differential_vs_full"]
-    ax.set_title(f"{row['scene']}/dynamic: {row['retraced_cells']} of {row['free_cells']} cells re-traced (blue; dark: blocked), "
-                 f"{row['full_s']:.1f} s → {row['differential_s']:.1f} s\nred: strongest path differs from the full "
-                 f"re-trace ({100 * (1 - a['all']['agreement']):.1f} % of free cells)", fontsize=9)
+    ax.set_title(
+        f"{row['scene']}/dynamic: {row['retraced_cells']} of {row['free_cells']} cells re-traced "
+        f"(blue; dark: blocked), "
+        f"{row['full_s']:.1f} s → {row['differential_s']:.1f} s\nred: strongest path differs from the full "
+        f"re-trace ({100 * (1 - a['all']['agreement']):.1f} % of free cells)",
+        fontsize=9,
+    )
     ax.set(xlabel="ix", ylabel="iy")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -119,17 +139,23 @@ def markdown(rows: list[dict], described: str) -> str:
     def pct(s):
         return f"{100 * s['agreement']:.1f} %"
 
-    lines = [f"Differential vs full re-trace of each dynamic twin ({described}).", "",
-             "| twin | re-traced | trace time full → differential | agreement with the full re-trace: all / "
-             "re-traced / kept cells | median / p95 abs. gain diff | parent reused unchanged | another full trace "
-             "(seed + 1) |", "|---|---:|---:|---|---:|---:|---:|"]
+    lines = [
+        f"Differential vs full re-trace of each dynamic twin ({described}).",
+        "",
+        "| twin | re-traced | trace time full → differential | agreement with the full re-trace: all / "
+        "re-traced / kept cells | median / p95 abs. gain diff | parent reused unchanged | another full trace "
+        "(seed + 1) |",
+        "|---|---:|---:|---|---:|---:|---:|",
+    ]
     for r in rows:
         a = r["differential_vs_full"]
         seed = r.get("full_other_seed_vs_full")
-        lines.append(f"| `{r['scene']}/dynamic` | {r['retraced_cells']} of {r['free_cells']} | {r['full_s']:.1f} s → "
-                     f"{r['differential_s']:.1f} s ({r['speedup']:.2f}×) | {pct(a['all'])} / {pct(a['retraced'])} / "
-                     f"{pct(a['kept'])} | {a['all']['gain_median_db']:.3f} / {a['all']['gain_p95_db']:.2f} dB | "
-                     f"{pct(r['parent_reused_vs_full'])} | {pct(seed) if seed else 'not run'} |")
+        lines.append(
+            f"| `{r['scene']}/dynamic` | {r['retraced_cells']} of {r['free_cells']} | {r['full_s']:.1f} s → "
+            f"{r['differential_s']:.1f} s ({r['speedup']:.2f}×) | {pct(a['all'])} / {pct(a['retraced'])} / "
+            f"{pct(a['kept'])} | {a['all']['gain_median_db']:.3f} / {a['all']['gain_p95_db']:.2f} dB | "
+            f"{pct(r['parent_reused_vs_full'])} | {pct(seed) if seed else 'not run'} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -137,8 +163,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="+", default=["cubicle"])
     ap.add_argument("--radius-m", type=float, default=BuildConfig.retrace_radius_m)
-    ap.add_argument("--no-seed-floor", dest="seed_floor", action="store_false",
-                    help="skip the second full trace with another seed")
+    ap.add_argument(
+        "--no-seed-floor", dest="seed_floor", action="store_false", help="skip the second full trace with another seed"
+    )
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
     host = machine()  # before the runs: the load they start under
@@ -148,8 +175,10 @@ def main() -> None:
         rows.append(row)
         md = markdown([row], describe(host))
         write_atomic(args.out / f"bench_differential_{scene}.md", md)
-        write_atomic(args.out / f"bench_differential_{scene}.json",
-                     json.dumps({**row, "machine": describe(host), "machine_details": host}, indent=2) + "\n")
+        write_atomic(
+            args.out / f"bench_differential_{scene}.json",
+            json.dumps({**row, "machine": describe(host), "machine_details": host}, indent=2) + "\n",
+        )
         print(md, flush=True)
 
 

@@ -1,9 +1,10 @@
 """Navigation that survives change (issue 12): learned agents beside the classical baseline, and twin updates.
 
 For each scene and seed: train the ``robust`` and ``memory`` presets on the blueprint (``--steps``, default the
-paper's 600 K; a run whose ``model.pt`` exists under ``--runs`` is reused), evaluate them zero-shot on the blueprint and the dynamic twin beside
-the fingerprint + breadth-first planner (:mod:`dtradar_rl.agents.planner`), then fine-tune the memory agent on the dynamic
-twin for ``--seconds`` against training from scratch (:mod:`dtradar_rl.experiments.adapt`). Writes
+paper's 600 K; a run whose ``model.pt`` exists under ``--runs`` is reused), evaluate them zero-shot on the blueprint and
+the dynamic twin beside the fingerprint + breadth-first planner (:mod:`dtradar_rl.agents.planner`), then fine-tune the
+memory agent on the dynamic twin for ``--seconds`` against training from scratch (:mod:`dtradar_rl.experiments.adapt`).
+Writes
 ``results/bench_dynamic.{json,md}`` (mean and spread over seeds) and ``results/bench_dynamic_adapt_<scene>.png``.
 
     python bench/bench_dynamic.py --scenes cubicle meeting --seeds 0 1 2
@@ -68,63 +69,114 @@ def main() -> None:
                 run = runs / scene / preset / f"seed{seed}"
                 if not (run / "model.pt").exists():
                     state = machine_state()
-                    result = train(config_for(preset, scene=scene, seed=seed, out=str(run), verbose=False,
-                                              total_env_steps=args.steps))
+                    result = train(
+                        config_for(
+                            preset, scene=scene, seed=seed, out=str(run), verbose=False, total_env_steps=args.steps
+                        )
+                    )
                     train_s[f"{scene}/{preset}/{seed}"] = {"wall_s": result.wall_s, "machine": state}
                 policy = load_policy(run / "model.pt")
                 for v, ds in twins.items():
                     m, _ = evaluate(policy, ds, pairs=args.pairs, latency=True)
-                    rows.append({"scene": scene, "agent": preset, "seed": seed, "twin": v, **m.to_dict(),
-                                 "train_s": policy.meta["stats"].get("wall_s")})
-                    print(f"{scene} {preset} seed {seed} -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}",
-                          flush=True)
+                    rows.append(
+                        {
+                            "scene": scene,
+                            "agent": preset,
+                            "seed": seed,
+                            "twin": v,
+                            **m.to_dict(),
+                            "train_s": policy.meta["stats"].get("wall_s"),
+                        }
+                    )
+                    print(
+                        f"{scene} {preset} seed {seed} -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}", flush=True
+                    )
         for seed in args.seeds if args.adapt_seeds is None else args.adapt_seeds:
             state = machine_state()
             t0 = time.perf_counter()
-            res = adapt(AdaptConfig(scene=scene, checkpoint=str(runs / scene / "memory" / f"seed{seed}" / "model.pt"),
-                                    seconds=args.seconds, pairs=args.pairs, seed=seed, verbose=False,
-                                    out=str(runs / scene / "adapt" / f"seed{seed}")))
-            adapt_rows.append({"scene": scene, "seed": seed, "curves": res.curves, "machine": state,
-                               "wall_s": time.perf_counter() - t0})
+            res = adapt(
+                AdaptConfig(
+                    scene=scene,
+                    checkpoint=str(runs / scene / "memory" / f"seed{seed}" / "model.pt"),
+                    seconds=args.seconds,
+                    pairs=args.pairs,
+                    seed=seed,
+                    verbose=False,
+                    out=str(runs / scene / "adapt" / f"seed{seed}"),
+                )
+            )
+            adapt_rows.append(
+                {
+                    "scene": scene,
+                    "seed": seed,
+                    "curves": res.curves,
+                    "machine": state,
+                    "wall_s": time.perf_counter() - t0,
+                }
+            )
             shutil.copy(res.out_dir / "curve.png", out / f"{args.name}_adapt_{scene}_seed{seed}.png")
             print(res.markdown, flush=True)
     md = report(rows, adapt_rows, args)
     write_atomic(out / f"{args.name}.md", md)
-    write_atomic(out / f"{args.name}.json", json.dumps({"args": vars(args), "rows": rows, "adapt": adapt_rows,
-                                                         "train": train_s, "machine_end": machine_state()},
-                                                        indent=2, default=str) + "\n")
+    write_atomic(
+        out / f"{args.name}.json",
+        json.dumps(
+            {"args": vars(args), "rows": rows, "adapt": adapt_rows, "train": train_s, "machine_end": machine_state()},
+            indent=2,
+            default=str,
+        )
+        + "\n",
+    )
     print(md)
 
 
 def report(rows, adapt_rows, args) -> str:
-    head = (f"Zero-shot (trained on the blueprint), mean ± std over seeds {', '.join(map(str, args.seeds))}; "
-            f"{args.pairs} seeded pairs per twin:")
-    lines = [head, "",
-             ("| scene | agent | blueprint → blueprint: success / SPL | → dynamic: success / SPL | "
-              "collisions/ep (dynamic) | decision (ms) |"), "|---|---|---|---|---|---|"]
+    head = (
+        f"Zero-shot (trained on the blueprint), mean ± std over seeds {', '.join(map(str, args.seeds))}; "
+        f"{args.pairs} seeded pairs per twin:"
+    )
+    lines = [
+        head,
+        "",
+        (
+            "| scene | agent | blueprint → blueprint: success / SPL | → dynamic: success / SPL | "
+            "collisions/ep (dynamic) | decision (ms) |"
+        ),
+        "|---|---|---|---|---|---|",
+    ]
     for scene in args.scenes:
         for agent in ["planner", *args.presets]:
-            sel = {t: [r for r in rows if r["scene"] == scene and r["agent"] == agent and r["twin"] == t]
-                   for t in ("blueprint", "dynamic")}
+            sel = {
+                t: [r for r in rows if r["scene"] == scene and r["agent"] == agent and r["twin"] == t]
+                for t in ("blueprint", "dynamic")
+            }
             if not sel["dynamic"]:
                 continue
 
             def f(t, k, sel=sel):
                 return spread([r[k] for r in sel[t]])
 
-            lines.append(f"| {scene} | {agent} | {f('blueprint', 'success_rate')} / {f('blueprint', 'spl')} | "
-                         f"{f('dynamic', 'success_rate')} / {f('dynamic', 'spl')} | {f('dynamic', 'collisions')} | "
-                         f"{np.median([r['latency_ms'] for r in sel['dynamic']]):.3f} |")
+            lines.append(
+                f"| {scene} | {agent} | {f('blueprint', 'success_rate')} / {f('blueprint', 'spl')} | "
+                f"{f('dynamic', 'success_rate')} / {f('dynamic', 'spl')} | {f('dynamic', 'collisions')} | "
+                f"{np.median([r['latency_ms'] for r in sel['dynamic']]):.3f} |"
+            )
     if adapt_rows:
-        lines += ["", f"Twin update on the dynamic twin ({args.seconds:g} s of training, memory agent as the start):",
-                  "", "| scene | seed | run | success at 0 s | success / SPL at the end | s to ≥ 0.95 | s to ≥ 0.99 |",
-                  "|---|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"Twin update on the dynamic twin ({args.seconds:g} s of training, memory agent as the start):",
+            "",
+            "| scene | seed | run | success at 0 s | success / SPL at the end | s to ≥ 0.95 | s to ≥ 0.99 |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for a in adapt_rows:
             for run, curve in a["curves"].items():
                 t95, t99 = first_time_at(curve, 0.95), first_time_at(curve, 0.99)
-                lines.append(f"| {a['scene']} | {a['seed']} | {run} | {curve[0]['success_rate']:.3f} | "
-                             f"{curve[-1]['success_rate']:.3f} / {curve[-1]['spl']:.3f} | "
-                             f"{'-' if t95 is None else f'{t95:.1f}'} | {'-' if t99 is None else f'{t99:.1f}'} |")
+                lines.append(
+                    f"| {a['scene']} | {a['seed']} | {run} | {curve[0]['success_rate']:.3f} | "
+                    f"{curve[-1]['success_rate']:.3f} / {curve[-1]['spl']:.3f} | "
+                    f"{'-' if t95 is None else f'{t95:.1f}'} | {'-' if t99 is None else f'{t99:.1f}'} |"
+                )
         for scene in args.scenes:
             runs: dict[str, list] = {}
             for a in adapt_rows:
@@ -132,9 +184,12 @@ def report(rows, adapt_rows, args) -> str:
                     for run, c in a["curves"].items():
                         runs.setdefault(run, []).append(c)
             if runs:
-                plot_adapt_seeds(runs, Path(args.out) / f"{args.name}_adapt_{scene}.png",
-                                 title=f"{scene}/dynamic: success vs training seconds, seeds "
-                                       f"{', '.join(str(a['seed']) for a in adapt_rows if a['scene'] == scene)}")
+                plot_adapt_seeds(
+                    runs,
+                    Path(args.out) / f"{args.name}_adapt_{scene}.png",
+                    title=f"{scene}/dynamic: success vs training seconds, seeds "
+                    f"{', '.join(str(a['seed']) for a in adapt_rows if a['scene'] == scene)}",
+                )
     return "\n".join(lines) + "\n"
 
 

@@ -1,8 +1,8 @@
 """Offline-RL benchmark (`make offline-bench` runs the same through `python -m dtradar_rl offline-bench`).
 
-    python bench/bench_offline.py --scene cubicle                      # the full setting: 4 datasets x 6 algorithms x 3 seeds
-    python bench/bench_offline.py --scene cubicle --n-steps 2000 --steps 50000   # the reduced setting measured in the README
-    python bench/bench_offline.py --help
+    python bench/bench_offline.py --scene cubicle                      # the full setting: 4 datasets x 6 algorithms x 3
+    seeds python bench/bench_offline.py --scene cubicle --n-steps 2000 --steps 50000   # the reduced setting measured in
+    the README python bench/bench_offline.py --help
 
 d3rlpy DiscreteCQL, DiscreteBCQ, DiscreteBC, DQN, DoubleDQN and NFQ on every logged behaviour dataset (random,
 noisy-shortest, epsilon-greedy from the online DQN, mixture), evaluated with our own rollouts on the blueprint and

@@ -29,8 +29,9 @@ from dtradar_data.store.versions import library_versions
 def timed(spec, settings, executor: str, workers: int):
     with tempfile.TemporaryDirectory(prefix="dtradar-bench-ray-") as work:
         t0 = time.perf_counter()
-        cells, _, _, tracer = trace_grid(spec, settings, Path(work), per_path=True, progress=False,
-                                         executor=executor, workers=workers)
+        cells, _, _, tracer = trace_grid(
+            spec, settings, Path(work), per_path=True, progress=False, executor=executor, workers=workers
+        )
         seconds = time.perf_counter() - t0
     if tracer is not None:
         tracer.close()
@@ -40,9 +41,13 @@ def timed(spec, settings, executor: str, workers: int):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", nargs="+", default=["cubicle", "dallas-q3"])
-    ap.add_argument("--cubicle-batch", type=int, default=128,
-                    help="batch size of the indoor scenes: the default 1024 is one batch for the cubicle, which "
-                         "cannot be split over workers")
+    ap.add_argument(
+        "--cubicle-batch",
+        type=int,
+        default=128,
+        help="batch size of the indoor scenes: the default 1024 is one batch for the cubicle, which "
+        "cannot be split over workers",
+    )
     ap.add_argument("--workers", type=int, default=0, help="Ray workers (0 = one per core)")
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
@@ -56,8 +61,10 @@ def main() -> None:
         settings = cfg.rt if spec.prisms or spec.base else replace(cfg.rt, batch_size=args.cubicle_batch)
         free = int((~occupancy(spec)).sum())
         batches = -(-free // settings.batch_size)
-        print(f"{spec.name}: {free} free cells in {batches} batches of {settings.batch_size}, "
-              f"{settings.samples_per_src:.0e} rays, buffer {settings.max_num_paths_per_src:.0e}")
+        print(
+            f"{spec.name}: {free} free cells in {batches} batches of {settings.batch_size}, "
+            f"{settings.samples_per_src:.0e} rays, buffer {settings.max_num_paths_per_src:.0e}"
+        )
         serial, serial_s = timed(spec, settings, "serial", 0)
         print(f"  serial: {serial_s:.1f} s ({free / serial_s:.1f} cells/s)")
         ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
@@ -67,28 +74,50 @@ def main() -> None:
             ray.shutdown()
         used = min(workers, batches)
         print(f"  ray ({used} workers): {ray_s:.1f} s ({free / ray_s:.1f} cells/s), speed-up {serial_s / ray_s:.2f}x")
-        rows.append({"scene": spec.name, "free_cells": free, "batch_size": settings.batch_size, "batches": batches,
-                     "samples_per_src": settings.samples_per_src,
-                     "max_num_paths_per_src": settings.max_num_paths_per_src,
-                     "serial_s": round(serial_s, 2), "serial_cells_per_s": round(free / serial_s, 1),
-                     "ray_workers": used, "ray_s": round(ray_s, 2), "ray_cells_per_s": round(free / ray_s, 1),
-                     "speedup": round(serial_s / ray_s, 2), "identical_tables": bool(on_ray.equals(serial)),
-                     "per_worker_cells_per_s": round(free / ray_s / used, 1)})
+        rows.append(
+            {
+                "scene": spec.name,
+                "free_cells": free,
+                "batch_size": settings.batch_size,
+                "batches": batches,
+                "samples_per_src": settings.samples_per_src,
+                "max_num_paths_per_src": settings.max_num_paths_per_src,
+                "serial_s": round(serial_s, 2),
+                "serial_cells_per_s": round(free / serial_s, 1),
+                "ray_workers": used,
+                "ray_s": round(ray_s, 2),
+                "ray_cells_per_s": round(free / ray_s, 1),
+                "speedup": round(serial_s / ray_s, 2),
+                "identical_tables": bool(on_ray.equals(serial)),
+                "per_worker_cells_per_s": round(free / ray_s / used, 1),
+            }
+        )
     host = machine()
     described = f"{describe(host)}, no GPU (LLVM backend)"
     load = host["load_average"][0] if host["load_average"] else None
-    result = {"machine": described, "load_average_at_end": load, "machine_details": host, "rows": rows,
-              "library_versions": library_versions()}
+    result = {
+        "machine": described,
+        "load_average_at_end": load,
+        "machine_details": host,
+        "rows": rows,
+        "library_versions": library_versions(),
+    }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "bench_ray.json").write_text(json.dumps(result, indent=2) + "\n")
-    lines = [f"# Serial vs Ray tracing ({described})", "",
-             "| dataset | free cells | batches | serial cells/s | Ray workers | Ray cells/s | speed-up | identical | "
-             "projected cells/s on 4 / 16 machines of this kind |", "|---|---:|---:|---:|---:|---:|---:|---|---|"]
+    lines = [
+        f"# Serial vs Ray tracing ({described})",
+        "",
+        "| dataset | free cells | batches | serial cells/s | Ray workers | Ray cells/s | speed-up | identical | "
+        "projected cells/s on 4 / 16 machines of this kind |",
+        "|---|---:|---:|---:|---:|---:|---:|---|---|",
+    ]
     for r in rows:
         per_machine = r["per_worker_cells_per_s"] * workers
-        lines.append(f"| {r['scene']} | {r['free_cells']} | {r['batches']} | {r['serial_cells_per_s']} | "
-                     f"{r['ray_workers']} | {r['ray_cells_per_s']} | {r['speedup']}× | {r['identical_tables']} | "
-                     f"{4 * per_machine:.0f} / {16 * per_machine:.0f} |")
+        lines.append(
+            f"| {r['scene']} | {r['free_cells']} | {r['batches']} | {r['serial_cells_per_s']} | "
+            f"{r['ray_workers']} | {r['ray_cells_per_s']} | {r['speedup']}× | {r['identical_tables']} | "
+            f"{4 * per_machine:.0f} / {16 * per_machine:.0f} |"
+        )
     (args.out / "bench_ray.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     assert all(r["identical_tables"] for r in rows), "Ray and serial tables differ"

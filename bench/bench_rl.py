@@ -130,18 +130,30 @@ def run_sb3(ds, dyn, cfg, ours_cfg, threads) -> dict:
             return time.perf_counter() - self.t0 < self.seconds
 
     torch.set_num_threads(threads)
-    model = DQN("MlpPolicy", env, gamma=ours_cfg.gamma, learning_starts=ours_cfg.learning_starts,
-                policy_kwargs={"net_arch": list(ours_cfg.hidden)}, seed=0, device="cpu", verbose=0)
+    model = DQN(
+        "MlpPolicy",
+        env,
+        gamma=ours_cfg.gamma,
+        learning_starts=ours_cfg.learning_starts,
+        policy_kwargs={"net_arch": list(ours_cfg.hidden)},
+        seed=0,
+        device="cpu",
+        verbose=0,
+    )
     t0 = time.perf_counter()
     model.learn(total_timesteps=cfg.budget, callback=Cap(cfg.sb3_max_seconds))
     wall = time.perf_counter() - t0
     steps = int(model.num_timesteps)
     policy = Policy(model.q_net.eval(), ours_cfg, norm, ours_cfg.obs, {"dataset": {"name": ds.name}})
-    res = {"env_steps": steps, "wall_s": wall, "capped": steps < cfg.budget,
-           "wall_s_for_budget": wall * cfg.budget / max(steps, 1),
-           "settings": "SB3 DQN defaults (train_freq 4, batch 32, buffer 1M, eps 1 -> 0.05 over 10%), "
-                       f"net_arch {list(ours_cfg.hidden)}, gamma {ours_cfg.gamma}, "
-                       f"learning_starts {ours_cfg.learning_starts}, same observations and reward"}
+    res = {
+        "env_steps": steps,
+        "wall_s": wall,
+        "capped": steps < cfg.budget,
+        "wall_s_for_budget": wall * cfg.budget / max(steps, 1),
+        "settings": "SB3 DQN defaults (train_freq 4, batch 32, buffer 1M, eps 1 -> 0.05 over 10%), "
+        f"net_arch {list(ours_cfg.hidden)}, gamma {ours_cfg.gamma}, "
+        f"learning_starts {ours_cfg.learning_starts}, same observations and reward",
+    }
     m, _ = evaluate(policy, ds, pairs=cfg.pairs, latency=False)
     res["blueprint"] = m.to_dict()
     if dyn is not None:
@@ -156,15 +168,23 @@ def main(cfg: BenchConfig) -> dict:
     torch.set_flush_denormal(True)
     load_before = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     ds, dyn, synthetic = _datasets(cfg.scene)
-    print(f"dataset: {ds.name} ({'synthetic stand-in' if synthetic else 'real'}), grid {ds.shape[1]}x{ds.shape[0]}, "
-          f"torch threads {threads}, 1-min load before start {load_before}")
+    print(
+        f"dataset: {ds.name} ({'synthetic stand-in' if synthetic else 'real'}), grid {ds.shape[1]}x{ds.shape[0]}, "
+        f"torch threads {threads}, 1-min load before start {load_before}"
+    )
 
     thr = env_throughput(ds, cfg.env_counts, cfg.env_seconds)
     print("env steps/s:", {k: f"{v:,.0f}" for k, v in thr.items()})
 
     scene = ds.name.split("/")[0]
-    ours_cfg = config_for("tuned", scene=scene, total_env_steps=cfg.budget, out=f"{cfg.runs}/{scene}/dqn",
-                          threads=threads, checkpoint_every=0)
+    ours_cfg = config_for(
+        "tuned",
+        scene=scene,
+        total_env_steps=cfg.budget,
+        out=f"{cfg.runs}/{scene}/dqn",
+        threads=threads,
+        checkpoint_every=0,
+    )
     result = train(ours_cfg, dataset=ds)
     policy = load_policy(result.checkpoint)
     m_bp, _ = evaluate(policy, ds, pairs=cfg.pairs)
@@ -179,8 +199,14 @@ def main(cfg: BenchConfig) -> dict:
 
     robust = None
     if cfg.robust:
-        robust_cfg = config_for("robust", scene=scene, total_env_steps=cfg.budget,
-                                out=f"{cfg.runs}/{scene}/dqn_robust", threads=threads, checkpoint_every=0)
+        robust_cfg = config_for(
+            "robust",
+            scene=scene,
+            total_env_steps=cfg.budget,
+            out=f"{cfg.runs}/{scene}/dqn_robust",
+            threads=threads,
+            checkpoint_every=0,
+        )
         r_result = train(robust_cfg, dataset=ds)
         r_policy = load_policy(r_result.checkpoint)
         label = f"ours (robust, {robust_cfg.aug_obstacles} extra obstacles)"
@@ -189,10 +215,17 @@ def main(cfg: BenchConfig) -> dict:
         if dyn is not None:
             for shield in (False, True):
                 m, _ = evaluate(r_policy, dyn, pairs=cfg.pairs, latency=False, shield=shield)
-                rows.append({"case": f"{label}: {ds.name} -> {dyn.name}" + (" (shielded)" if shield else ""),
-                             **m.to_dict()})
-        robust = {"config": robust_cfg.to_dict(), "env_steps": r_result.env_steps, "updates": r_result.updates,
-                  "wall_s": r_result.wall_s, "blueprint_success": m_rbp.success_rate, "blueprint_spl": m_rbp.spl}
+                rows.append(
+                    {"case": f"{label}: {ds.name} -> {dyn.name}" + (" (shielded)" if shield else ""), **m.to_dict()}
+                )
+        robust = {
+            "config": robust_cfg.to_dict(),
+            "env_steps": r_result.env_steps,
+            "updates": r_result.updates,
+            "wall_s": r_result.wall_s,
+            "blueprint_success": m_rbp.success_rate,
+            "blueprint_spl": m_rbp.spl,
+        }
         print(f"robust DQN: {r_result.env_steps} env steps, {r_result.updates} updates in {r_result.wall_s:.1f} s")
 
     sb3 = run_sb3(ds, dyn, cfg, ours_cfg, threads) if cfg.sb3 else {"skipped": "--no-sb3"}
@@ -205,13 +238,19 @@ def main(cfg: BenchConfig) -> dict:
         "machine": {**machine(), "torch_threads": threads, "load_1min_before": load_before},
         "env_steps_per_s": thr,
         "batched_vs_gymnasium": {k: v / thr["gymnasium"] for k, v in thr.items() if k != "gymnasium"},
-        "decision_latency_ms": m_bp.latency_ms, "paper_decision_ms": PAPER_DECISION_MS,
+        "decision_latency_ms": m_bp.latency_ms,
+        "paper_decision_ms": PAPER_DECISION_MS,
         "decision_speedup_vs_paper": PAPER_DECISION_MS / m_bp.latency_ms,
-        "train": {"config": ours_cfg.to_dict(), "env_steps": result.env_steps, "updates": result.updates,
-                  "wall_s": result.wall_s, "paper_wall_s": PAPER_TRAIN_S,
-                  "speedup_vs_paper": PAPER_TRAIN_S / result.wall_s,
-                  "goal": "budget in <= 60 s with >= 95% success and SPL >= 0.9 on blueprint -> blueprint",
-                  "goal_met": bool(result.wall_s <= 60 and m_bp.success_rate >= 0.95 and m_bp.spl >= 0.9)},
+        "train": {
+            "config": ours_cfg.to_dict(),
+            "env_steps": result.env_steps,
+            "updates": result.updates,
+            "wall_s": result.wall_s,
+            "paper_wall_s": PAPER_TRAIN_S,
+            "speedup_vs_paper": PAPER_TRAIN_S / result.wall_s,
+            "goal": "budget in <= 60 s with >= 95% success and SPL >= 0.9 on blueprint -> blueprint",
+            "goal_met": bool(result.wall_s <= 60 and m_bp.success_rate >= 0.95 and m_bp.spl >= 0.9),
+        },
         "train_robust": robust,
         "eval": rows,
         "sb3": sb3,
@@ -232,29 +271,52 @@ def main(cfg: BenchConfig) -> dict:
 def render_markdown(r: dict) -> str:
     d, t, sb3 = r["dataset"], r["train"], r["sb3"]
     src = "synthetic 42x18 stand-in (no ray-traced table built yet)" if d["synthetic"] else f"real twin {d['name']}"
-    lines = [(f"## RL benchmark ({src}; {describe(r['machine'])}, torch {r['machine']['torch_threads']} threads, "
-              f"1-min load before start {r['machine']['load_1min_before']:.2f})"), "",
-             "| measure | ours | reference | ratio |", "|---|---|---|---|"]
+    lines = [
+        (
+            f"## RL benchmark ({src}; {describe(r['machine'])}, torch {r['machine']['torch_threads']} threads, "
+            f"1-min load before start {r['machine']['load_1min_before']:.2f})"
+        ),
+        "",
+        "| measure | ours | reference | ratio |",
+        "|---|---|---|---|",
+    ]
     thr = r["env_steps_per_s"]
     for k, v in thr.items():
         if k != "gymnasium":
-            lines.append(f"| env steps/s, {k.replace('_', ' ')} robots | {v:,.0f} | "
-                         f"gymnasium env {thr['gymnasium']:,.0f} | {v / thr['gymnasium']:.2g}x |")
-    lines.append(f"| greedy decision latency | {r['decision_latency_ms']:.3f} ms | paper 17 ms | "
-                 f"{r['decision_speedup_vs_paper']:.0f}x faster |")
-    lines.append(f"| wall time, {t['env_steps']:,} env steps | {t['wall_s']:.1f} s | paper 46 min | "
-                 f"{t['speedup_vs_paper']:.0f}x faster |")
+            lines.append(
+                f"| env steps/s, {k.replace('_', ' ')} robots | {v:,.0f} | "
+                f"gymnasium env {thr['gymnasium']:,.0f} | {v / thr['gymnasium']:.2g}x |"
+            )
+    lines.append(
+        f"| greedy decision latency | {r['decision_latency_ms']:.3f} ms | paper 17 ms | "
+        f"{r['decision_speedup_vs_paper']:.0f}x faster |"
+    )
+    lines.append(
+        f"| wall time, {t['env_steps']:,} env steps | {t['wall_s']:.1f} s | paper 46 min | "
+        f"{t['speedup_vs_paper']:.0f}x faster |"
+    )
     rob = r.get("train_robust")
     if rob:
-        lines.append(f"| wall time, same budget, robust preset ({rob['config']['aug_obstacles']} extra obstacles "
-                     f"per episode) | {rob['wall_s']:.1f} s | tuned {t['wall_s']:.1f} s | "
-                     f"{rob['wall_s'] / t['wall_s']:.2f}x |")
+        lines.append(
+            f"| wall time, same budget, robust preset ({rob['config']['aug_obstacles']} extra obstacles "
+            f"per episode) | {rob['wall_s']:.1f} s | tuned {t['wall_s']:.1f} s | "
+            f"{rob['wall_s'] / t['wall_s']:.2f}x |"
+        )
     if "wall_s_for_budget" in sb3:
         cap = f" (capped at {sb3['env_steps']:,} steps; extrapolated)" if sb3["capped"] else ""
-        lines.append(f"| wall time, same budget | {t['wall_s']:.1f} s | "
-                     f"SB3 DQN {sb3['wall_s_for_budget']:.0f} s{cap} | {t['speedup_vs_sb3']:.1f}x faster |")
-    lines += ["", (f"Goal (budget in <= 60 s, >= 95 % success, SPL >= 0.9 on blueprint -> blueprint): "
-                   f"**{'met' if t['goal_met'] else 'not met'}**."), "", markdown_table(r["eval"])]
+        lines.append(
+            f"| wall time, same budget | {t['wall_s']:.1f} s | "
+            f"SB3 DQN {sb3['wall_s_for_budget']:.0f} s{cap} | {t['speedup_vs_sb3']:.1f}x faster |"
+        )
+    lines += [
+        "",
+        (
+            f"Goal (budget in <= 60 s, >= 95 % success, SPL >= 0.9 on blueprint -> blueprint): "
+            f"**{'met' if t['goal_met'] else 'not met'}**."
+        ),
+        "",
+        markdown_table(r["eval"]),
+    ]
     return "\n".join(lines)
 
 

@@ -51,7 +51,7 @@ def timed_trace(tracer: RayTracer, points: np.ndarray, batch_size: int):
     t0 = time.perf_counter()
     parts = []
     for s in range(0, len(points), batch_size):
-        b = tracer.trace(points[s:s + batch_size])
+        b = tracer.trace(points[s : s + batch_size])
         cells = features.reduce_cells(b)  # part of the per-cell cost a build pays
         parts.append({**strongest(b), "gain_db": cells["path_gain_db"], "num_paths": cells["num_paths"]})
     dt = time.perf_counter() - t0
@@ -65,10 +65,18 @@ def main() -> None:
     ap.add_argument("--variant", default="blueprint")
     ap.add_argument("--samples", type=int, nargs="+", default=[1_000, 3_000, 10_000, 30_000, 100_000, 300_000])
     ap.add_argument("--reference", type=int, default=1_000_000)
-    ap.add_argument("--reference-buffer", type=int, default=10_000_000,
-                    help="max_num_paths_per_src of the reference (Sionna's 1e6 default drops paths at 1e6 samples)")
-    ap.add_argument("--buffer", type=int, default=RTSettings().max_num_paths_per_src,
-                    help="max_num_paths_per_src of the compared rows (default: the RTSettings default)")
+    ap.add_argument(
+        "--reference-buffer",
+        type=int,
+        default=10_000_000,
+        help="max_num_paths_per_src of the reference (Sionna's 1e6 default drops paths at 1e6 samples)",
+    )
+    ap.add_argument(
+        "--buffer",
+        type=int,
+        default=RTSettings().max_num_paths_per_src,
+        help="max_num_paths_per_src of the compared rows (default: the RTSettings default)",
+    )
     ap.add_argument("--batch-size", type=int, default=RTSettings().batch_size)
     ap.add_argument("--repeats", type=int, default=2, help="timed repeats per setting (best is reported)")
     ap.add_argument("--cell-m", type=float, default=None, help="city scenes: cell size instead of the scene's")
@@ -106,39 +114,60 @@ def main() -> None:
     for s in args.samples:
         got, dt = run(s, args.repeats)
         agree = agreement(ref, got)
-        rows.append({"samples_per_src": s, "seconds": round(dt, 3), "cells_per_s": round(len(points) / dt, 1),
-                     "agreement": round(float(agree.mean()), 4),
-                     "found_path_share": round(float(got["has"].mean()), 4),
-                     "paths_found_vs_reference": round(float(got["num_paths"].sum() / ref["num_paths"].sum()), 4),
-                     "median_abs_gain_error_db": round(float(np.nanmedian(np.abs(got["gain_db"] - ref["gain_db"]))), 3),
-                     "speedup_vs_reference": round(ref_s / dt, 2)})
+        rows.append(
+            {
+                "samples_per_src": s,
+                "seconds": round(dt, 3),
+                "cells_per_s": round(len(points) / dt, 1),
+                "agreement": round(float(agree.mean()), 4),
+                "found_path_share": round(float(got["has"].mean()), 4),
+                "paths_found_vs_reference": round(float(got["num_paths"].sum() / ref["num_paths"].sum()), 4),
+                "median_abs_gain_error_db": round(float(np.nanmedian(np.abs(got["gain_db"] - ref["gain_db"]))), 3),
+                "speedup_vs_reference": round(ref_s / dt, 2),
+            }
+        )
         print(rows[-1])
     ok = [r for r in rows if r["agreement"] >= 0.95 and r["cells_per_s"] >= 300]
     host = machine()  # after the runs: the load they were measured under
     result = {
-        "scene": spec.name, "cell_m": spec.grid.cell_m, "free_cells": int(len(points)), "reference_samples": args.reference,
-        "reference_path_buffer": args.reference_buffer, "path_buffer": base.max_num_paths_per_src,
-        "reference_seconds": round(ref_s, 3), "reference_cells_per_s": round(len(points) / ref_s, 1),
-        "first_call_seconds_incl_jit": round(first_call_s, 2), "batch_size": args.batch_size,
-        "max_depth": base.max_depth, "rows": rows,
+        "scene": spec.name,
+        "cell_m": spec.grid.cell_m,
+        "free_cells": int(len(points)),
+        "reference_samples": args.reference,
+        "reference_path_buffer": args.reference_buffer,
+        "path_buffer": base.max_num_paths_per_src,
+        "reference_seconds": round(ref_s, 3),
+        "reference_cells_per_s": round(len(points) / ref_s, 1),
+        "first_call_seconds_incl_jit": round(first_call_s, 2),
+        "batch_size": args.batch_size,
+        "max_depth": base.max_depth,
+        "rows": rows,
         "meets_goal_300_cells_per_s_at_95pct": [r["samples_per_src"] for r in ok],
         "paper_ms_per_decision_rt": 16.0,
-        "machine": f"{describe(host)}, no GPU (LLVM backend)", "machine_details": host,
+        "machine": f"{describe(host)}, no GPU (LLVM backend)",
+        "machine_details": host,
         "library_versions": library_versions(),
     }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
-    lines = [f"# Ray-tracing benchmark: {spec.name} ({len(points)} free cells, max_depth {base.max_depth}, "
-             f"{result['machine']})", "",
-             f"Reference: {args.reference:.0e} samples (path buffer {args.reference_buffer:.0e}), {ref_s:.1f} s "
-             f"({len(points) / ref_s:.0f} cells/s); rows use the default buffer {base.max_num_paths_per_src:.0e}. "
-             f"First call incl. JIT compile: {first_call_s:.1f} s.", "",
-             "| samples_per_src | s / grid | cells/s | strongest-path agreement | cells with a path | paths found "
-             "| median abs. total-gain error | speed-up vs reference |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    lines += [f"| {r['samples_per_src']:,} | {r['seconds']} | {r['cells_per_s']} | {100 * r['agreement']:.1f} % | "
-              f"{100 * r['found_path_share']:.1f} % | {100 * r['paths_found_vs_reference']:.0f} % | "
-              f"{r['median_abs_gain_error_db']} dB | {r['speedup_vs_reference']}× |" for r in rows]
+    lines = [
+        f"# Ray-tracing benchmark: {spec.name} ({len(points)} free cells, max_depth {base.max_depth}, "
+        f"{result['machine']})",
+        "",
+        f"Reference: {args.reference:.0e} samples (path buffer {args.reference_buffer:.0e}), {ref_s:.1f} s "
+        f"({len(points) / ref_s:.0f} cells/s); rows use the default buffer {base.max_num_paths_per_src:.0e}. "
+        f"First call incl. JIT compile: {first_call_s:.1f} s.",
+        "",
+        "| samples_per_src | s / grid | cells/s | strongest-path agreement | cells with a path | paths found "
+        "| median abs. total-gain error | speed-up vs reference |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    lines += [
+        f"| {r['samples_per_src']:,} | {r['seconds']} | {r['cells_per_s']} | {100 * r['agreement']:.1f} % | "
+        f"{100 * r['found_path_share']:.1f} % | {100 * r['paths_found_vs_reference']:.0f} % | "
+        f"{r['median_abs_gain_error_db']} dB | {r['speedup_vs_reference']}× |"
+        for r in rows
+    ]
     (args.out / f"{stem}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -32,7 +32,6 @@ Name = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="NAME")]
 Revision = Annotated["str | None", tyro.conf.arg(metavar="TAG|HASH")]
 
 
-
 @dataclass(frozen=True)
 class ListCmd:
     """List the built-in datasets and every version stored in the data root."""
@@ -43,12 +42,33 @@ class ListCmd:
     def run(self) -> int:
         rows = listing.list_datasets()
         if self.json:
-            print(json.dumps([{"name": r.name, "builtin": r.builtin, "latest": r.latest,
-                               "versions": [{"tag": v.tag, "version": v.version, "created_utc": v.created_utc,
-                                             "rows": v.num_rows, "bytes": v.size_bytes} for v in r.versions],
-                               "damaged": [{"tag": v.tag, "version": v.version, "path": str(v.path),
-                                            "problem": v.problem} for v in r.damaged]}
-                              for r in rows], indent=2))
+            print(
+                json.dumps(
+                    [
+                        {
+                            "name": r.name,
+                            "builtin": r.builtin,
+                            "latest": r.latest,
+                            "versions": [
+                                {
+                                    "tag": v.tag,
+                                    "version": v.version,
+                                    "created_utc": v.created_utc,
+                                    "rows": v.num_rows,
+                                    "bytes": v.size_bytes,
+                                }
+                                for v in r.versions
+                            ],
+                            "damaged": [
+                                {"tag": v.tag, "version": v.version, "path": str(v.path), "problem": v.problem}
+                                for v in r.damaged
+                            ],
+                        }
+                        for r in rows
+                    ],
+                    indent=2,
+                )
+            )
             return 0
         print(f"data root: {data_root()}")
         w = max([24, *(len(r.name) for r in rows)])  # names like sionna-san_francisco/blueprint are long
@@ -57,21 +77,27 @@ class ListCmd:
             latest = next((v for v in r.versions if v.version == r.latest), None)
             tags = ",".join(v.tag or v.version[:7] for v in r.versions) or "(not built)"
             shown = f"{latest.tag} {latest.version[:12]}" if latest else "-"
-            print(f"{r.name:<{w}} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
-                  f"{human_size(latest.size_bytes) if latest else '-':>10}")
+            print(
+                f"{r.name:<{w}} {tags:<20} {shown:<22} {latest.num_rows if latest else '-':>8} "
+                f"{human_size(latest.size_bytes) if latest else '-':>10}"
+            )
         logged = list_logged()
         if logged:  # offline-RL datasets logged on the twins (scene/variant/behaviour)
             print(f"\n{'logged dataset':<40} {'tag':<5} {'version':<18} {'steps':>8} {'episodes':>8} {'success':>8}")
             for e in logged:
                 ok = f"{e.success_rate:.3f}" if e.success_rate is not None else "-"
-                print(f"{e.name:<40} {e.tag or '-':<5} {e.version:<18} {e.steps or '-':>8} {e.episodes or '-':>8} "
-                      f"{ok:>8}")
+                print(
+                    f"{e.name:<40} {e.tag or '-':<5} {e.version:<18} {e.steps or '-':>8} {e.episodes or '-':>8} {ok:>8}"
+                )
         damaged = [(r.name, v) for r in rows for v in r.damaged]
         for name, v in damaged:
             print(f"DAMAGED {name}@{v.tag or v.version}: {v.problem}")
         if damaged:  # listed, not fatal: the healthy versions stay usable
-            print(f"{len(damaged)} damaged version(s): `python -m dtradar_data verify NAME` shows every problem; "
-                  "remove or re-pull them", file=sys.stderr)
+            print(
+                f"{len(damaged)} damaged version(s): `python -m dtradar_data verify NAME` shows every problem; "
+                "remove or re-pull them",
+                file=sys.stderr,
+            )
         return 0
 
 
@@ -92,10 +118,14 @@ class InfoCmd:
         print(f"{did.name}@{tag or version}  (version {version}, schema v{meta.get('schema_version')})")
         print(f"  title:       {meta.get('title') or (meta.get('scene_spec') or {}).get('title', '-')}")
         print(f"  created:     {meta.get('created_utc', '-')}")
-        print(f"  grid:        {grid.get('nx')} x {grid.get('ny')} cells of {grid.get('cell_m')} m, "
-              f"origin ({grid.get('x0_m')}, {grid.get('y0_m')})")
-        print(f"  cells:       {stats.get('num_cells', '-')} ({stats.get('num_free', '-')} free, "
-              f"{stats.get('num_with_paths', '-')} with paths)")
+        print(
+            f"  grid:        {grid.get('nx')} x {grid.get('ny')} cells of {grid.get('cell_m')} m, "
+            f"origin ({grid.get('x0_m')}, {grid.get('y0_m')})"
+        )
+        print(
+            f"  cells:       {stats.get('num_cells', '-')} ({stats.get('num_free', '-')} free, "
+            f"{stats.get('num_with_paths', '-')} with paths)"
+        )
         keys = ("frequency_hz", "max_depth", "samples_per_src", "seed")
         print("  rt:          " + ", ".join(f"{k}={rt[k]}" for k in keys if k in rt))
         print(f"  licence:     {meta.get('licence') or (meta.get('scene_spec') or {}).get('licence', '-')}")
@@ -119,8 +149,11 @@ class VerifyCmd:
     """Only this tag or version hash."""
 
     def run(self) -> int:
-        results = (verify_logged(self.name, self.revision) if is_logged_name(self.name)
-                   else listing.verify(self.name, self.revision))
+        results = (
+            verify_logged(self.name, self.revision)
+            if is_logged_name(self.name)
+            else listing.verify(self.name, self.revision)
+        )
         bad = 0
         for version, problems in results.items():
             print(f"{version}: {'ok' if not problems else 'FAILED'}")
@@ -128,8 +161,10 @@ class VerifyCmd:
                 print(f"  - {p}")
             bad += bool(problems)
         if bad:
-            print(f"{bad} of {len(results)} versions failed; rebuild them (`make dataset`) or re-pull them",
-                  file=sys.stderr)
+            print(
+                f"{bad} of {len(results)} versions failed; rebuild them (`make dataset`) or re-pull them",
+                file=sys.stderr,
+            )
         return EXIT_FAILED_CHECK if bad else 0
 
 
@@ -173,7 +208,7 @@ class PublishCmd:
     """Dataset id, e.g. cubicle/blueprint (newest version) or cubicle/blueprint@v0."""
     revision: Revision = None
     """Tag or version hash to publish; default: the newest."""
-    repo: Annotated["str | None", tyro.conf.arg(metavar="OWNER/NAME")] = None
+    repo: Annotated[str | None, tyro.conf.arg(metavar="OWNER/NAME")] = None
     """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>. Needs a token (HF_TOKEN or `hf auth login`)."""
     private: bool = False
     """Create the repo as private if it does not exist."""
@@ -193,7 +228,7 @@ class PullCmd:
     """Dataset id, e.g. cubicle/blueprint@v0; without a revision, the Hub's newest (main)."""
     revision: Revision = None
     """Tag or version hash to pull."""
-    repo: Annotated["str | None", tyro.conf.arg(metavar="OWNER/NAME")] = None
+    repo: Annotated[str | None, tyro.conf.arg(metavar="OWNER/NAME")] = None
     """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>."""
 
     def run(self) -> int:
@@ -228,10 +263,20 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _parse_and_run(argv: list[str]) -> int:
-    commands = {"build": BuildConfig, "list": ListCmd, "info": InfoCmd, "verify": VerifyCmd, "cards": CardsCmd,
-                "publish": PublishCmd, "pull": PullCmd, "check": CheckCmd}
+    commands = {
+        "build": BuildConfig,
+        "list": ListCmd,
+        "info": InfoCmd,
+        "verify": VerifyCmd,
+        "cards": CardsCmd,
+        "publish": PublishCmd,
+        "pull": PullCmd,
+        "check": CheckCmd,
+    }
     cfg = tyro.extras.subcommand_cli_from_dict(
-        commands, prog="python -m dtradar_data", args=argv,
-        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull. "
-                    + DEBUG_HELP)
+        commands,
+        prog="python -m dtradar_data",
+        args=argv,
+        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull. " + DEBUG_HELP,
+    )
     return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()

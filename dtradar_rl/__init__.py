@@ -17,17 +17,27 @@ Never imports Sionna.
 from __future__ import annotations
 
 _EXPORTS = {
-    "GridMDP": "dtradar_rl.task.mdp", "ACTIONS": "dtradar_rl.task.mdp", "REWARDS": "dtradar_rl.task.mdp",
-    "OBS_PRESETS": "dtradar_rl.task.observations", "Normalizer": "dtradar_rl.task.observations",
-    "build_observations": "dtradar_rl.task.observations", "load_dataset": "dtradar_rl.task.twins",
-    "DtradarNavEnv": "dtradar_rl.envs.nav_env", "register_dataset_envs": "dtradar_rl.envs.registration",
+    "GridMDP": "dtradar_rl.task.mdp",
+    "ACTIONS": "dtradar_rl.task.mdp",
+    "REWARDS": "dtradar_rl.task.mdp",
+    "OBS_PRESETS": "dtradar_rl.task.observations",
+    "Normalizer": "dtradar_rl.task.observations",
+    "build_observations": "dtradar_rl.task.observations",
+    "load_dataset": "dtradar_rl.task.twins",
+    "DtradarNavEnv": "dtradar_rl.envs.nav_env",
+    "register_dataset_envs": "dtradar_rl.envs.registration",
     "BatchedNavEnv": "dtradar_rl.envs.batched",
     "Policy": "dtradar_rl.agents.policy",
-    "DQNConfig": "dtradar_rl.train.config", "config_for": "dtradar_rl.train.config", "PRESETS": "dtradar_rl.train.config",
-    "train": "dtradar_rl.train.dqn", "load_policy": "dtradar_rl.train.checkpoints",
-    "evaluate": "dtradar_rl.evaluation.evaluate", "spl": "dtradar_rl.evaluation.evaluate",
+    "DQNConfig": "dtradar_rl.train.config",
+    "config_for": "dtradar_rl.train.config",
+    "PRESETS": "dtradar_rl.train.config",
+    "train": "dtradar_rl.train.dqn",
+    "load_policy": "dtradar_rl.train.checkpoints",
+    "evaluate": "dtradar_rl.evaluation.evaluate",
+    "spl": "dtradar_rl.evaluation.evaluate",
     "cross_matrix": "dtradar_rl.evaluation.evaluate",
-    "OfflineConfig": "dtradar_rl.offline.config", "train_offline": "dtradar_rl.offline.trainer",
+    "OfflineConfig": "dtradar_rl.offline.config",
+    "train_offline": "dtradar_rl.offline.trainer",
 }
 __all__ = sorted(_EXPORTS)
 

@@ -5,11 +5,12 @@
     python -m dtradar_rl train --scene cubicle --preset paper  # the paper's agent (defaults switch to the preset)
     python -m dtradar_rl eval --scene cubicle                  # blueprint -> blueprint and blueprint -> dynamic
     python -m dtradar_rl cross --scenes dallas-q1 dallas-q2 dallas-q3 dallas-q4   # train-on-Qi x eval-on-Qj
-    python -m dtradar_rl offline --scene cubicle --algorithm cql   # d3rlpy on logged transitions -> runs/cubicle/offline/cql
-    python -m dtradar_rl adapt --scene cubicle                 # fine-tune the blueprint agent on cubicle/dynamic
-    python -m dtradar_rl log --scene cubicle --behaviour mixture --checkpoint runs/cubicle/dqn/model.pt   # a logged dataset
-    python -m dtradar_rl offline-bench --scene cubicle         # offline-RL benchmark -> results/offline_bench/cubicle
-    python -m dtradar_rl paper --scenes cubicle meeting        # the paper's tables and figures -> runs/paper/report.md
+    python -m dtradar_rl offline --scene cubicle --algorithm cql   # d3rlpy on logged transitions ->
+    runs/cubicle/offline/cql python -m dtradar_rl adapt --scene cubicle                 # fine-tune the blueprint agent
+    on cubicle/dynamic python -m dtradar_rl log --scene cubicle --behaviour mixture --checkpoint
+    runs/cubicle/dqn/model.pt   # a logged dataset python -m dtradar_rl offline-bench --scene cubicle         #
+    offline-RL benchmark -> results/offline_bench/cubicle python -m dtradar_rl paper --scenes cubicle meeting        #
+    the paper's tables and figures -> runs/paper/report.md
 """
 
 from __future__ import annotations
@@ -35,9 +36,11 @@ OFFLINE_DEFAULT = OfflineConfig()
 
 def run_train(cfg: DQNConfig) -> None:
     result = train(cfg)
-    print(f"checkpoint: {result.checkpoint}\nepisodes {result.episodes}, env steps {result.env_steps}, "
-          f"updates {result.updates}, {result.wall_s:.1f} s; last 10% of episodes: "
-          + ", ".join(f"{k} {v:.3f}" for k, v in result.final.items()))
+    print(
+        f"checkpoint: {result.checkpoint}\nepisodes {result.episodes}, env steps {result.env_steps}, "
+        f"updates {result.updates}, {result.wall_s:.1f} s; last 10% of episodes: "
+        + ", ".join(f"{k} {v:.3f}" for k, v in result.final.items())
+    )
 
 
 def _train_default(argv: list[str]) -> DQNConfig:
@@ -45,8 +48,11 @@ def _train_default(argv: list[str]) -> DQNConfig:
     preset, scene = "tuned", DQNConfig.scene
     for i, a in enumerate(argv):
         for option in ("--preset", "--scene"):
-            value = a.split("=", 1)[1] if a.startswith(option + "=") else (
-                argv[i + 1] if a == option and i + 1 < len(argv) else None)
+            value = (
+                a.split("=", 1)[1]
+                if a.startswith(option + "=")
+                else (argv[i + 1] if a == option and i + 1 < len(argv) else None)
+            )
             if value is not None:
                 preset, scene = (value, scene) if option == "--preset" else (preset, value)
     return config_for(preset if preset in PRESETS else "tuned", scene=scene)
@@ -90,8 +96,11 @@ def _parse_and_run(argv: list[str]) -> int:
         if result.rows:
             print(result.markdown, end="")
             print(f"results: {result.out_dir / 'results.json'}, {result.out_dir / 'results.md'}")
-        print(f"model: {result.model}\ntrained on {result.logged['source']}: {result.logged['steps']} steps ({result.logged['transitions']} "
-              f"transitions), {result.n_steps} d3rlpy steps in {result.train_s:.1f} s; total {result.wall_s:.1f} s")
+        print(
+            f"model: {result.model}\ntrained on {result.logged['source']}: {result.logged['steps']} steps "
+            f"({result.logged['transitions']} transitions), {result.n_steps} d3rlpy steps in {result.train_s:.1f} s; "
+            f"total {result.wall_s:.1f} s"
+        )
 
     def log_cmd(cfg: Annotated[LogConfig, tyro.conf.arg(name="")] = LogConfig()) -> None:
         """Log a behaviour policy (random, noisy-shortest, epsilon-greedy, mixture) on a twin into the store as a
@@ -120,9 +129,20 @@ def _parse_and_run(argv: list[str]) -> int:
         and PNGs): Tables II, V, VI, VII, coverage maps, training curves, inference paths, cross-quadrant bars."""
         run_paper(cfg.validate())
 
-    tyro.extras.subcommand_cli_from_dict({"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd,
-                                          "offline": offline_cmd, "adapt": adapt_cmd, "log": log_cmd,
-                                          "offline-bench": offline_bench_cmd, "sweep": sweep_cmd, "paper": paper_cmd},
-                                         args=argv, prog="python -m dtradar_rl",
-                                         description="Navigation agents on dtradar datasets. " + DEBUG_HELP)
+    tyro.extras.subcommand_cli_from_dict(
+        {
+            "train": train_cmd,
+            "eval": eval_cmd,
+            "cross": cross_cmd,
+            "offline": offline_cmd,
+            "adapt": adapt_cmd,
+            "log": log_cmd,
+            "offline-bench": offline_bench_cmd,
+            "sweep": sweep_cmd,
+            "paper": paper_cmd,
+        },
+        args=argv,
+        prog="python -m dtradar_rl",
+        description="Navigation agents on dtradar datasets. " + DEBUG_HELP,
+    )
     return 0

@@ -11,9 +11,6 @@ import numpy as np
 import pytest
 
 from dtradar_data import cli as data_cli
-from dtradar_data.pipeline import builder as pipeline
-from dtradar_data.pipeline.builder import BuildConfig, build_inputs
-from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.core import layout
 from dtradar_data.core.errors import (
     CorruptDatasetError,
@@ -22,6 +19,9 @@ from dtradar_data.core.errors import (
     InvalidSettingError,
 )
 from dtradar_data.core.files import open_atomic, write_atomic
+from dtradar_data.pipeline import builder as pipeline
+from dtradar_data.pipeline.builder import BuildConfig, build_inputs
+from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish import cards, hub
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.scenes import load_scene_spec
@@ -42,6 +42,7 @@ def put(version=V0, name="cubicle/blueprint", **meta):
 @pytest.fixture()
 def no_tracing(monkeypatch):
     """Any call into the ray tracer fails the test: bad inputs must be refused before it."""
+
     def traced(*args, **kwargs):
         raise AssertionError("the ray tracer was called for an input that should have been refused first")
 
@@ -56,12 +57,19 @@ def one_error_line(err: str) -> str:
 
 # -- 1. ray-tracing and build settings ------------------------------------------------------------------------------
 BAD_RT = [
-    ({"frequency_hz": 1.0}, "--rt.frequency-hz"), ({"frequency_hz": float("nan")}, "--rt.frequency-hz"),
-    ({"frequency_hz": 2e11}, "--rt.frequency-hz"), ({"max_depth": -1}, "--rt.max-depth"),
-    ({"max_depth": 11}, "--rt.max-depth"), ({"samples_per_src": 0}, "--rt.samples-per-src"),
-    ({"batch_size": 0}, "--rt.batch-size"), ({"max_num_paths_per_src": -3}, "--rt.max-num-paths-per-src"),
-    ({"seed": -1}, "--rt.seed"), ({"seed": 2**32}, "--rt.seed"), ({"rx_pattern": "isotropic"}, "--rt.rx-pattern"),
-    ({"rx_polarization": "X"}, "--rt.rx-polarization"), ({"device": "tpu"}, "--rt.device"),
+    ({"frequency_hz": 1.0}, "--rt.frequency-hz"),
+    ({"frequency_hz": float("nan")}, "--rt.frequency-hz"),
+    ({"frequency_hz": 2e11}, "--rt.frequency-hz"),
+    ({"max_depth": -1}, "--rt.max-depth"),
+    ({"max_depth": 11}, "--rt.max-depth"),
+    ({"samples_per_src": 0}, "--rt.samples-per-src"),
+    ({"batch_size": 0}, "--rt.batch-size"),
+    ({"max_num_paths_per_src": -3}, "--rt.max-num-paths-per-src"),
+    ({"seed": -1}, "--rt.seed"),
+    ({"seed": 2**32}, "--rt.seed"),
+    ({"rx_pattern": "isotropic"}, "--rt.rx-pattern"),
+    ({"rx_polarization": "X"}, "--rt.rx-polarization"),
+    ({"device": "tpu"}, "--rt.device"),
 ]
 
 
@@ -71,13 +79,17 @@ def test_an_out_of_range_rt_setting_is_a_typed_error_naming_its_flag(changes, fl
         RTSettings(**changes)
 
 
-@pytest.mark.parametrize("argv, flag", [
-    (["--rt.frequency-hz", "1"], "--rt.frequency-hz"), (["--rt.rx-pattern", "isotropic"], "--rt.rx-pattern"),
-    (["--rt.seed", "-1"], "--rt.seed"), (["--coverage-samples", "0"], "--coverage-samples"),
-    (["--coverage-samples", "-5"], "--coverage-samples"),
-])
-def test_the_build_command_refuses_a_bad_setting_while_parsing_and_names_its_flag(root, no_tracing, capsys, argv,
-                                                                                   flag):
+@pytest.mark.parametrize(
+    "argv, flag",
+    [
+        (["--rt.frequency-hz", "1"], "--rt.frequency-hz"),
+        (["--rt.rx-pattern", "isotropic"], "--rt.rx-pattern"),
+        (["--rt.seed", "-1"], "--rt.seed"),
+        (["--coverage-samples", "0"], "--coverage-samples"),
+        (["--coverage-samples", "-5"], "--coverage-samples"),
+    ],
+)
+def test_the_build_command_refuses_a_bad_setting_while_parsing_and_names_its_flag(root, no_tracing, capsys, argv, flag):
     with pytest.raises(SystemExit) as exit_:
         data_cli.main(["build", "--scene", "cubicle", *argv])
     assert exit_.value.code == 2
@@ -92,8 +104,9 @@ def test_coverage_settings_are_checked_when_the_config_is_made(coverage_samples)
 
 
 @pytest.mark.parametrize("frequency_hz, material", [(0.5e9, "brick"), (45e9, "brick"), (12e9, "wet_ground")])
-def test_a_frequency_where_a_scene_material_is_undefined_is_refused_before_tracing(root, no_tracing, capsys,
-                                                                                   frequency_hz, material):
+def test_a_frequency_where_a_scene_material_is_undefined_is_refused_before_tracing(
+    root, no_tracing, capsys, frequency_hz, material
+):
     # 12 GHz suits every material of the blueprint but not the dynamic twin's: still nothing may be traced
     assert data_cli.main(["build", "--scene", "cubicle", "--rt.frequency-hz", str(frequency_hz)]) == 2
     line = one_error_line(capsys.readouterr().err)
@@ -141,8 +154,25 @@ def env():
     return e
 
 
-@pytest.mark.parametrize("action", [1.5, 1.0, "2", "1", True, np.bool_(False), 4, -1, None, [1], np.array([1]),
-                                    np.float32(1), np.array(1.0), np.int64(7)])
+@pytest.mark.parametrize(
+    "action",
+    [
+        1.5,
+        1.0,
+        "2",
+        "1",
+        True,
+        np.bool_(False),
+        4,
+        -1,
+        None,
+        [1],
+        np.array([1]),
+        np.float32(1),
+        np.array(1.0),
+        np.int64(7),
+    ],
+)
 def test_the_env_refuses_an_action_that_is_not_an_integer_move(env, action):
     with pytest.raises(InvalidActionError, match="not an integer in 0..3"):
         env.step(action)
@@ -198,8 +228,16 @@ def file_root(tmp_path, monkeypatch):
     return f
 
 
-@pytest.mark.parametrize("argv", [["list"], ["info", "cubicle/blueprint"], ["verify", "cubicle/blueprint"],
-                                  ["build", "--scene", "cubicle"], ["pull", "cubicle/blueprint@v0"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["list"],
+        ["info", "cubicle/blueprint"],
+        ["verify", "cubicle/blueprint"],
+        ["build", "--scene", "cubicle"],
+        ["pull", "cubicle/blueprint@v0"],
+    ],
+)
 def test_a_data_root_that_is_a_file_is_one_error_naming_it(file_root, no_tracing, capsys, argv):
     assert data_cli.main(argv) == 2
     line = one_error_line(capsys.readouterr().err)
@@ -219,8 +257,7 @@ def read_only_root(root, monkeypatch):
     root.mkdir(parents=True)
     if os.geteuid() == 0:  # root ignores permission bits; make the data root read-only the way access(2) sees it
         real_access = os.access
-        monkeypatch.setattr(layout.os, "access",
-                            lambda p, mode: False if Path(p) == root else real_access(p, mode))
+        monkeypatch.setattr(layout.os, "access", lambda p, mode: False if Path(p) == root else real_access(p, mode))
     else:
         root.chmod(0o555)
     yield root
@@ -361,16 +398,22 @@ def test_evaluation_results_are_written_atomically(tmp_path):
 
 
 # -- the RL command line -----------------------------------------------------------------------------------------
-@pytest.mark.parametrize("argv, flag", [
-    (["eval", "--pairs", "0"], "--pairs"), (["eval", "--max-steps", "-1"], "--max-steps"),
-    (["eval", "--plot-paths", "-2"], "--plot-paths"), (["eval", "--variants", "blueprnt"], "blueprnt"),
-    (["eval", "--device", "gpu"], "--device"), (["cross", "--pairs", "0"], "--pairs"),
-    (["cross", "--scenes", "a", "b", "--checkpoint-pattern", "model.pt"], "--checkpoint-pattern"),
-    (["cross", "--variant", "dynamc"], "dynamc"),
-    (["train", "--scene", "synthetic", "--lr", "0"], "--lr"),
-    (["train", "--scene", "synthetic", "--max-steps", "-5"], "--max-steps"),
-    (["offline", "--scene", "synthetic", "--transitions", "0"], "--transitions"),
-])
+@pytest.mark.parametrize(
+    "argv, flag",
+    [
+        (["eval", "--pairs", "0"], "--pairs"),
+        (["eval", "--max-steps", "-1"], "--max-steps"),
+        (["eval", "--plot-paths", "-2"], "--plot-paths"),
+        (["eval", "--variants", "blueprnt"], "blueprnt"),
+        (["eval", "--device", "gpu"], "--device"),
+        (["cross", "--pairs", "0"], "--pairs"),
+        (["cross", "--scenes", "a", "b", "--checkpoint-pattern", "model.pt"], "--checkpoint-pattern"),
+        (["cross", "--variant", "dynamc"], "dynamc"),
+        (["train", "--scene", "synthetic", "--lr", "0"], "--lr"),
+        (["train", "--scene", "synthetic", "--max-steps", "-5"], "--max-steps"),
+        (["offline", "--scene", "synthetic", "--transitions", "0"], "--transitions"),
+    ],
+)
 def test_a_bad_rl_setting_exits_2_with_its_flag_and_writes_nothing(tmp_path, monkeypatch, capsys, argv, flag):
     monkeypatch.chdir(tmp_path)
     assert rl_cli.main([*argv, "--out", str(tmp_path / "run")]) == 2
@@ -379,6 +422,5 @@ def test_a_bad_rl_setting_exits_2_with_its_flag_and_writes_nothing(tmp_path, mon
 
 
 def test_every_error_in_this_battery_is_a_dtradar_error():
-    for cls in (InvalidSettingError, DataRootError, CorruptDatasetError, InvalidActionError,
-                cards.CardsNotFoundError):
+    for cls in (InvalidSettingError, DataRootError, CorruptDatasetError, InvalidActionError, cards.CardsNotFoundError):
         assert issubclass(cls, DtradarError)

@@ -43,8 +43,9 @@ def test_an_unexpected_exception_is_one_line_pointing_at_debug_and_exit_status_3
     make_it_raise(ZeroDivisionError("division by zero"))
     assert main(argv) == EXIT_BUG == 3
     captured = capsys.readouterr()
-    assert captured.err == ("error: unexpected ZeroDivisionError: division by zero "
-                            "(run again with --debug for the traceback)\n")
+    assert captured.err == (
+        "error: unexpected ZeroDivisionError: division by zero (run again with --debug for the traceback)\n"
+    )
     assert "Traceback" not in captured.out
 
 
@@ -52,8 +53,9 @@ def test_a_multi_line_or_empty_message_still_gives_one_line(command, capsys):
     main, argv, make_it_raise = command
     make_it_raise(RuntimeError("first\nsecond\n  third"))
     assert main(argv) == EXIT_BUG
-    assert capsys.readouterr().err == ("error: unexpected RuntimeError: first second third "
-                                       "(run again with --debug for the traceback)\n")
+    assert capsys.readouterr().err == (
+        "error: unexpected RuntimeError: first second third (run again with --debug for the traceback)\n"
+    )
     make_it_raise(AssertionError())
     assert main(argv) == EXIT_BUG
     assert capsys.readouterr().err == "error: unexpected AssertionError (run again with --debug for the traceback)\n"
@@ -119,17 +121,24 @@ def test_help_and_usage_errors_keep_tyros_exit_status(root, capsys):
 
 
 # The process's own exit status, through ``python -m``: the bug is planted before the module runs.
-PLANTED = ("import runpy, dtradar_data.store.listing as listing\n"
-           "def bug(*a, **k): raise ZeroDivisionError('division by zero')\n"
-           "listing.list_datasets = bug\n"
-           "runpy.run_module('dtradar_data', run_name='__main__')\n")
+PLANTED = (
+    "import runpy, dtradar_data.store.listing as listing\n"
+    "def bug(*a, **k): raise ZeroDivisionError('division by zero')\n"
+    "listing.list_datasets = bug\n"
+    "runpy.run_module('dtradar_data', run_name='__main__')\n"
+)
 
 
 @pytest.mark.parametrize("debug", [False, True])
 def test_python_m_dtradar_data_exits_3_on_a_bug(root, debug):
     env = {k: v for k, v in os.environ.items() if k != "DTRADAR_DEBUG"}
-    run = subprocess.run([sys.executable, "-c", PLANTED, "list", *(["--debug"] if debug else [])],
-                         capture_output=True, text=True, env=env, timeout=60)
+    run = subprocess.run(
+        [sys.executable, "-c", PLANTED, "list", *(["--debug"] if debug else [])],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
     assert run.returncode == 3, run.stderr
     assert ("Traceback" in run.stderr) is debug
     assert run.stderr.splitlines()[-1].startswith("error: unexpected ZeroDivisionError: division by zero")
@@ -140,8 +149,14 @@ def test_a_reader_that_closes_the_output_early_ends_the_command_quietly_with_141
     read, write = os.pipe()
     os.close(read)  # `... | head -0`
     try:
-        run = subprocess.run([sys.executable, "-m", "dtradar_data", "list"], stdout=write, stderr=subprocess.PIPE,
-                             text=True, env=env, timeout=60)
+        run = subprocess.run(
+            [sys.executable, "-m", "dtradar_data", "list"],
+            stdout=write,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+            timeout=60,
+        )
     finally:
         os.close(write)
     assert run.returncode == EXIT_BROKEN_PIPE == 141

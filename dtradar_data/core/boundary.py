@@ -26,8 +26,10 @@ EXIT_BROKEN_PIPE = 141
 DEBUG_FLAG = "--debug"
 DEBUG_ENV = "DTRADAR_DEBUG"
 #: For the --help text of both CLIs (tyro never sees the flag: it is taken off the command line first).
-DEBUG_HELP = (f"Add {DEBUG_FLAG} anywhere (or set {DEBUG_ENV}=1) to see the traceback of an error. "
-              "Exit status: 0 ok, 1 a failed check, 2 a bad input, 3 an unexpected error (a bug), 130 interrupted.")
+DEBUG_HELP = (
+    f"Add {DEBUG_FLAG} anywhere (or set {DEBUG_ENV}=1) to see the traceback of an error. "
+    "Exit status: 0 ok, 1 a failed check, 2 a bad input, 3 an unexpected error (a bug), 130 interrupted."
+)
 
 
 def split_debug(argv: Sequence[str] | None) -> tuple[list[str], bool]:
@@ -78,6 +80,9 @@ def run_cli(command: Callable[[list[str]], int | None], argv: Sequence[str] | No
             print(f"error: unexpected {type(exc).__name__}: {_one_line(exc)}", file=sys.stderr)
         else:
             detail = _one_line(exc)
-            print(f"error: unexpected {type(exc).__name__}{': ' + detail if detail else ''} "
-                  f"(run again with {DEBUG_FLAG} for the traceback)", file=sys.stderr)
+            print(
+                f"error: unexpected {type(exc).__name__}{': ' + detail if detail else ''} "
+                f"(run again with {DEBUG_FLAG} for the traceback)",
+                file=sys.stderr,
+            )
         return EXIT_BUG

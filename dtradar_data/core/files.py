@@ -84,9 +84,11 @@ def installed_file(dist: str, rel: str, what: str) -> Path:
     try:
         path = Path(str(metadata.distribution(dist).locate_file(rel)))
     except metadata.PackageNotFoundError as e:
-        raise MissingDependencyError(f"{what} comes with {dist}, which is not installed",
-                                     hint="run `make setup`") from e
+        raise MissingDependencyError(
+            f"{what} comes with {dist}, which is not installed", hint="run `make setup`"
+        ) from e
     if not path.is_file():
-        raise MissingDependencyError(f"{path} is missing from the installed {dist}",
-                                     hint=f"reinstall it: `pip install --force-reinstall {dist}`")
+        raise MissingDependencyError(
+            f"{path} is missing from the installed {dist}", hint=f"reinstall it: `pip install --force-reinstall {dist}`"
+        )
     return path

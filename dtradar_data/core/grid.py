@@ -30,14 +30,20 @@ class Grid:
         return (self.ny, self.nx)
 
     def centres(self) -> tuple[np.ndarray, np.ndarray]:
-        return (self.x0_m + self.cell_m * np.arange(self.nx, dtype=np.float64),
-                self.y0_m + self.cell_m * np.arange(self.ny, dtype=np.float64))
+        return (
+            self.x0_m + self.cell_m * np.arange(self.nx, dtype=np.float64),
+            self.y0_m + self.cell_m * np.arange(self.ny, dtype=np.float64),
+        )
 
     def bounds(self) -> tuple[float, float, float, float]:
         """Outer edges ``(xmin, ymin, xmax, ymax)`` of the grid's cells."""
         h = self.cell_m / 2
-        return (self.x0_m - h, self.y0_m - h,
-                self.x0_m + (self.nx - 1) * self.cell_m + h, self.y0_m + (self.ny - 1) * self.cell_m + h)
+        return (
+            self.x0_m - h,
+            self.y0_m - h,
+            self.x0_m + (self.nx - 1) * self.cell_m + h,
+            self.y0_m + (self.ny - 1) * self.cell_m + h,
+        )
 
     def index_of(self, x: float, y: float) -> tuple[int, int]:
         """``(ix, iy)`` of the cell holding the point; a point on the grid's far edge belongs to the last cell."""
@@ -49,7 +55,8 @@ class Grid:
             xmin, ymin, xmax, ymax = self.bounds()
             raise InvalidCoordinatesError(
                 f"point ({x}, {y}) is outside the grid [{xmin}, {xmax}] x [{ymin}, {ymax}] m",
-                hint="use coordinates in the scene frame inside the grid")
+                hint="use coordinates in the scene frame inside the grid",
+            )
         return ix, iy
 
     def to_dict(self) -> dict[str, Any]:

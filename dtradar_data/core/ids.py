@@ -76,12 +76,15 @@ def _split_revision(text: str, what: str) -> tuple[str, str | None]:
     """``name@revision`` -> ``(name, revision or None)``, the revision checked (both forms share it)."""
     name, sep, revision = text.strip().partition("@")
     if sep and not revision:
-        raise UnknownNameError(f"{what} {text!r} has an empty revision after '@'",
-                               hint="write a tag (v0, v1, ...) or a version hash after '@', or drop the '@'")
+        raise UnknownNameError(
+            f"{what} {text!r} has an empty revision after '@'",
+            hint="write a tag (v0, v1, ...) or a version hash after '@', or drop the '@'",
+        )
     if revision and not (is_tag(revision) or is_hash(revision)):
         raise UnknownNameError(
             f"revision {revision!r} in {text!r} is neither a tag nor a version hash",
-            hint=f"use a tag like 'v0' or at least {MIN_HASH_PREFIX} lowercase hex characters of a version hash")
+            hint=f"use a tag like 'v0' or at least {MIN_HASH_PREFIX} lowercase hex characters of a version hash",
+        )
     return name, revision or None
 
 
@@ -101,10 +104,12 @@ def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
     if len(parts) != 2 or not SCENE_RE.fullmatch(parts[0]) or not parts[1]:
         # "cubicle" alone is the most common slip: suggest both of its variants.
         guess = [c for c in candidates if c.startswith(f"{name.lower()}/")] or None
-        suggestion = (f"did you mean {' or '.join(repr(g) for g in guess)}?" if guess
-                      else did_you_mean(name.lower(), candidates))
+        suggestion = (
+            f"did you mean {' or '.join(repr(g) for g in guess)}?" if guess else did_you_mean(name.lower(), candidates)
+        )
         raise UnknownNameError(
-            f"malformed dataset id {text!r}" + (f"; {suggestion}" if suggestion else ""), hint=f"use {GRAMMAR}")
+            f"malformed dataset id {text!r}" + (f"; {suggestion}" if suggestion else ""), hint=f"use {GRAMMAR}"
+        )
     scene, variant = parts
     if variant not in VARIANTS or (check_known and scene not in scenes):
         raise unknown_name("dataset", name, candidates if check_known else [f"{scene}/{v}" for v in VARIANTS])
@@ -153,13 +158,15 @@ def parse_logged_id(text: str | LoggedId) -> LoggedId:
     if isinstance(text, LoggedId):
         return text
     if not isinstance(text, str):
-        raise UnknownNameError(f"logged dataset id must be a string, got {type(text).__name__}",
-                               hint=f"use {LOGGED_GRAMMAR}")
+        raise UnknownNameError(
+            f"logged dataset id must be a string, got {type(text).__name__}", hint=f"use {LOGGED_GRAMMAR}"
+        )
     name, revision = _split_revision(text, "logged dataset id")
     parts = name.split("/")
     if len(parts) != 3 or not all(SCENE_RE.fullmatch(p) for p in parts):
-        raise UnknownNameError(f"malformed logged dataset id {text!r}",
-                               hint=f"use {LOGGED_GRAMMAR} (an RT dataset is {GRAMMAR})")
+        raise UnknownNameError(
+            f"malformed logged dataset id {text!r}", hint=f"use {LOGGED_GRAMMAR} (an RT dataset is {GRAMMAR})"
+        )
     scene, variant, behaviour = parts
     if variant not in VARIANTS:
         raise UnknownNameError(f"unknown variant {variant!r} in {text!r}", hint=f"use one of: {', '.join(VARIANTS)}")

@@ -42,8 +42,9 @@ def data_root() -> Path:
     root = Path(value).expanduser() if value else DEFAULT_DATA_ROOT.expanduser()
     existing = _nearest_existing(root)
     if not existing.is_dir():
-        raise DataRootError(f"data root {root} is not a folder: {existing} is a file",
-                            hint=f"move {existing} away, or {_fix()}")
+        raise DataRootError(
+            f"data root {root} is not a folder: {existing} is a file", hint=f"move {existing} away, or {_fix()}"
+        )
     return root
 
 

@@ -59,9 +59,16 @@ def machine() -> dict[str, Any]:
         load: list[float] | None = [round(x, 2) for x in os.getloadavg()]
     except (AttributeError, OSError):
         load = None
-    return {"cpu": _cpu_model(), "arch": platform.machine(), "cores": os.cpu_count(), "usable_cores": usable,
-            "load_average": load, "memory_bytes": _memory_bytes(), "platform": platform.platform(),
-            "python": platform.python_version()}
+    return {
+        "cpu": _cpu_model(),
+        "arch": platform.machine(),
+        "cores": os.cpu_count(),
+        "usable_cores": usable,
+        "load_average": load,
+        "memory_bytes": _memory_bytes(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+    }
 
 
 def describe(m: dict[str, Any] | None = None) -> str:

@@ -17,9 +17,17 @@ from dtradar_data.core.errors import CorruptDatasetError
 
 RECORD_FORMAT = 1
 #: keys that a format-0 record may carry only inside its ``scene_spec`` (name in the record, name in the spec)
-_FROM_SPEC = (("title", "title"), ("description", "description"), ("source", "source"), ("licence", "licence"),
-              ("attribution", "attribution"), ("grid", "grid"), ("transmitter", "tx"), ("rx_height_m", "rx_height_m"),
-              ("robot_height_m", "robot_height_m"))
+_FROM_SPEC = (
+    ("title", "title"),
+    ("description", "description"),
+    ("source", "source"),
+    ("licence", "licence"),
+    ("attribution", "attribution"),
+    ("grid", "grid"),
+    ("transmitter", "tx"),
+    ("rx_height_m", "rx_height_m"),
+    ("robot_height_m", "robot_height_m"),
+)
 
 
 class FileRecord(BaseModel):
@@ -62,12 +70,16 @@ class VersionRecord(BaseModel):
     def from_meta(cls, meta: dict[str, Any], *, where: str = "meta.json") -> VersionRecord:
         """The record of a ``meta.json`` object of any format this package knows."""
         if not isinstance(meta, dict):
-            raise CorruptDatasetError(f"{where} holds {type(meta).__name__}, not a version record",
-                                      hint="rebuild the dataset (`make dataset`) or pull it again")
+            raise CorruptDatasetError(
+                f"{where} holds {type(meta).__name__}, not a version record",
+                hint="rebuild the dataset (`make dataset`) or pull it again",
+            )
         fmt = meta.get("record_format", 0)
         if not isinstance(fmt, int) or fmt > RECORD_FORMAT:
-            raise CorruptDatasetError(f"{where} is version record format {fmt!r}; this dtradar reads formats "
-                                      f"0..{RECORD_FORMAT}", hint="upgrade dtradar (`pip install -U dtradar`)")
+            raise CorruptDatasetError(
+                f"{where} is version record format {fmt!r}; this dtradar reads formats 0..{RECORD_FORMAT}",
+                hint="upgrade dtradar (`pip install -U dtradar`)",
+            )
         data = dict(meta)
         if fmt == 0:
             spec = data.get("scene_spec") or {}
@@ -80,8 +92,10 @@ class VersionRecord(BaseModel):
         except ValidationError as e:
             first = e.errors()[0]
             field = ".".join(str(p) for p in first["loc"]) or "(record)"
-            raise CorruptDatasetError(f"{where}: field {field!r}: {first['msg']}",
-                                      hint="rebuild the dataset (`make dataset`) or pull it again") from e
+            raise CorruptDatasetError(
+                f"{where}: field {field!r}: {first['msg']}",
+                hint="rebuild the dataset (`make dataset`) or pull it again",
+            ) from e
 
     def to_meta(self) -> dict[str, Any]:
         """The JSON object written to ``meta.json``."""

@@ -54,8 +54,12 @@ _PATH_FIELDS: list[tuple[str, pa.DataType, bool, str]] = [
     ("aoa_zen_rad", pa.float32(), False, "zenith angle of arrival, rad"),
     ("aoa_az_rad", pa.float32(), False, "azimuth angle of arrival, rad"),
     ("depth", pa.int8(), False, "number of interactions (0 = line of sight)"),
-    ("interactions", pa.string(), False, "interaction types in order: S specular, D diffuse, R refraction, "
-                                         "F diffraction; empty for line of sight"),
+    (
+        "interactions",
+        pa.string(),
+        False,
+        "interaction types in order: S specular, D diffuse, R refraction, F diffraction; empty for line of sight",
+    ),
 ]
 
 

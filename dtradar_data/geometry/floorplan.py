@@ -47,22 +47,49 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
 
     seen: set[str] = set()
     for i, polygon in enumerate(base_footprints(spec)):  # an XML scene's buildings: their sections at robot height
-        ax.add_patch(_shapely_patch(polygon, facecolor=BASE_COLOUR, edgecolor="black", linewidth=0.3, alpha=0.9,
-                                    label="_nolegend_" if i else "buildings (XML)", zorder=2))
+        ax.add_patch(
+            _shapely_patch(
+                polygon,
+                facecolor=BASE_COLOUR,
+                edgecolor="black",
+                linewidth=0.3,
+                alpha=0.9,
+                label="_nolegend_" if i else "buildings (XML)",
+                zorder=2,
+            )
+        )
     for prism in sorted(spec.prisms, key=lambda p: (p.top_m, p.name)):  # lots and roads under buildings
         entry = prism.material if prism.material not in seen else "_nolegend_"
         seen.add(prism.material)
         flat = prism.top_m < spec.robot_height_m
-        ax.add_patch(_polygon_patch(prism, facecolor=material_colour(prism.material), edgecolor="black",
-                                    linewidth=0.3, alpha=0.35 if flat else 0.9, label=entry,
-                                    zorder=1.2 if flat else 2))
+        ax.add_patch(
+            _polygon_patch(
+                prism,
+                facecolor=material_colour(prism.material),
+                edgecolor="black",
+                linewidth=0.3,
+                alpha=0.35 if flat else 0.9,
+                label=entry,
+                zorder=1.2 if flat else 2,
+            )
+        )
     for box, corners in footprints(spec):
         above = box.z_m >= spec.robot_height_m
         entry = box.material if box.material not in seen else "_nolegend_"
         seen.add(box.material)
-        ax.add_patch(Polygon(corners, closed=True, facecolor=material_colour(box.material), edgecolor="black",
-                             linewidth=0.5, alpha=0.55 if above else 0.9, hatch="//" if above else None,
-                             label=entry, zorder=2 + box.z_m))
+        ax.add_patch(
+            Polygon(
+                corners,
+                closed=True,
+                facecolor=material_colour(box.material),
+                edgecolor="black",
+                linewidth=0.5,
+                alpha=0.55 if above else 0.9,
+                hatch="//" if above else None,
+                label=entry,
+                zorder=2 + box.z_m,
+            )
+        )
         if label and box.kind != "wall":
             ax.annotate(box.name, (box.x_m, box.y_m), ha="center", va="center", fontsize=5, zorder=10)
 
@@ -71,16 +98,34 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
         g = spec.grid
         gx0, gy0, gx1, gy1 = g.bounds()
         blocked = occupancy(spec)
-        ax.imshow(np.where(blocked, 1.0, np.nan), origin="lower", extent=(gx0, gx1, gy0, gy1), cmap="Reds",
-                  vmin=0, vmax=2, alpha=0.5, interpolation="nearest", zorder=1.5)
+        ax.imshow(
+            np.where(blocked, 1.0, np.nan),
+            origin="lower",
+            extent=(gx0, gx1, gy0, gy1),
+            cmap="Reds",
+            vmin=0,
+            vmax=2,
+            alpha=0.5,
+            interpolation="nearest",
+            zorder=1.5,
+        )
         for x in np.linspace(gx0, gx1, g.nx + 1):
             ax.plot([x, x], [gy0, gy1], color="0.8", linewidth=0.3, zorder=1)
         for y in np.linspace(gy0, gy1, g.ny + 1):
             ax.plot([gx0, gx1], [y, y], color="0.8", linewidth=0.3, zorder=1)
 
     tx = spec.tx.position_m
-    ax.plot([tx[0]], [tx[1]], marker="*", markersize=14, color="gold", markeredgecolor="black", linestyle="none",
-            label="TX", zorder=20)
+    ax.plot(
+        [tx[0]],
+        [tx[1]],
+        marker="*",
+        markersize=14,
+        color="gold",
+        markeredgecolor="black",
+        linestyle="none",
+        label="TX",
+        zorder=20,
+    )
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
     ax.set_aspect("equal")
@@ -119,8 +164,9 @@ def _extent(spec: SceneSpec) -> tuple[float, float, float, float]:
     return pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad
 
 
-def save_floorplan_png(spec: SceneSpec, path: str | Path, *, with_grid: bool = True, label: bool = True,
-                       dpi: int = 150) -> Path:
+def save_floorplan_png(
+    spec: SceneSpec, path: str | Path, *, with_grid: bool = True, label: bool = True, dpi: int = 150
+) -> Path:
     """Write a labelled floor plan (blocked cells shaded) to ``path`` and return it."""
     # A bare Figure (no pyplot): no global backend switch, nothing left open in interactive sessions.
     from matplotlib.figure import Figure
@@ -131,8 +177,11 @@ def save_floorplan_png(spec: SceneSpec, path: str | Path, *, with_grid: bool = T
     ax = fig.add_subplot()
     draw_floorplan(ax, spec, with_grid=with_grid, label=label)
     blocked = occupancy(spec)
-    ax.set_title(f"{spec.name}: {spec.title}  |  grid {spec.grid.nx} x {spec.grid.ny} @ {spec.grid.cell_m} m, "
-                 f"{int(blocked.sum())} blocked cells", fontsize=9)
+    ax.set_title(
+        f"{spec.name}: {spec.title}  |  grid {spec.grid.nx} x {spec.grid.ny} @ {spec.grid.cell_m} m, "
+        f"{int(blocked.sum())} blocked cells",
+        fontsize=9,
+    )
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
     fig.tight_layout()
     path = Path(path)
@@ -140,8 +189,9 @@ def save_floorplan_png(spec: SceneSpec, path: str | Path, *, with_grid: bool = T
     return path
 
 
-def save_city_overview_png(specs: list[SceneSpec], path: str | Path, *, highlight: str | None = None,
-                           dpi: int = 120) -> Path:
+def save_city_overview_png(
+    specs: list[SceneSpec], path: str | Path, *, highlight: str | None = None, dpi: int = 120
+) -> Path:
     """One city's overview: every building, lot and road, each quadrant's grid outline and transmitter (paper
     Fig. 6). ``specs`` are the quadrants' specs (they share the city geometry); ``highlight`` names one to emphasise."""
     from matplotlib.figure import Figure
@@ -157,18 +207,53 @@ def save_city_overview_png(specs: list[SceneSpec], path: str | Path, *, highligh
     for prism in sorted(first.prisms, key=lambda p: (p.top_m, p.name)):
         entry = prism.material if prism.material not in seen else "_nolegend_"
         seen.add(prism.material)
-        ax.add_patch(_polygon_patch(prism, facecolor=material_colour(prism.material), edgecolor="black",
-                                    linewidth=0.3, alpha=0.9, label=entry))
+        ax.add_patch(
+            _polygon_patch(
+                prism,
+                facecolor=material_colour(prism.material),
+                edgecolor="black",
+                linewidth=0.3,
+                alpha=0.9,
+                label=entry,
+            )
+        )
     for spec in specs:
         x0, y0, x1, y1 = spec.grid.bounds()
         mine = spec.scene == highlight
-        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor="red" if mine else "black",
-                               linewidth=2.0 if mine else 0.8, linestyle="-" if mine else "--", zorder=5))
-        ax.annotate(spec.scene.rpartition("-")[2].upper(), ((x0 + x1) / 2, (y0 + y1) / 2), ha="center",
-                    va="center", fontsize=18, color="red" if mine else "black", alpha=0.6, zorder=6)
+        ax.add_patch(
+            Rectangle(
+                (x0, y0),
+                x1 - x0,
+                y1 - y0,
+                fill=False,
+                edgecolor="red" if mine else "black",
+                linewidth=2.0 if mine else 0.8,
+                linestyle="-" if mine else "--",
+                zorder=5,
+            )
+        )
+        ax.annotate(
+            spec.scene.rpartition("-")[2].upper(),
+            ((x0 + x1) / 2, (y0 + y1) / 2),
+            ha="center",
+            va="center",
+            fontsize=18,
+            color="red" if mine else "black",
+            alpha=0.6,
+            zorder=6,
+        )
         tx = spec.tx.position_m
-        ax.plot([tx[0]], [tx[1]], marker="*", markersize=14, color="gold", markeredgecolor="black",
-                linestyle="none", zorder=20, label="TX" if spec is specs[0] else "_nolegend_")
+        ax.plot(
+            [tx[0]],
+            [tx[1]],
+            marker="*",
+            markersize=14,
+            color="gold",
+            markeredgecolor="black",
+            linestyle="none",
+            zorder=20,
+            label="TX" if spec is specs[0] else "_nolegend_",
+        )
     ax.set_xlim(-hx, hx)
     ax.set_ylim(-hy, hy)
     ax.set_aspect("equal")
@@ -176,8 +261,11 @@ def save_city_overview_png(specs: list[SceneSpec], path: str | Path, *, highligh
     ax.set_ylabel("y [m] (north)")
     counts = first.count_by_kind()
     city = first.provenance.get("city", first.scene)
-    ax.set_title(f"{city}: {counts.get('building', 0)} buildings, {counts.get('parking', 0)} parking lots, "
-                 f"{counts.get('road', 0)} road surfaces; quadrants and transmitters", fontsize=9)
+    ax.set_title(
+        f"{city}: {counts.get('building', 0)} buildings, {counts.get('parking', 0)} parking lots, "
+        f"{counts.get('road', 0)} road surfaces; quadrants and transmitters",
+        fontsize=9,
+    )
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
     fig.tight_layout()
     path = Path(path)

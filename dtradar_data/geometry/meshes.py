@@ -31,12 +31,12 @@ from dtradar_data.scenes.model import Box, Prism, SceneSpec
 # material's thickness; Sionna's default is 0.1 m). Our obstacles are closed boxes, so a ray through one crosses two
 # faces: thicknesses are roughly half the real solid, or the panel thickness for hollow furniture.
 MATERIAL_THICKNESS_M: dict[str, float] = {
-    "brick": 0.1,          # 0.2 m walls
-    "concrete": 0.1,       # floor and ceiling slabs (only their inner faces are ever hit)
-    "wood": 0.02,          # chair seats/backs, table tops, board, rack panels: ~2 cm boards
-    "chipboard": 0.01,     # cardboard boxes
-    "metal": 0.002,        # sheet metal; metal does not transmit at 2.4 GHz anyway
-    "wet_ground": 0.15,    # stands in for a human body (~0.3 m deep)
+    "brick": 0.1,  # 0.2 m walls
+    "concrete": 0.1,  # floor and ceiling slabs (only their inner faces are ever hit)
+    "wood": 0.02,  # chair seats/backs, table tops, board, rack panels: ~2 cm boards
+    "chipboard": 0.01,  # cardboard boxes
+    "metal": 0.002,  # sheet metal; metal does not transmit at 2.4 GHz anyway
+    "wet_ground": 0.15,  # stands in for a human body (~0.3 m deep)
     "glass": 0.01,
     "plasterboard": 0.0125,
 }
@@ -55,7 +55,7 @@ BUNDLED_MESHES: dict[str, tuple[str, str]] = {
 
 
 # ---------------------------------------------------------------------------------------------------- meshes
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def bundled_mesh(name: str) -> trimesh.Trimesh:
     """A bundled mesh by name, centred on its footprint with its bottom at z = 0."""
     if name not in BUNDLED_MESHES:
@@ -144,21 +144,31 @@ def write_mitsuba_scene(spec: SceneSpec, out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     (out_dir / "meshes").mkdir(parents=True, exist_ok=True)
     meshes = material_meshes(spec)
-    lines = ['<scene version="2.1.0">', "", f"<!-- dtradar scene {spec.name} (spec sha256 {spec.digest()}) -->",
-             "", "<!-- Materials -->", ""]
+    lines = [
+        '<scene version="2.1.0">',
+        "",
+        f"<!-- dtradar scene {spec.name} (spec sha256 {spec.digest()}) -->",
+        "",
+        "<!-- Materials -->",
+        "",
+    ]
     for material in meshes:
-        lines += [f'\t<bsdf type="itu-radio-material" id={quoteattr("itu_" + material)}>',
-                  f'\t\t<string name="type" value={quoteattr(material)}/>',
-                  f'\t\t<float name="thickness" value="{material_thickness(material)!r}"/>',
-                  "\t</bsdf>"]
+        lines += [
+            f'\t<bsdf type="itu-radio-material" id={quoteattr("itu_" + material)}>',
+            f'\t\t<string name="type" value={quoteattr(material)}/>',
+            f'\t\t<float name="thickness" value="{material_thickness(material)!r}"/>',
+            "\t</bsdf>",
+        ]
     lines += ["", "<!-- Shapes -->", ""]
     for material, mesh in meshes.items():
         _write_if_changed(out_dir / "meshes" / f"{material}.ply", _ply_bytes(mesh))
-        lines += [f'\t<shape type="ply" id={quoteattr("mesh-" + material)}>',
-                  f'\t\t<string name="filename" value={quoteattr(f"meshes/{material}.ply")}/>',
-                  '\t\t<boolean name="face_normals" value="true"/>',
-                  f'\t\t<ref id={quoteattr("itu_" + material)} name="bsdf"/>',
-                  "\t</shape>"]
+        lines += [
+            f'\t<shape type="ply" id={quoteattr("mesh-" + material)}>',
+            f'\t\t<string name="filename" value={quoteattr(f"meshes/{material}.ply")}/>',
+            '\t\t<boolean name="face_normals" value="true"/>',
+            f'\t\t<ref id={quoteattr("itu_" + material)} name="bsdf"/>',
+            "\t</shape>",
+        ]
     lines += ["</scene>", ""]
     text = "\n".join(lines)
     if spec.base is not None:  # built on an external XML: its shapes as they are, our objects added

@@ -79,8 +79,8 @@ def occupancy(spec: SceneSpec, *, eps: float = 1e-6) -> np.ndarray:
         iy1 = min(g.ny - 1, math.floor((corners[:, 1].max() - g.y0_m) / g.cell_m + 0.5))
         if ix0 > ix1 or iy0 > iy1:
             continue
-        cx, cy = np.meshgrid(xs[ix0:ix1 + 1], ys[iy0:iy1 + 1])
-        blocked[iy0:iy1 + 1, ix0:ix1 + 1] |= _overlap_cells(corners, cx, cy, half, eps)
+        cx, cy = np.meshgrid(xs[ix0 : ix1 + 1], ys[iy0 : iy1 + 1])
+        blocked[iy0 : iy1 + 1, ix0 : ix1 + 1] |= _overlap_cells(corners, cx, cy, half, eps)
     covered = np.zeros(g.shape)
     for prism in spec.prisms:
         if prism.z_m < hi and prism.top_m > lo:
@@ -101,11 +101,11 @@ def _add_cover(covered: np.ndarray, g, polygon: Polygon) -> None:
     if ix0 > ix1 or iy0 > iy1:
         return
     xs, ys = g.centres()
-    cx, cy = np.meshgrid(xs[ix0:ix1 + 1], ys[iy0:iy1 + 1])
+    cx, cy = np.meshgrid(xs[ix0 : ix1 + 1], ys[iy0 : iy1 + 1])
     h = g.cell_m / 2
     cells = shapely.box(cx - h, cy - h, cx + h, cy + h)
     shapely.prepare(polygon)
-    covered[iy0:iy1 + 1, ix0:ix1 + 1] += shapely.area(shapely.intersection(cells, polygon))
+    covered[iy0 : iy1 + 1, ix0 : ix1 + 1] += shapely.area(shapely.intersection(cells, polygon))
 
 
 def free_components(blocked: np.ndarray) -> np.ndarray:

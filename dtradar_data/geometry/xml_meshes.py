@@ -35,11 +35,13 @@ def _to_world(shape: ET.Element) -> np.ndarray:
     if tr is None:
         return m
     for op in tr:
-        def xyz(default: float) -> np.ndarray:
+
+        def xyz(default: float, op: ET.Element = op) -> np.ndarray:
             if op.get("value") is not None:
                 vals = [float(v) for v in op.get("value").replace(",", " ").split()]
                 return np.array(vals * 3 if len(vals) == 1 else vals, dtype=float)
             return np.array([float(op.get(k, default)) for k in "xyz"])
+
         if op.tag == "matrix":
             step = np.array([float(v) for v in op.get("value").replace(",", " ").split()]).reshape(4, 4)
         elif op.tag == "translate":
@@ -49,8 +51,10 @@ def _to_world(shape: ET.Element) -> np.ndarray:
         elif op.tag == "rotate":
             step = trimesh.transformations.rotation_matrix(math.radians(float(op.get("angle", 0))), xyz(0.0))
         else:
-            raise SceneFileError(f"shape {shape.get('id')!r}: transform <{op.tag}> is not supported",
-                                 hint="use matrix, translate, scale or rotate (or bake the transform into the mesh)")
+            raise SceneFileError(
+                f"shape {shape.get('id')!r}: transform <{op.tag}> is not supported",
+                hint="use matrix, translate, scale or rotate (or bake the transform into the mesh)",
+            )
         m = step @ m
     return m
 
@@ -65,13 +69,16 @@ def _shape_meshes(path: str, sha256: str) -> tuple[tuple[str, trimesh.Trimesh], 
             fn = next(s.get("value") for s in el.findall("string") if s.get("name") == "filename")
             mesh = trimesh.load(str(xml.parent / fn), process=False, force="mesh")
         elif kind == "rectangle":  # Mitsuba's unit rectangle: [-1, 1]^2 at z = 0
-            mesh = trimesh.Trimesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], [[0, 1, 2], [0, 2, 3]],
-                                   process=False)
+            mesh = trimesh.Trimesh(
+                [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], [[0, 1, 2], [0, 2, 3]], process=False
+            )
         elif kind == "cube":  # Mitsuba's unit cube: [-1, 1]^3
             mesh = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
         else:  # read_shapes rejected it when the spec was made
-            raise SceneFileError(f"{xml}: shape {sid!r} has type {kind!r}",
-                                 hint=f"use {', '.join(FILE_SHAPES + PRIMITIVE_SHAPES)} shapes")
+            raise SceneFileError(
+                f"{xml}: shape {sid!r} has type {kind!r}",
+                hint=f"use {', '.join(FILE_SHAPES + PRIMITIVE_SHAPES)} shapes",
+            )
         mesh.apply_transform(_to_world(el))
         out.append((sid, mesh))
     return tuple(out)
@@ -115,8 +122,11 @@ def _section(mesh: trimesh.Trimesh, z: float):
     if len(seg) == 0:
         return None
     lines = shapely.line_merge(shapely.multilinestrings(np.round(seg[:, :, :2] / SNAP_M) * SNAP_M))
-    rings = [shapely.make_valid(shapely.Polygon(p.coords)) for p in shapely.get_parts(lines)
-             if p.is_closed and len(p.coords) >= 4]
+    rings = [
+        shapely.make_valid(shapely.Polygon(p.coords))
+        for p in shapely.get_parts(lines)
+        if p.is_closed and len(p.coords) >= 4
+    ]
     rings = [r for r in rings if r.area > 0]
     return reduce(shapely.symmetric_difference, rings) if rings else None
 
@@ -161,7 +171,8 @@ def _footprints(path: str, sha256: str, ground: tuple[str, ...], robot_height_m:
 
 def base_footprints(spec: SceneSpec) -> list[shapely.Polygon]:
     """Footprints at robot height of everything in the XML that stands on the ground (not the ground itself, not
-    what hangs above the robot): its section at robot height and its shadow from above, merged: ``[]`` without an XML base. Cached per file content and robot height."""
+    what hangs above the robot): its section at robot height and its shadow from above, merged: ``[]`` without an XML
+    base. Cached per file content and robot height."""
     if spec.base is None:
         return []
     b = spec.base

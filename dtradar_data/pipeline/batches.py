@@ -20,8 +20,9 @@ def batch_path(work_dir: Path, b: int) -> Path:
     return work_dir / f"batch_{b:05d}.npz"
 
 
-def trace_batch(tracer, points: np.ndarray, ix: np.ndarray, iy: np.ndarray, *, per_path: bool
-                ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+def trace_batch(
+    tracer, points: np.ndarray, ix: np.ndarray, iy: np.ndarray, *, per_path: bool
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Trace ``points`` (receivers of the cells ``ix``, ``iy``) and reduce them to ``(cells, paths)`` arrays."""
     batch = tracer.trace(points)
     cells = features.reduce_cells(batch)

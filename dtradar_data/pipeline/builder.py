@@ -95,8 +95,10 @@ class BuildConfig:
 
     def __post_init__(self) -> None:
         if self.coverage_samples < 1:
-            raise InvalidSettingError(f"--coverage-samples {self.coverage_samples} must be positive",
-                                      hint="the default is 2000000; use --no-coverage-map to skip the map")
+            raise InvalidSettingError(
+                f"--coverage-samples {self.coverage_samples} must be positive",
+                hint="the default is 2000000; use --no-coverage-map to skip the map",
+            )
         if self.retrace_radius_m < 0:
             raise InvalidSettingError(f"--retrace-radius-m {self.retrace_radius_m} must be >= 0")
         if self.workers < 0:
@@ -104,8 +106,9 @@ class BuildConfig:
         if self.executor == "ray":
             import_ray()  # a missing Ray is a setup error, reported before anything is traced
         elif self.ray_address or self.workers:
-            raise InvalidSettingError("--ray-address and --workers apply to --executor ray only",
-                                      hint="add --executor ray, or drop them")
+            raise InvalidSettingError(
+                "--ray-address and --workers apply to --executor ray only", hint="add --executor ray, or drop them"
+            )
 
     def check_scene(self, spec) -> None:
         """The checks that need the scene, run before anything is traced (see :meth:`RTSettings.check_scene`)."""
@@ -118,18 +121,36 @@ def build_inputs(spec, config: BuildConfig, *, libraries: dict[str, str] | None 
 
     Besides the scene and the RT settings: whether the per-path table is stored, the coverage map's settings (it is
     one of the version's files), and for a city quadrant the specs its overview plot draws (the other quadrants)."""
-    inputs = {**versions.build_inputs(spec.to_dict(), config.rt.hashed(), SCHEMA_VERSION, libraries),
-              "per_path": config.per_path,
-              "coverage": ({"solver": "sionna.rt.RadioMapSolver", "samples_per_tx": config.coverage_samples,
-                            "cells_per_grid_cell_side": COVERAGE_SUBCELLS} if config.coverage_map else None)}
+    inputs = {
+        **versions.build_inputs(spec.to_dict(), config.rt.hashed(), SCHEMA_VERSION, libraries),
+        "per_path": config.per_path,
+        "coverage": (
+            {
+                "solver": "sionna.rt.RadioMapSolver",
+                "samples_per_tx": config.coverage_samples,
+                "cells_per_grid_cell_side": COVERAGE_SUBCELLS,
+            }
+            if config.coverage_map
+            else None
+        ),
+    }
     if spec.prisms and "city" in spec.provenance:
         inputs["city_overview"] = [s.digest() for s in city_quadrant_specs(spec, config)]
     return inputs
 
 
-def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_path: bool = True,
-               progress: bool = True, tracer=None, executor: str = "serial", ray_address: str | None = None,
-               workers: int = 0):
+def trace_grid(
+    spec,
+    settings: RTSettings,
+    work_dir: Path | None = None,
+    *,
+    per_path: bool = True,
+    progress: bool = True,
+    tracer=None,
+    executor: str = "serial",
+    ray_address: str | None = None,
+    workers: int = 0,
+):
     """Trace every free cell of ``spec``'s grid. Returns ``(cells, paths, blocked, tracer)``.
 
     With ``work_dir``, each finished batch is saved there and reused on the next call (resumable). ``executor="ray"``
@@ -142,8 +163,10 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
     # rx_height_m above the ground: 0 indoors and on flat cities, the terrain under an XML scene's cells
     points = np.stack([xs[ix], ys[iy], spec.rx_height_m + ground_height(spec, xs[ix], ys[iy])], axis=1)
     if len(points) == 0:
-        raise InvalidCoordinatesError(f"all {blocked.size} cells of {spec.name} are blocked: nothing to trace",
-                                      hint="use smaller cells (--cell-m for a city) or fix the grid in the scene file")
+        raise InvalidCoordinatesError(
+            f"all {blocked.size} cells of {spec.name} are blocked: nothing to trace",
+            hint="use smaller cells (--cell-m for a city) or fix the grid in the scene file",
+        )
     n_batches = max(1, -(-len(points) // settings.batch_size))
     if work_dir is not None:
         work_dir.mkdir(parents=True, exist_ok=True)
@@ -154,8 +177,19 @@ def trace_grid(spec, settings: RTSettings, work_dir: Path | None = None, *, per_
         if work_dir is None:
             raise InvalidSettingError("--executor ray needs a work folder", hint="build through build()/build_one()")
         on_ray = {b for b in range(n_batches) if not batch_path(work_dir, b).exists()}
-        trace_on_ray(spec, settings, points, ix, iy, work_dir, sorted(on_ray), per_path=per_path,
-                     address=ray_address, workers=workers, bar=bar)
+        trace_on_ray(
+            spec,
+            settings,
+            points,
+            ix,
+            iy,
+            work_dir,
+            sorted(on_ray),
+            per_path=per_path,
+            address=ray_address,
+            workers=workers,
+            bar=bar,
+        )
     elif executor != "serial":
         raise InvalidSettingError(f"--executor {executor!r} is not an executor", hint="use serial or ray")
     for b in range(n_batches):
@@ -200,8 +234,11 @@ def build_one(spec, config: BuildConfig) -> Dataset:
     parent = None
     if config.differential and spec.variant == "dynamic":
         parent, parent_spec = differential_parent(spec, config)
-        inputs["differential"] = {"parent": parent.version, "rule": differential.RULE,
-                                  "radius_m": config.retrace_radius_m}
+        inputs["differential"] = {
+            "parent": parent.version,
+            "rule": differential.RULE,
+            "radius_m": config.retrace_radius_m,
+        }
     version = versions.version_id(inputs)
     local.check_can_store(ds_id, version)  # a damaged version folder would otherwise fail only after tracing
     work_dir = work_root() / spec.scene / spec.variant / version
@@ -215,12 +252,32 @@ def build_one(spec, config: BuildConfig) -> Dataset:
         if parent is not None:
             t0 = time.perf_counter()
             cells, paths, blocked, tracer, record = differential.differential_trace(
-                parent, parent_spec, spec, config.rt, radius_m=config.retrace_radius_m, per_path=config.per_path,
-                tracer_factory=lambda: RayTracer(spec, config.rt))
-            print(f"{name}: re-traced {record['retraced_cells']} of {record['free_cells']} free cells "
-                  f"(parent {record['parent']})")
-            return _store(spec, config, ds_id, version, inputs, work_dir, cells, paths, blocked, tracer,
-                          time.perf_counter() - t0, {"differential": record})
+                parent,
+                parent_spec,
+                spec,
+                config.rt,
+                radius_m=config.retrace_radius_m,
+                per_path=config.per_path,
+                tracer_factory=lambda: RayTracer(spec, config.rt),
+            )
+            print(
+                f"{name}: re-traced {record['retraced_cells']} of {record['free_cells']} free cells "
+                f"(parent {record['parent']})"
+            )
+            return _store(
+                spec,
+                config,
+                ds_id,
+                version,
+                inputs,
+                work_dir,
+                cells,
+                paths,
+                blocked,
+                tracer,
+                time.perf_counter() - t0,
+                {"differential": record},
+            )
         return _trace_and_store(spec, config, ds_id, version, inputs, work_dir)
 
 
@@ -233,27 +290,48 @@ def differential_parent(spec, config: BuildConfig):
     same = ("grid", "tx", "rx_height_m", "robot_height_m", "room", "prisms", "base")
     differs = [k for k in same if recorded.get(k) != here.get(k)]
     if differs:
-        raise InvalidSettingError(f"--differential: {spec.scene}/blueprint@{parent.version} differs from "
-                                  f"{spec.name} in {', '.join(differs)}, not only in objects",
-                                  hint="build the dynamic twin in full (drop --differential)")
-    parent_spec = dataclasses.replace(spec, variant="blueprint",
-                                      objects=tuple(Box(**o) for o in recorded["objects"]))
+        raise InvalidSettingError(
+            f"--differential: {spec.scene}/blueprint@{parent.version} differs from "
+            f"{spec.name} in {', '.join(differs)}, not only in objects",
+            hint="build the dynamic twin in full (drop --differential)",
+        )
+    parent_spec = dataclasses.replace(spec, variant="blueprint", objects=tuple(Box(**o) for o in recorded["objects"]))
     return parent, parent_spec
 
 
-def _trace_and_store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: dict,
-                     work_dir: Path) -> Dataset:
+def _trace_and_store(
+    spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: dict, work_dir: Path
+) -> Dataset:
     settings = config.rt
     t0 = time.perf_counter()
-    cells, paths, blocked, tracer = trace_grid(spec, settings, work_dir, per_path=config.per_path,
-                                               progress=config.progress, executor=config.executor,
-                                               ray_address=config.ray_address, workers=config.workers)
+    cells, paths, blocked, tracer = trace_grid(
+        spec,
+        settings,
+        work_dir,
+        per_path=config.per_path,
+        progress=config.progress,
+        executor=config.executor,
+        ray_address=config.ray_address,
+        workers=config.workers,
+    )
     trace_s = time.perf_counter() - t0
     return _store(spec, config, ds_id, version, inputs, work_dir, cells, paths, blocked, tracer, trace_s, {})
 
 
-def _store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: dict, work_dir: Path, cells, paths,
-           blocked, tracer, trace_s: float, extra_meta: dict) -> Dataset:
+def _store(
+    spec,
+    config: BuildConfig,
+    ds_id: DatasetId,
+    version: str,
+    inputs: dict,
+    work_dir: Path,
+    cells,
+    paths,
+    blocked,
+    tracer,
+    trace_s: float,
+    extra_meta: dict,
+) -> Dataset:
     """Render the coverage map and overview, write the version with its metadata, clean the work folder."""
     settings = config.rt
     name = format_id(ds_id)
@@ -262,11 +340,13 @@ def _store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: di
         if config.coverage_map:
             if tracer is None:
                 tracer = RayTracer(spec, settings)
-            extra["coverage.png"] = render_coverage_png(spec, tracer, Path(tmp) / "coverage.png",
-                                                        samples=config.coverage_samples)
+            extra["coverage.png"] = render_coverage_png(
+                spec, tracer, Path(tmp) / "coverage.png", samples=config.coverage_samples
+            )
         if spec.prisms and "city" in spec.provenance:
-            extra["city.png"] = save_city_overview_png(city_quadrant_specs(spec, config), Path(tmp) / "city.png",
-                                                       highlight=spec.scene)
+            extra["city.png"] = save_city_overview_png(
+                city_quadrant_specs(spec, config), Path(tmp) / "city.png", highlight=spec.scene
+            )
         num_free = int((~blocked).sum())
         meta = {
             "name": name,
@@ -278,8 +358,12 @@ def _store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: di
             "description": spec.description,
             "scene_spec": spec.to_dict(),
             "scene_hash": spec.digest(),
-            "rt": {**settings.hashed(), "reduction": REDUCTION_DOC, "solver": "sionna.rt.PathSolver",
-                   "mitsuba_variant": active_variant() or "(reused cached batches)"},
+            "rt": {
+                **settings.hashed(),
+                "reduction": REDUCTION_DOC,
+                "solver": "sionna.rt.PathSolver",
+                "mitsuba_variant": active_variant() or "(reused cached batches)",
+            },
             "transmitter": dataclasses.asdict(spec.tx),
             "grid": spec.grid.to_dict(),
             "rx_height_m": spec.rx_height_m,
@@ -311,14 +395,18 @@ def _store(spec, config: BuildConfig, ds_id: DatasetId, version: str, inputs: di
 def city_quadrant_specs(spec, config: BuildConfig) -> list:
     """The blueprint specs of every quadrant of ``spec``'s city (for the overview plot)."""
     city = spec.provenance["city"]
-    return [load_scene_spec(s, "blueprint", footprints=config.osm, cell_m=config.cell_m)
-            for s, _ in build_targets(city, "blueprint")]
+    return [
+        load_scene_spec(s, "blueprint", footprints=config.osm, cell_m=config.cell_m)
+        for s, _ in build_targets(city, "blueprint")
+    ]
 
 
 def build(config: BuildConfig) -> list[Dataset]:
     """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
-    specs = [load_scene_spec(scene, v, footprints=config.osm, cell_m=config.cell_m, grid=config.grid, tx=config.tx)
-             for scene, v in build_targets(config.scene, config.variant)]
+    specs = [
+        load_scene_spec(scene, v, footprints=config.osm, cell_m=config.cell_m, grid=config.grid, tx=config.tx)
+        for scene, v in build_targets(config.scene, config.variant)
+    ]
     for spec in specs:  # every variant before the first is traced, so `all` does not fail after the blueprint
         scene_config(config, spec).check_scene(spec)
         cfg = scene_config(config, spec)

@@ -72,8 +72,9 @@ def retrace_mask(parent_spec, spec, parent_cells: pa.Table, *, radius_m: float) 
         first_leg_end = tx + direction * (tau * 299_792_458.0)[:, None]
         for box in changed:
             footprint = Polygon(box.corners())
-            reasons["near"] |= (shapely.distance(footprint, shapely.points(cx.ravel(), cy.ravel())) <= radius_m
-                                ).reshape(g.shape)
+            reasons["near"] |= (
+                shapely.distance(footprint, shapely.points(cx.ravel(), cy.ravel())) <= radius_m
+            ).reshape(g.shape)
             corners = box.corners()
             lo = np.array([corners[:, 0].min(), corners[:, 1].min(), box.z_m]) - radius_m
             hi = np.array([corners[:, 0].max(), corners[:, 1].max(), box.top_m]) + radius_m
@@ -113,8 +114,14 @@ def differential_trace(parent, parent_spec, spec, settings, *, radius_m: float, 
     paths_tbl = None
     if per_path:
         paths_tbl = features.paths_table([_keep_parent_paths(parent.paths_table, mask | blocked), *new_paths])
-    record = {"parent": f"{parent.name}@{parent.version}", "rule": RULE, "radius_m": max(radius_m, spec.grid.cell_m),
-              "retraced_cells": int(len(todo)), "free_cells": int(len(free_ix)), "reasons": counts}
+    record = {
+        "parent": f"{parent.name}@{parent.version}",
+        "rule": RULE,
+        "radius_m": max(radius_m, spec.grid.cell_m),
+        "retraced_cells": int(len(todo)),
+        "free_cells": int(len(free_ix)),
+        "reasons": counts,
+    }
     return cells_tbl, paths_tbl, blocked, tracer, record
 
 

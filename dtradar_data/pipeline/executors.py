@@ -62,8 +62,20 @@ def start_ray(ray, address: str | None, workers: int) -> bool:
     return True
 
 
-def trace_on_ray(spec, settings, points: np.ndarray, ix: np.ndarray, iy: np.ndarray, work_dir: Path,
-                 todo: list[int], *, per_path: bool, address: str | None = None, workers: int = 0, bar=None) -> None:
+def trace_on_ray(
+    spec,
+    settings,
+    points: np.ndarray,
+    ix: np.ndarray,
+    iy: np.ndarray,
+    work_dir: Path,
+    todo: list[int],
+    *,
+    per_path: bool,
+    address: str | None = None,
+    workers: int = 0,
+    bar=None,
+) -> None:
     """Trace the batches ``todo`` of ``points`` on Ray actors, writing each to ``work_dir`` as it finishes."""
     if not todo:
         return
@@ -84,7 +96,7 @@ def trace_on_ray(spec, settings, points: np.ndarray, ix: np.ndarray, iy: np.ndar
         for b, cells, paths in pool.map_unordered(submit, todo):
             save_batch(batch_path(work_dir, b), cells, paths)
             if bar is not None:
-                bar.update(len(points[b * size:(b + 1) * size]))
+                bar.update(len(points[b * size : (b + 1) * size]))
         for a in actors:
             ray.kill(a)
     finally:

@@ -51,7 +51,8 @@ def check_resources(name: str, free_cells: int, settings: RTSettings, work_dir: 
             f"{name}: tracing needs about {need / 2**30:.1f} GiB of memory (a path buffer of "
             f"{settings.max_num_paths_per_src:.0e} paths, batches of {settings.batch_size} cells); "
             f"{have / 2**30:.1f} GiB are available",
-            hint="lower --rt.max-num-paths-per-src (fewer weak paths kept) or --rt.batch-size, or free memory")
+            hint="lower --rt.max-num-paths-per-src (fewer weak paths kept) or --rt.batch-size, or free memory",
+        )
     disk_need = free_cells * (DISK_BYTES_PER_FREE_CELL if per_path else DISK_BYTES_PER_FREE_CELL // 20)
     probe = next(p for p in (work_dir, *work_dir.parents) if p.exists())
     disk_have = shutil.disk_usage(probe).free
@@ -59,4 +60,5 @@ def check_resources(name: str, free_cells: int, settings: RTSettings, work_dir: 
         raise InsufficientResourcesError(
             f"{name}: {free_cells} free cells need about {disk_need / 2**20:.0f} MiB of disk in {probe}; "
             f"{disk_have / 2**20:.0f} MiB are free",
-            hint="free disk space, point DTRADAR_DATA_ROOT at a larger disk, use --no-per-path, or coarser cells")
+            hint="free disk space, point DTRADAR_DATA_ROOT at a larger disk, use --no-per-path, or coarser cells",
+        )

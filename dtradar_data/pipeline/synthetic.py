@@ -68,8 +68,15 @@ def synthetic_table(
     return pa.Table.from_pydict(arrays, schema=CELL_SCHEMA)
 
 
-def synthetic_dataset(nx: int = 8, ny: int = 6, blocked: np.ndarray | None = None, *, cell_m: float = 0.5,
-                      name: str = "synthetic/blueprint", **kwargs) -> Dataset:
+def synthetic_dataset(
+    nx: int = 8,
+    ny: int = 6,
+    blocked: np.ndarray | None = None,
+    *,
+    cell_m: float = 0.5,
+    name: str = "synthetic/blueprint",
+    **kwargs,
+) -> Dataset:
     """A :class:`Dataset` around :func:`synthetic_table`, with the metadata a real dataset carries."""
     table = synthetic_table(nx, ny, blocked, cell_m=cell_m, **kwargs)
     grid = GridInfo(x0_m=0.5 * cell_m, y0_m=0.5 * cell_m, cell_m=cell_m, nx=nx, ny=ny)

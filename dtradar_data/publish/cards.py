@@ -76,11 +76,16 @@ def _require_cards(cards_dir: Path) -> list[Path]:
     """The committed cards, or :class:`CardsNotFoundError`: checking nothing must not pass as "up to date"."""
     found = committed_cards(cards_dir) if cards_dir.is_dir() else []
     if not found:
-        why = "no such folder" if not cards_dir.exists() else (
-            "not a folder" if not cards_dir.is_dir() else f"no <scene>/<variant>/{CARD_INPUTS} in it")
-        raise CardsNotFoundError(f"--out {cards_dir}: no committed cards ({why})",
-                                 hint="pass the folder that holds <scene>/<variant>/card.json (default: cards), "
-                                      "or write the cards first with `make cards`")
+        why = (
+            "no such folder"
+            if not cards_dir.exists()
+            else ("not a folder" if not cards_dir.is_dir() else f"no <scene>/<variant>/{CARD_INPUTS} in it")
+        )
+        raise CardsNotFoundError(
+            f"--out {cards_dir}: no committed cards ({why})",
+            hint="pass the folder that holds <scene>/<variant>/card.json (default: cards), "
+            "or write the cards first with `make cards`",
+        )
     return found
 
 
@@ -89,8 +94,9 @@ def _read_inputs(card_dir: Path) -> dict[str, Any]:
     try:
         inputs = json.loads(path.read_text())
     except (ValueError, UnicodeDecodeError) as exc:
-        raise CorruptDatasetError(f"{path} is not valid JSON ({exc})",
-                                  hint="restore it from git, or rewrite it with `make cards`") from exc
+        raise CorruptDatasetError(
+            f"{path} is not valid JSON ({exc})", hint="restore it from git, or rewrite it with `make cards`"
+        ) from exc
     if not isinstance(inputs, dict) or not isinstance(inputs.get("meta"), dict):
         raise CorruptDatasetError(f"{path} has no 'meta' record", hint="restore it from git, or `make cards`")
     return inputs

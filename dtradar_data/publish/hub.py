@@ -53,8 +53,10 @@ def check_repo_id(repo_id: str) -> str:
     try:
         validate_repo_id(repo_id)
     except HFValidationError as exc:
-        raise InvalidSettingError(f"--repo {repo_id!r} is not a Hub repo id: {exc}",
-                                  hint="use OWNER/NAME, e.g. dtradar/dtradar-cubicle-blueprint") from exc
+        raise InvalidSettingError(
+            f"--repo {repo_id!r} is not a Hub repo id: {exc}",
+            hint="use OWNER/NAME, e.g. dtradar/dtradar-cubicle-blueprint",
+        ) from exc
     return repo_id
 
 
@@ -62,8 +64,9 @@ def offline() -> bool:
     """``HF_HUB_OFFLINE`` read now (huggingface_hub reads it once at import, which tests and users can't undo)."""
     from huggingface_hub import constants
 
-    return os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in {"1", "true", "yes", "on"} or \
-        bool(constants.HF_HUB_OFFLINE)
+    return os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in {"1", "true", "yes", "on"} or bool(
+        constants.HF_HUB_OFFLINE
+    )
 
 
 def endpoint() -> str | None:
@@ -82,35 +85,49 @@ def hub_errors(action: str, repo_id: str) -> Iterator[None]:
     except DtradarError:
         raise
     except hf.RepositoryNotFoundError as exc:
-        raise HubError(f"cannot {action}: the Hub repo {repo_id!r} does not exist or your token cannot see it",
-                       hint="check --repo, and log in with `hf auth login` (or set HF_TOKEN)") from exc
+        raise HubError(
+            f"cannot {action}: the Hub repo {repo_id!r} does not exist or your token cannot see it",
+            hint="check --repo, and log in with `hf auth login` (or set HF_TOKEN)",
+        ) from exc
     except hf.RevisionNotFoundError as exc:
-        raise HubError(f"cannot {action}: {repo_id!r} has no such revision on the Hub",
-                       hint="list its tags on the Hub page, or publish that version first") from exc
+        raise HubError(
+            f"cannot {action}: {repo_id!r} has no such revision on the Hub",
+            hint="list its tags on the Hub page, or publish that version first",
+        ) from exc
     except hf.LocalEntryNotFoundError as exc:
         if offline():
-            raise HubError(f"cannot {action} {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1) and the version "
-                           "is not in the local store",
-                           hint="unset HF_HUB_OFFLINE with network access, or build it locally "
-                                "(`make dataset SCENE=<scene>`)") from exc
-        raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc.__cause__ or exc})",
-                       hint="check the network and HF_ENDPOINT, or build the dataset locally "
-                            "(`make dataset SCENE=<scene>`)") from exc
+            raise HubError(
+                f"cannot {action} {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1) and the version "
+                "is not in the local store",
+                hint="unset HF_HUB_OFFLINE with network access, or build it locally (`make dataset SCENE=<scene>`)",
+            ) from exc
+        raise HubError(
+            f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc.__cause__ or exc})",
+            hint="check the network and HF_ENDPOINT, or build the dataset locally (`make dataset SCENE=<scene>`)",
+        ) from exc
     except hf.HfHubHTTPError as exc:
         status = getattr(getattr(exc, "response", None), "status_code", None)
         if status in (401, 403):
-            raise HubError(f"cannot {action} {repo_id!r}: the Hub refused the token (HTTP {status})",
-                           hint="use a token with write access: `hf auth login` or HF_TOKEN") from exc
-        raise HubError(f"cannot {action} {repo_id!r}: the Hub answered HTTP {status} ({exc})",
-                       hint="retry later; check the repo on the Hub") from exc
+            raise HubError(
+                f"cannot {action} {repo_id!r}: the Hub refused the token (HTTP {status})",
+                hint="use a token with write access: `hf auth login` or HF_TOKEN",
+            ) from exc
+        raise HubError(
+            f"cannot {action} {repo_id!r}: the Hub answered HTTP {status} ({exc})",
+            hint="retry later; check the repo on the Hub",
+        ) from exc
     except (OSError, ConnectionError, TimeoutError) as exc:
-        raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
-                       hint="check the network and HF_ENDPOINT, or build the dataset locally") from exc
+        raise HubError(
+            f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
+            hint="check the network and HF_ENDPOINT, or build the dataset locally",
+        ) from exc
     except Exception as exc:  # httpx errors and others that do not derive from OSError
         # huggingface_hub 2.x talks through httpx2/httpcore2, 1.x through httpx, older ones through requests
         if type(exc).__module__.split(".")[0].rstrip("0123456789") in {"httpx", "httpcore", "requests", "urllib"}:
-            raise HubError(f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
-                           hint="check the network and HF_ENDPOINT, or build the dataset locally") from exc
+            raise HubError(
+                f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
+                hint="check the network and HF_ENDPOINT, or build the dataset locally",
+            ) from exc
         raise
 
 
@@ -119,12 +136,15 @@ def _token() -> str:
 
     token = get_token()
     if not token:
-        raise HubError("no Hugging Face token found, so nothing can be published",
-                       hint="run `hf auth login` or set HF_TOKEN to a token with write access")
+        raise HubError(
+            "no Hugging Face token found, so nothing can be published",
+            hint="run `hf auth login` or set HF_TOKEN to a token with write access",
+        )
     return token
 
 
 # --------------------------------------------------------------------------------------------------------- publish
+
 
 @dataclass(frozen=True)
 class PublishResult:
@@ -144,14 +164,21 @@ def publish_operations(vdir: Path, card_text: str) -> list[Any]:
     """The files of one commit: every data file of the version plus the card as ``README.md``."""
     from huggingface_hub import CommitOperationAdd
 
-    ops = [CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in DATA_FILES
-           if (vdir / f).is_file()]
+    ops = [
+        CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in DATA_FILES if (vdir / f).is_file()
+    ]
     ops.append(CommitOperationAdd(path_in_repo=P.CARD_FILE, path_or_fileobj=card_text.encode()))
     return ops
 
 
-def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None,
-            private: bool = False, api: Any = None) -> PublishResult:
+def publish(
+    name: str | DatasetId,
+    revision: str | None = None,
+    *,
+    repo_id: str | None = None,
+    private: bool = False,
+    api: Any = None,
+) -> PublishResult:
     """Upload one stored version (verified first) as one tagged commit; ``api`` replaces ``HfApi`` in tests."""
     if repo_id is not None:
         check_repo_id(repo_id)
@@ -159,8 +186,10 @@ def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str 
     repo_id = repo_id or default_repo(did)
     problems = local.verify_dir(vdir)
     if problems:
-        raise CorruptDatasetError(f"refusing to publish damaged {did.name}@{version}: " + "; ".join(problems),
-                                  hint="rebuild it first (`make dataset`)")
+        raise CorruptDatasetError(
+            f"refusing to publish damaged {did.name}@{version}: " + "; ".join(problems),
+            hint="rebuild it first (`make dataset`)",
+        )
     meta = local.read_meta(vdir)
     history = listing.history(did)
     upto = history[: next((i + 1 for i, (_, m) in enumerate(history) if m.get("version") == version), len(history))]
@@ -169,20 +198,36 @@ def publish(name: str | DatasetId, revision: str | None = None, *, repo_id: str 
     ops = publish_operations(vdir, card)
 
     def stale(api_) -> list[str]:  # e.g. paths.parquet of an older version
-        return [f for f in api_.list_repo_files(repo_id, repo_type="dataset")
-                if f in DATA_FILES and not (vdir / f).is_file()]
+        return [
+            f
+            for f in api_.list_repo_files(repo_id, repo_type="dataset")
+            if f in DATA_FILES and not (vdir / f).is_file()
+        ]
 
-    return push_version(repo_id, ops, name=did.name, tag=tag, version=version, what="dataset", private=private,
-                        api=api, stale=stale)
+    return push_version(
+        repo_id, ops, name=did.name, tag=tag, version=version, what="dataset", private=private, api=api, stale=stale
+    )
 
 
-def push_version(repo_id: str, ops: list[Any], *, name: str, tag: str | None, version: str, what: str,
-                 private: bool, api: Any = None, stale=None) -> PublishResult:
+def push_version(
+    repo_id: str,
+    ops: list[Any],
+    *,
+    name: str,
+    tag: str | None,
+    version: str,
+    what: str,
+    private: bool,
+    api: Any = None,
+    stale=None,
+) -> PublishResult:
     """Upload ``ops`` as one commit tagged with ``tag`` and ``version`` (both never moved); ``stale(api)`` names
     remote files to delete in the same commit. Shared by RT and logged datasets; ``api`` replaces ``HfApi`` in tests."""
     if offline():
-        raise HubError(f"cannot publish to {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1)",
-                       hint="unset HF_HUB_OFFLINE on a machine with network access")
+        raise HubError(
+            f"cannot publish to {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1)",
+            hint="unset HF_HUB_OFFLINE on a machine with network access",
+        )
     if api is None:
         from huggingface_hub import HfApi
 
@@ -193,32 +238,49 @@ def push_version(repo_id: str, ops: list[Any], *, name: str, tag: str | None, ve
         if version in remote_tags:
             return PublishResult(repo_id, tag, version, None, already_published=True)
         if tag in remote_tags:
-            raise HubError(f"{repo_id!r} already has a tag {tag!r} for another version than {version}",
-                           hint="tags are never moved: publish to another --repo, or pull the Hub's versions "
-                                "first so local tags follow the Hub's")
+            raise HubError(
+                f"{repo_id!r} already has a tag {tag!r} for another version than {version}",
+                hint="tags are never moved: publish to another --repo, or pull the Hub's versions "
+                "first so local tags follow the Hub's",
+            )
         if stale is not None:
             from huggingface_hub import CommitOperationDelete
 
             ops = [*ops, *(CommitOperationDelete(path_in_repo=f) for f in stale(api))]
-        info = api.create_commit(repo_id, ops, commit_message=f"{name} {tag}: version {version}",
-                                 commit_description=f"dtradar {what} {name}, content version {version}",
-                                 repo_type="dataset")
+        info = api.create_commit(
+            repo_id,
+            ops,
+            commit_message=f"{name} {tag}: version {version}",
+            commit_description=f"dtradar {what} {name}, content version {version}",
+            repo_type="dataset",
+        )
         for name_ in (tag, version):
             if name_:
-                api.create_tag(repo_id, tag=name_, revision=info.oid, repo_type="dataset",
-                               tag_message=f"{name} version {version}")
+                api.create_tag(
+                    repo_id, tag=name_, revision=info.oid, repo_type="dataset", tag_message=f"{name} version {version}"
+                )
     return PublishResult(repo_id, tag, version, info.oid)
 
 
 # ------------------------------------------------------------------------------------------------------------ pull
 
+
 def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
     """The only download call; a separate function so tests can replace the network with a local folder."""
     from huggingface_hub import snapshot_download
 
-    return Path(snapshot_download(repo_id, repo_type="dataset", revision=revision, local_dir=dest, cache_dir=cache,
-                                  endpoint=endpoint(), local_files_only=offline(),
-                                  allow_patterns=[*DATA_FILES, P.CARD_FILE]))
+    return Path(
+        snapshot_download(
+            repo_id,
+            repo_type="dataset",
+            revision=revision,
+            local_dir=dest,
+            cache_dir=cache,
+            endpoint=endpoint(),
+            local_files_only=offline(),
+            allow_patterns=[*DATA_FILES, P.CARD_FILE],
+        )
+    )
 
 
 def _remote_revision(repo_id: str, revision: str | None) -> str:
@@ -233,8 +295,10 @@ def _remote_revision(repo_id: str, revision: str | None) -> str:
         tags = [t.name for t in HfApi(endpoint=endpoint()).list_repo_refs(repo_id, repo_type="dataset").tags]
     matches = [t for t in tags if is_hash(t) and t.startswith(revision)]
     if len(matches) != 1:
-        raise HubError(f"{repo_id!r} has {len(matches)} versions starting with {revision!r}",
-                       hint=f"give a tag or at least {MIN_HASH_PREFIX}+ distinct characters of the hash")
+        raise HubError(
+            f"{repo_id!r} has {len(matches)} versions starting with {revision!r}",
+            hint=f"give a tag or at least {MIN_HASH_PREFIX}+ distinct characters of the hash",
+        )
     return matches[0]
 
 

@@ -10,8 +10,15 @@ from dtradar_data.store import local
 from dtradar_data.store.logged import LoggedDataset, is_logged_name, load_logged
 
 
-def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = False, verify: bool = True,
-         from_hub: bool = False, repo_id: str | None = None) -> Dataset | LoggedDataset:
+def load(
+    name: str | DatasetId,
+    revision: str | None = None,
+    *,
+    paths: bool = False,
+    verify: bool = True,
+    from_hub: bool = False,
+    repo_id: str | None = None,
+) -> Dataset | LoggedDataset:
     """Load a dataset version: the newest without ``revision`` (or ``@rev`` in ``name``), else a tag or hash.
 
     ``paths=True`` also reads the per-path table into ``Dataset.paths_table``; ``verify`` re-hashes the files read

@@ -43,8 +43,14 @@ def default_repo(lid: LoggedId) -> str:
     return f"dtradar/dtradar-{lid.scene}-{lid.variant}-{lid.behaviour}"
 
 
-def publish(name: str | LoggedId, revision: str | None = None, *, repo_id: str | None = None,
-            private: bool = False, api: Any = None) -> hub.PublishResult:
+def publish(
+    name: str | LoggedId,
+    revision: str | None = None,
+    *,
+    repo_id: str | None = None,
+    private: bool = False,
+    api: Any = None,
+) -> hub.PublishResult:
     """Upload one stored logged version (verified first) as one commit tagged with its tag and version."""
     from huggingface_hub import CommitOperationAdd
 
@@ -55,20 +61,32 @@ def publish(name: str | LoggedId, revision: str | None = None, *, repo_id: str |
     try:
         check_version_dir(vdir)
     except CorruptDatasetError as exc:
-        raise CorruptDatasetError(f"refusing to publish damaged {lid.name}@{version}: {exc.message}",
-                                  hint="log it again first") from exc
+        raise CorruptDatasetError(
+            f"refusing to publish damaged {lid.name}@{version}: {exc.message}", hint="log it again first"
+        ) from exc
     tag = read_refs(refs_path(lid)).tag_of(version)
     ops = [CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in FILES if (vdir / f).is_file()]
-    return hub.push_version(repo_id, ops, name=lid.name, tag=tag, version=version, what="logged dataset",
-                            private=private, api=api)
+    return hub.push_version(
+        repo_id, ops, name=lid.name, tag=tag, version=version, what="logged dataset", private=private, api=api
+    )
 
 
 def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
     """The only download call (tests replace it with a local folder)."""
     from huggingface_hub import snapshot_download
 
-    return Path(snapshot_download(repo_id, repo_type="dataset", revision=revision, local_dir=dest, cache_dir=cache,
-                                  endpoint=hub.endpoint(), local_files_only=hub.offline(), allow_patterns=list(FILES)))
+    return Path(
+        snapshot_download(
+            repo_id,
+            repo_type="dataset",
+            revision=revision,
+            local_dir=dest,
+            cache_dir=cache,
+            endpoint=hub.endpoint(),
+            local_files_only=hub.offline(),
+            allow_patterns=list(FILES),
+        )
+    )
 
 
 def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
@@ -94,8 +112,10 @@ def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | No
         try:
             check_version_dir(version_dir)
         except CorruptDatasetError as exc:
-            raise CorruptDatasetError(f"the download of {lid.name} from {repo_id!r} failed verification: "
-                                      f"{exc.message}", hint="retry; if it persists the Hub copy is damaged") from exc
+            raise CorruptDatasetError(
+                f"the download of {lid.name} from {repo_id!r} failed verification: {exc.message}",
+                hint="retry; if it persists the Hub copy is damaged",
+            ) from exc
         preferred = revision if revision and is_tag(revision) else hub._card_tag(version_dir / P.CARD_FILE)
         return install_logged(lid, version_dir, preferred_tag=preferred)
     finally:

@@ -39,8 +39,12 @@ def agreement(ref: dict[str, np.ndarray], got: dict[str, np.ndarray]) -> np.ndar
     """Per-cell bool: the two traces' strongest paths agree (see the module docstring)."""
     both_none = ~ref["has"] & ~got["has"]
     recorded = (ref["inter"] != "") & (got["inter"] != "")
-    same = (ref["has"] & got["has"] & (~recorded | (ref["inter"] == got["inter"]))
-            & (np.abs(ref["tau_s"] - got["tau_s"]) < TAU_TOL_S))
+    same = (
+        ref["has"]
+        & got["has"]
+        & (~recorded | (ref["inter"] == got["inter"]))
+        & (np.abs(ref["tau_s"] - got["tau_s"]) < TAU_TOL_S)
+    )
 
     def close(a, b, wrap):
         d = np.abs(a - b)
@@ -63,5 +67,8 @@ def compare(ref: Dataset, got: Dataset) -> dict[str, np.ndarray]:
     def gain(ds):
         return np.array(ds.table.column("path_gain_db").to_numpy(zero_copy_only=False), dtype=float)
 
-    return {"agree": agreement(strongest_of(ref), strongest_of(got)), "gain_diff_db": np.abs(gain(ref) - gain(got)),
-            "free": free}
+    return {
+        "agree": agreement(strongest_of(ref), strongest_of(got)),
+        "gain_diff_db": np.abs(gain(ref) - gain(got)),
+        "free": free,
+    }

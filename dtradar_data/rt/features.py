@@ -26,8 +26,20 @@ from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA
 # Sionna InteractionType codes -> one letter each (the per-path table's `interactions` column).
 INTERACTION_LETTERS = {1: "S", 2: "D", 4: "R", 8: "F"}
 
-CELL_RADIO_KEYS = ("num_paths", "los", "path_gain_db", "a_re", "a_im", "phase_rad", "tau_s", "aod_zen_rad",
-                   "aod_az_rad", "aoa_zen_rad", "aoa_az_rad", "delay_spread_s")
+CELL_RADIO_KEYS = (
+    "num_paths",
+    "los",
+    "path_gain_db",
+    "a_re",
+    "a_im",
+    "phase_rad",
+    "tau_s",
+    "aod_zen_rad",
+    "aod_az_rad",
+    "aoa_zen_rad",
+    "aoa_az_rad",
+    "delay_spread_s",
+)
 
 
 def reduce_cells(batch) -> dict[str, np.ndarray]:
@@ -74,8 +86,11 @@ def _one_empty_path(batch):
     """The batch padded to one invalid path per receiver, so that per-receiver reductions have a slot to look at."""
     import dataclasses
 
-    pad = {f.name: np.zeros((*getattr(batch, f.name).shape[:-1], 1), dtype=getattr(batch, f.name).dtype)
-           for f in dataclasses.fields(batch) if isinstance(getattr(batch, f.name), np.ndarray)}
+    pad = {
+        f.name: np.zeros((*getattr(batch, f.name).shape[:-1], 1), dtype=getattr(batch, f.name).dtype)
+        for f in dataclasses.fields(batch)
+        if isinstance(getattr(batch, f.name), np.ndarray)
+    }
     return dataclasses.replace(batch, **pad)
 
 
@@ -92,10 +107,18 @@ def path_rows(batch, ix: np.ndarray, iy: np.ndarray) -> dict[str, np.ndarray]:
     with np.errstate(divide="ignore"):
         power_db = 10.0 * np.log10(batch.gain[r, p])
     return {  # a: baseband-equivalent, as in reduce_cells
-        "ix": np.asarray(ix)[r].astype(np.int32), "iy": np.asarray(iy)[r].astype(np.int32),
-        "path": k.astype(np.int16), "a_re": a.real, "a_im": a.imag, "power_db": power_db,
-        "tau_s": batch.tau[r, p], "aod_zen_rad": batch.theta_t[r, p], "aod_az_rad": batch.phi_t[r, p],
-        "aoa_zen_rad": batch.theta_r[r, p], "aoa_az_rad": batch.phi_r[r, p], "depth": depth.astype(np.int8),
+        "ix": np.asarray(ix)[r].astype(np.int32),
+        "iy": np.asarray(iy)[r].astype(np.int32),
+        "path": k.astype(np.int16),
+        "a_re": a.real,
+        "a_im": a.imag,
+        "power_db": power_db,
+        "tau_s": batch.tau[r, p],
+        "aod_zen_rad": batch.theta_t[r, p],
+        "aod_az_rad": batch.phi_t[r, p],
+        "aoa_zen_rad": batch.theta_r[r, p],
+        "aoa_az_rad": batch.phi_r[r, p],
+        "depth": depth.astype(np.int8),
         "interactions": np.array(letters, dtype=object),
     }
 
@@ -109,8 +132,10 @@ def cells_table(xs: np.ndarray, ys: np.ndarray, blocked: np.ndarray, free_featur
     free = ~blocked.ravel()
     n = blocked.size
     cols: dict[str, pa.Array] = {
-        "ix": pa.array(ix.ravel(), pa.int32()), "iy": pa.array(iy.ravel(), pa.int32()),
-        "x_m": pa.array(x.ravel(), pa.float64()), "y_m": pa.array(y.ravel(), pa.float64()),
+        "ix": pa.array(ix.ravel(), pa.int32()),
+        "iy": pa.array(iy.ravel(), pa.int32()),
+        "x_m": pa.array(x.ravel(), pa.float64()),
+        "y_m": pa.array(y.ravel(), pa.float64()),
         "blocked": pa.array(blocked.ravel()),
     }
     for key in CELL_RADIO_KEYS:

@@ -57,8 +57,7 @@ def find_libllvm() -> Path:
         return Path(explicit)
     found = candidates()
     if not found:
-        raise RayTracerUnavailableError(
-            f"no libLLVM >= {MIN_MAJOR} found for Sionna RT on the CPU", hint=INSTALL_HINT)
+        raise RayTracerUnavailableError(f"no libLLVM >= {MIN_MAJOR} found for Sionna RT on the CPU", hint=INSTALL_HINT)
     return found[0]
 
 

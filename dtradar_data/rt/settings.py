@@ -76,30 +76,34 @@ class RTSettings:
         if not 0 <= self.seed < 2**32:  # Sionna's samplers take an unsigned 32-bit seed
             problems.append(f"{flag('seed')} {self.seed} must be in 0 .. 2**32-1")
         if self.rx_pattern not in PATTERNS:
-            problems.append(f"{flag('rx_pattern')} {self.rx_pattern!r} is not an antenna pattern "
-                            f"({', '.join(PATTERNS)})")
+            problems.append(
+                f"{flag('rx_pattern')} {self.rx_pattern!r} is not an antenna pattern ({', '.join(PATTERNS)})"
+            )
         if self.rx_polarization not in POLARIZATIONS:
-            problems.append(f"{flag('rx_polarization')} {self.rx_polarization!r} is not a polarization "
-                            f"({', '.join(POLARIZATIONS)})")
+            problems.append(
+                f"{flag('rx_polarization')} {self.rx_polarization!r} is not a polarization ({', '.join(POLARIZATIONS)})"
+            )
         if self.device not in ("auto", "cpu", "cuda"):
             problems.append(f"{flag('device')} {self.device!r} must be 'auto', 'cpu' or 'cuda'")
         if problems:
-            raise InvalidSettingError("invalid ray-tracing settings: " + "; ".join(problems),
-                                      hint="see `python -m dtradar_data build --help` for the accepted values")
+            raise InvalidSettingError(
+                "invalid ray-tracing settings: " + "; ".join(problems),
+                hint="see `python -m dtradar_data build --help` for the accepted values",
+            )
 
     def check_scene(self, spec) -> None:
         """Settings that are in range but that ``spec`` cannot be traced with: Sionna would fail (or, for an
         undefined material, raise deep inside) only after the scene was loaded."""
         # getattr: city specs also carry prisms (buildings, roads), indoor ones only boxes
         materials = {o.material for o in (*spec.objects, *getattr(spec, "prisms", ()))}
-        undefined = sorted(m for m in materials
-                           if m in ITU_VALID_GHZ and not material_valid_at(m, self.frequency_hz))
+        undefined = sorted(m for m in materials if m in ITU_VALID_GHZ and not material_valid_at(m, self.frequency_hz))
         if undefined:
             ranges = ", ".join(f"{m} {ITU_VALID_GHZ[m][0]:g}-{ITU_VALID_GHZ[m][1]:g} GHz" for m in undefined)
             raise InvalidSettingError(
                 f"{flag('frequency_hz')} {self.frequency_hz:g}: ITU-R P.2040 does not define the material(s) of "
                 f"{spec.name} at {self.frequency_hz / 1e9:g} GHz ({ranges})",
-                hint="pick a frequency inside every material's range (the paper: 2.4e9)")
+                hint="pick a frequency inside every material's range (the paper: 2.4e9)",
+            )
 
     def hashed(self) -> dict[str, Any]:
         """The settings that determine the result (and so the dataset version)."""
@@ -110,8 +114,14 @@ class RTSettings:
 
     def solver_kwargs(self) -> dict[str, Any]:
         return dict(
-            max_depth=self.max_depth, max_num_paths_per_src=self.max_num_paths_per_src,
-            samples_per_src=self.samples_per_src, synthetic_array=self.synthetic_array, los=self.los,
-            specular_reflection=self.specular_reflection, diffuse_reflection=self.diffuse_reflection,
-            refraction=self.refraction, diffraction=self.diffraction, seed=self.seed,
+            max_depth=self.max_depth,
+            max_num_paths_per_src=self.max_num_paths_per_src,
+            samples_per_src=self.samples_per_src,
+            synthetic_array=self.synthetic_array,
+            los=self.los,
+            specular_reflection=self.specular_reflection,
+            diffuse_reflection=self.diffuse_reflection,
+            refraction=self.refraction,
+            diffraction=self.diffraction,
+            seed=self.seed,
         )

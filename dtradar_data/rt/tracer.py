@@ -1,8 +1,8 @@
 """Sionna RT for dtradar: the only module that imports ``sionna.rt``, ``mitsuba`` or ``drjit``.
 
 A :class:`RayTracer` owns the one mutable object, the Sionna scene, built once from a :class:`SceneSpec` (through the
-Mitsuba XML that :mod:`dtradar_data.geometry.meshes` writes). Solvers are called with explicit keyword settings and a seed
-taken from :class:`RTSettings`, and a cheap precondition check (:meth:`RayTracer.check_points`) runs before any
+Mitsuba XML that :mod:`dtradar_data.geometry.meshes` writes). Solvers are called with explicit keyword settings and a
+seed taken from :class:`RTSettings`, and a cheap precondition check (:meth:`RayTracer.check_points`) runs before any
 expensive trace. Results leave this module as plain numpy (:class:`PathBatch`), so everything downstream tests
 without the ray tracer.
 """
@@ -60,12 +60,14 @@ def _import_sionna(device: Device):
         import drjit as dr
         import mitsuba as mi
     except ImportError as e:  # pragma: no cover - depends on the install
-        raise RayTracerUnavailableError(f"Mitsuba/Dr.Jit is not importable: {e}",
-                                        hint="run `make setup` (or `pip install sionna-rt==2.2.0`)") from e
+        raise RayTracerUnavailableError(
+            f"Mitsuba/Dr.Jit is not importable: {e}", hint="run `make setup` (or `pip install sionna-rt==2.2.0`)"
+        ) from e
     use_cuda = device == "cuda" or (device == "auto" and dr.has_backend(dr.JitBackend.CUDA))
     if device == "cuda" and not dr.has_backend(dr.JitBackend.CUDA):
-        raise RayTracerUnavailableError("device='cuda' requested but Dr.Jit finds no CUDA GPU",
-                                        hint="use device='cpu' (or 'auto')")
+        raise RayTracerUnavailableError(
+            "device='cuda' requested but Dr.Jit finds no CUDA GPU", hint="use device='cpu' (or 'auto')"
+        )
     variant = "cuda_ad_mono_polarized" if use_cuda else "llvm_ad_mono_polarized"
     if mi.variant() != variant:
         mi.set_variant(variant)
@@ -97,10 +99,12 @@ class RayTracer:
         self.scene = rt.load_scene(str(xml), merge_shapes=True)
         self.scene.frequency = settings.frequency_hz
         tx = spec.tx  # the transmitter array is part of the scene (paper: 8x2 tr38901 VH, on the ceiling)
-        self.scene.tx_array = rt.PlanarArray(num_rows=tx.num_rows, num_cols=tx.num_cols, pattern=tx.pattern,
-                                             polarization=tx.polarization)
-        self.scene.rx_array = rt.PlanarArray(num_rows=1, num_cols=1, pattern=settings.rx_pattern,
-                                             polarization=settings.rx_polarization)
+        self.scene.tx_array = rt.PlanarArray(
+            num_rows=tx.num_rows, num_cols=tx.num_cols, pattern=tx.pattern, polarization=tx.polarization
+        )
+        self.scene.rx_array = rt.PlanarArray(
+            num_rows=1, num_cols=1, pattern=settings.rx_pattern, polarization=settings.rx_polarization
+        )
         kwargs = {"look_at": list(tx.look_at_m)} if tx.look_at_m is not None else {}
         self.scene.add(rt.Transmitter("tx", position=list(tx.position_m), power_dbm=tx.power_dbm, **kwargs))
         self._solver = rt.PathSolver(deterministic=settings.deterministic and self.variant.startswith("cuda"))
@@ -115,11 +119,14 @@ class RayTracer:
         """Reject receiver positions that are not finite or lie outside the scene's horizontal extent."""
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3:
-            raise InvalidCoordinatesError(f"receiver positions must have shape [N, 3], got {points.shape}",
-                                          hint="pass one (x, y, z) row per receiver")
+            raise InvalidCoordinatesError(
+                f"receiver positions must have shape [N, 3], got {points.shape}",
+                hint="pass one (x, y, z) row per receiver",
+            )
         if not np.isfinite(points).all():
-            raise InvalidCoordinatesError("receiver positions contain NaN or infinity",
-                                          hint="check the grid origin and cell size")
+            raise InvalidCoordinatesError(
+                "receiver positions contain NaN or infinity", hint="check the grid origin and cell size"
+            )
         bbox = self.scene.mi_scene.bbox()
         lo, hi = np.array(bbox.min, dtype=float).ravel(), np.array(bbox.max, dtype=float).ravel()
         # x/y only: receivers may float above a flat scene (z is checked against the grid spec elsewhere)
@@ -128,7 +135,9 @@ class RayTracer:
             first = points[np.argmax(outside)]
             raise InvalidCoordinatesError(
                 f"{int(outside.sum())} receiver(s) lie outside the scene bounds {lo[:2].round(2)}..{hi[:2].round(2)}, "
-                f"e.g. {first.round(3)}", hint="fix the grid (x0_m, y0_m, cell_m, nx, ny) or rx_height_m in the scene file")
+                f"e.g. {first.round(3)}",
+                hint="fix the grid (x0_m, y0_m, cell_m, nx, ny) or rx_height_m in the scene file",
+            )
 
     # -- tracing -------------------------------------------------------------------------------------------------
     def _set_receivers(self, points: np.ndarray) -> None:
@@ -181,27 +190,45 @@ class RayTracer:
             inter = np.asarray(paths.interactions)[:, :, 0, 0, 0, :]
         valid = geo(paths.valid).astype(bool)
         batch = PathBatch(
-            valid=valid, a=ref.astype(np.complex64), gain=gain.astype(np.float64),
+            valid=valid,
+            a=ref.astype(np.complex64),
+            gain=gain.astype(np.float64),
             tau=geo(paths.tau).astype(np.float64),
-            theta_t=geo(paths.theta_t).astype(np.float64), phi_t=geo(paths.phi_t).astype(np.float64),
-            theta_r=geo(paths.theta_r).astype(np.float64), phi_r=geo(paths.phi_r).astype(np.float64),
-            interactions=inter.astype(np.uint32), frequency_hz=float(self.settings.frequency_hz),
+            theta_t=geo(paths.theta_t).astype(np.float64),
+            phi_t=geo(paths.phi_t).astype(np.float64),
+            theta_r=geo(paths.theta_r).astype(np.float64),
+            phi_r=geo(paths.phi_r).astype(np.float64),
+            interactions=inter.astype(np.uint32),
+            frequency_hz=float(self.settings.frequency_hz),
         )
         if batch.valid.shape[0] != n:  # pragma: no cover - guards against a Sionna layout change
             raise RuntimeError(f"Sionna returned {batch.valid.shape[0]} receivers for {n} requested")
         return batch
 
-    def radio_map(self, *, centre_m: tuple[float, float, float], size_m: tuple[float, float], cell_m: float,
-                  samples_per_tx: int = 2_000_000) -> np.ndarray:
+    def radio_map(
+        self,
+        *,
+        centre_m: tuple[float, float, float],
+        size_m: tuple[float, float],
+        cell_m: float,
+        samples_per_tx: int = 2_000_000,
+    ) -> np.ndarray:
         """Path gain (linear) on a horizontal plane with RadioMapSolver: ``float64[ny, nx]`` (row 0 = lowest y)."""
         rt, mi = self.rt, self.mi
         rm = rt.RadioMapSolver()(
-            self.scene, center=mi.Point3f(*centre_m), orientation=mi.Point3f(0, 0, 0),
-            size=mi.Point2f(*size_m), cell_size=mi.Point2f(cell_m, cell_m), samples_per_tx=samples_per_tx,
-            max_depth=self.settings.max_depth, los=self.settings.los,
+            self.scene,
+            center=mi.Point3f(*centre_m),
+            orientation=mi.Point3f(0, 0, 0),
+            size=mi.Point2f(*size_m),
+            cell_size=mi.Point2f(cell_m, cell_m),
+            samples_per_tx=samples_per_tx,
+            max_depth=self.settings.max_depth,
+            los=self.settings.los,
             specular_reflection=self.settings.specular_reflection,
-            diffuse_reflection=self.settings.diffuse_reflection, refraction=self.settings.refraction,
-            diffraction=self.settings.diffraction, seed=self.settings.seed,
+            diffuse_reflection=self.settings.diffuse_reflection,
+            refraction=self.settings.refraction,
+            diffraction=self.settings.diffraction,
+            seed=self.settings.seed,
         )
         return np.asarray(rm.path_gain, dtype=np.float64)[0]
 
@@ -219,6 +246,8 @@ def smoke_test() -> str:
     x = dr.arange(mi.Float, 8)
     total = float(dr.sum(x * x)[0] if hasattr(dr.sum(x * x), "__getitem__") else dr.sum(x * x))
     if abs(total - 140.0) > 1e-6:  # pragma: no cover
-        raise RayTracerUnavailableError(f"Dr.Jit smoke test computed {total}, expected 140",
-                                        hint="the LLVM backend is broken: reinstall with `make setup`")
+        raise RayTracerUnavailableError(
+            f"Dr.Jit smoke test computed {total}, expected 140",
+            hint="the LLVM backend is broken: reinstall with `make setup`",
+        )
     return f"Sionna RT ready: variant {mi.variant()}, DRJIT_LIBLLVM_PATH={os.environ.get('DRJIT_LIBLLVM_PATH')}"

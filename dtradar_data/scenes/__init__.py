@@ -34,8 +34,17 @@ from dtradar_data.scenes.xml_scene import (
     sionna_scene_names,
 )
 
-__all__ = ["SceneSpec", "available_scenes", "sionna_scene_names", "build_targets", "builtin_names", "city_names", "scene_file", "is_scene_path",
-           "load_scene_spec"]
+__all__ = [
+    "SceneSpec",
+    "available_scenes",
+    "sionna_scene_names",
+    "build_targets",
+    "builtin_names",
+    "city_names",
+    "scene_file",
+    "is_scene_path",
+    "load_scene_spec",
+]
 
 
 def _indoor_dir():
@@ -71,8 +80,15 @@ def is_scene_path(scene: str | Path) -> bool:
     return isinstance(scene, Path) or text.endswith((".toml", ".xml")) or "/" in text or "\\" in text
 
 
-def load_scene_spec(scene: str | Path, variant: str, *, footprints: str | None = None,
-                    cell_m: float | None = None, grid: tuple | None = None, tx: tuple | None = None) -> SceneSpec:
+def load_scene_spec(
+    scene: str | Path,
+    variant: str,
+    *,
+    footprints: str | None = None,
+    cell_m: float | None = None,
+    grid: tuple | None = None,
+    tx: tuple | None = None,
+) -> SceneSpec:
     """One variant ("blueprint" or "dynamic") of a built-in scene, a city quadrant or the user's scene file.
 
     ``footprints`` (cities only) replaces the city's footprint source (a GeoJSON or ``.osm`` file, or ``osm``);
@@ -85,8 +101,10 @@ def load_scene_spec(scene: str | Path, variant: str, *, footprints: str | None =
     if is_scene_path(scene):
         path = Path(scene).expanduser()
         if not path.is_file():
-            raise SceneFileError(f"{path}: no such scene file",
-                                 hint="check the path, or use a built-in scene: " + ", ".join(available_scenes()))
+            raise SceneFileError(
+                f"{path}: no such scene file",
+                hint="check the path, or use a built-in scene: " + ", ".join(available_scenes()),
+            )
         _no_footprints(footprints, str(path))
         if path.suffix.lower() == ".xml":
             return load_xml_spec(path, variant, **mesh_options)
@@ -109,11 +127,15 @@ def load_scene_spec(scene: str | Path, variant: str, *, footprints: str | None =
 
 def _indoor_only(footprints, cell_m, scene: str, grid=None, tx=None, what: str = "an indoor scene") -> None:
     if footprints is not None or cell_m is not None:
-        raise SceneFileError(f"{scene} is an indoor scene: --osm and --cell-m apply to city scenes only",
-                             hint="edit [grid] in the scene file instead, or drop the option")
+        raise SceneFileError(
+            f"{scene} is an indoor scene: --osm and --cell-m apply to city scenes only",
+            hint="edit [grid] in the scene file instead, or drop the option",
+        )
     if grid is not None or tx is not None:
-        raise SceneFileError(f"{scene} is {what}: --grid and --tx apply to XML scenes (sionna:munich, a .xml) only",
-                             hint="edit [grid] / [tx] in the scene file instead, or drop the option")
+        raise SceneFileError(
+            f"{scene} is {what}: --grid and --tx apply to XML scenes (sionna:munich, a .xml) only",
+            hint="edit [grid] / [tx] in the scene file instead, or drop the option",
+        )
 
 
 def _no_footprints(footprints, scene: str) -> None:

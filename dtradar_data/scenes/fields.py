@@ -20,8 +20,21 @@ from pydantic_core import PydanticCustomError
 from dtradar_data.core.errors import did_you_mean
 from dtradar_data.scenes.materials import ITU_MATERIALS
 
-__all__ = ["NAME_CHARS", "SceneFileModel", "fail", "choice", "name_check", "Num", "Pos", "PosInt", "Text",
-           "Material", "SceneName", "ObjName", "Vec3"]
+__all__ = [
+    "NAME_CHARS",
+    "SceneFileModel",
+    "fail",
+    "choice",
+    "name_check",
+    "Num",
+    "Pos",
+    "PosInt",
+    "Text",
+    "Material",
+    "SceneName",
+    "ObjName",
+    "Vec3",
+]
 
 NAME_CHARS = "lower-case letters, digits, '-' and '_'"
 
@@ -63,13 +76,16 @@ def _text(value: Any) -> str:
 
 def choice(choices: tuple[str, ...], what: str) -> Callable[[Any], str]:
     """A validator: one of ``choices`` (``what`` names them in the error, with a did-you-mean)."""
+
     def check(value: Any) -> str:
         value = _text(value)
         if value not in choices:
             close = did_you_mean(value, choices)
-            raise fail(f"{value!r} is not {what}" + (f"; {close}" if close else ""),
-                       "use one of: " + ", ".join(choices))
+            raise fail(
+                f"{value!r} is not {what}" + (f"; {close}" if close else ""), "use one of: " + ", ".join(choices)
+            )
         return value
+
     return check
 
 
@@ -79,11 +95,15 @@ def name_check(kind_of_name: str, allow_dash: bool) -> Callable[[Any], str]:
 
     def check(value: Any) -> str:
         value = _text(value)
-        ok = value[0].isalnum() and all(c.islower() or c.isdigit() or c == "_" or (allow_dash and c == "-")
-                                        for c in value) and value.isascii()
+        ok = (
+            value[0].isalnum()
+            and all(c.islower() or c.isdigit() or c == "_" or (allow_dash and c == "-") for c in value)
+            and value.isascii()
+        )
         if not ok or (not allow_dash and not value[0].isalpha()):
             raise fail(f"{value!r} is not a valid {kind_of_name}", f"use {chars} (e.g. 'chair_01')")
         return value
+
     return check
 
 

@@ -94,9 +94,15 @@ class Prism:
         return min(xs), min(ys), max(xs), max(ys)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "kind": self.kind, "material": self.material,
-                "exterior": [list(p) for p in self.exterior], "holes": [[list(p) for p in h] for h in self.holes],
-                "height_m": self.height_m, "z_m": self.z_m}
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "material": self.material,
+            "exterior": [list(p) for p in self.exterior],
+            "holes": [[list(p) for p in h] for h in self.holes],
+            "height_m": self.height_m,
+            "z_m": self.z_m,
+        }
 
 
 @dataclass(frozen=True)

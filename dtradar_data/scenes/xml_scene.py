@@ -153,16 +153,22 @@ def read_shapes(xml: Path) -> list[XmlShape]:
     file, an unsupported shape type or a scene without shapes."""
     xml = Path(xml)
     if not xml.is_file():
-        raise SceneFileError(f"{xml}: no such XML scene file",
-                             hint="check the path, or name a bundled scene: " + ", ".join(sionna_scene_names()))
+        raise SceneFileError(
+            f"{xml}: no such XML scene file",
+            hint="check the path, or name a bundled scene: " + ", ".join(sionna_scene_names()),
+        )
     try:
         root = ET.parse(xml).getroot()
     except (ET.ParseError, OSError) as e:
-        raise SceneFileError(f"{xml}: not a readable XML file ({e})",
-                             hint="export the scene again (Blender's Mitsuba add-on writes Sionna's format)") from e
+        raise SceneFileError(
+            f"{xml}: not a readable XML file ({e})",
+            hint="export the scene again (Blender's Mitsuba add-on writes Sionna's format)",
+        ) from e
     if root.tag != "scene":
-        raise SceneFileError(f"{xml}: the root element is <{root.tag}>, not <scene>",
-                             hint="a Mitsuba/Sionna scene file starts with <scene version=...>")
+        raise SceneFileError(
+            f"{xml}: the root element is <{root.tag}>, not <scene>",
+            hint="a Mitsuba/Sionna scene file starts with <scene version=...>",
+        )
     shapes = []
     for i, el in enumerate(root.findall("shape")):
         kind = el.get("type", "")
@@ -170,18 +176,24 @@ def read_shapes(xml: Path) -> list[XmlShape]:
         if kind in FILE_SHAPES:
             fn = next((s.get("value") for s in el.findall("string") if s.get("name") == "filename"), None)
             if not fn:
-                raise SceneFileError(f"{xml}: shape {sid!r} ({kind}) has no filename",
-                                     hint='add <string name="filename" value="meshes/...ply"/>')
+                raise SceneFileError(
+                    f"{xml}: shape {sid!r} ({kind}) has no filename",
+                    hint='add <string name="filename" value="meshes/...ply"/>',
+                )
             file = (xml.parent / fn).resolve()
             if not file.is_file():
-                raise SceneFileError(f"{xml}: shape {sid!r} refers to {fn}, which does not exist ({file})",
-                                     hint="mesh paths are relative to the XML file's folder; copy the meshes along")
+                raise SceneFileError(
+                    f"{xml}: shape {sid!r} refers to {fn}, which does not exist ({file})",
+                    hint="mesh paths are relative to the XML file's folder; copy the meshes along",
+                )
             shapes.append(XmlShape(sid, kind, file))
         elif kind in PRIMITIVE_SHAPES:
             shapes.append(XmlShape(sid, kind, None))
         else:
-            raise SceneFileError(f"{xml}: shape {sid!r} has type {kind!r}, which dtradar cannot read",
-                                 hint=f"use {', '.join(FILE_SHAPES + PRIMITIVE_SHAPES)} shapes (export meshes as PLY)")
+            raise SceneFileError(
+                f"{xml}: shape {sid!r} has type {kind!r}, which dtradar cannot read",
+                hint=f"use {', '.join(FILE_SHAPES + PRIMITIVE_SHAPES)} shapes (export meshes as PLY)",
+            )
     if not shapes:
         raise SceneFileError(f"{xml}: the scene has no shapes", hint="a scene needs at least a ground and buildings")
     return shapes
@@ -211,15 +223,21 @@ def mesh_scene(xml: Path, label: str, ground: list[str] | None = None) -> MeshSc
         for g in ground:
             if g not in ids:
                 close = did_you_mean(g, ids)
-                raise SceneFileError(f"{xml}: [xml] ground names shape {g!r}, which the XML does not have"
-                                     + (f"; {close}" if close else ""), hint="use the shape's id attribute")
+                raise SceneFileError(
+                    f"{xml}: [xml] ground names shape {g!r}, which the XML does not have"
+                    + (f"; {close}" if close else ""),
+                    hint="use the shape's id attribute",
+                )
     return MeshScene(xml=label, sha256=content_sha256(xml, shapes), ground=tuple(ground), path=str(Path(xml).resolve()))
 
 
 # ------------------------------------------------------------------------------------------- the scene file
 def _vec3(value: Any) -> tuple[float, float, float]:
-    if not (isinstance(value, (list, tuple)) and len(value) == 3
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+    if not (
+        isinstance(value, (list, tuple))
+        and len(value) == 3
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    ):
         raise ValueError(f"must be [x, y, z] in metres, got {value!r}")
     return tuple(float(v) for v in value)  # type: ignore[return-value]
 
@@ -290,15 +308,25 @@ def _parse(data: dict[str, Any], origin: str) -> MeshSceneDocument:
         where = f"[{'.'.join(loc[:-1])}]" if len(loc) > 1 else "top level"
         field = loc[-1] if loc else "(document)"
         what = {"extra_forbidden": f"unknown key {field!r}", "missing": f"missing {field!r}"}.get(
-            e["type"], f"{field}: {e['msg'].removeprefix('Value error, ')}")
-        raise SceneFileError(f"{origin}: {where}: {what}",
-                             hint="sections: [scene] name, title; [xml] path; [grid] x0_m, y0_m, cell_m, nx, ny; "
-                                  "[tx] position_m; [robot] rx_height_m, robot_height_m (README, 'Sionna scenes')"
-                             ) from exc
+            e["type"], f"{field}: {e['msg'].removeprefix('Value error, ')}"
+        )
+        raise SceneFileError(
+            f"{origin}: {where}: {what}",
+            hint="sections: [scene] name, title; [xml] path; [grid] x0_m, y0_m, cell_m, nx, ny; "
+            "[tx] position_m; [robot] rx_height_m, robot_height_m (README, 'Sionna scenes')",
+        ) from exc
 
 
-def _spec(doc: MeshSceneDocument, base: MeshScene, variant: str, *, grid: tuple | None, tx: tuple | None,
-          cell_m: float | None, origin: str) -> SceneSpec:
+def _spec(
+    doc: MeshSceneDocument,
+    base: MeshScene,
+    variant: str,
+    *,
+    grid: tuple | None,
+    tx: tuple | None,
+    cell_m: float | None,
+    origin: str,
+) -> SceneSpec:
     g = doc.grid
     the_grid = Grid(float(g.x0_m), float(g.y0_m), float(g.cell_m), int(g.nx), int(g.ny))
     if grid is not None:
@@ -310,15 +338,32 @@ def _spec(doc: MeshSceneDocument, base: MeshScene, variant: str, *, grid: tuple 
     t = doc.tx
     position = t.position_m if tx is None else tx_from_option(tx)
     if variant != "blueprint":
-        raise SceneFileError(f"{origin} has no {variant} twin: only its blueprint",
-                             hint="build it with --variant blueprint (the default `all` does this for XML scenes)")
+        raise SceneFileError(
+            f"{origin} has no {variant} twin: only its blueprint",
+            hint="build it with --variant blueprint (the default `all` does this for XML scenes)",
+        )
     return SceneSpec(
-        scene=doc.scene.name, variant=variant, title=doc.scene.title, description=doc.scene.description,
-        source=doc.scene.source, licence=doc.scene.licence, attribution=doc.scene.attribution, grid=the_grid,
-        tx=TxSpec(position_m=tuple(position), look_at_m=t.look_at_m or _grid_centre(the_grid, doc.robot.rx_height_m),
-                  num_rows=t.num_rows, num_cols=t.num_cols,
-                  pattern=t.pattern, polarization=t.polarization, power_dbm=t.power_dbm),
-        rx_height_m=doc.robot.rx_height_m, robot_height_m=doc.robot.robot_height_m, objects=(), base=base,
+        scene=doc.scene.name,
+        variant=variant,
+        title=doc.scene.title,
+        description=doc.scene.description,
+        source=doc.scene.source,
+        licence=doc.scene.licence,
+        attribution=doc.scene.attribution,
+        grid=the_grid,
+        tx=TxSpec(
+            position_m=tuple(position),
+            look_at_m=t.look_at_m or _grid_centre(the_grid, doc.robot.rx_height_m),
+            num_rows=t.num_rows,
+            num_cols=t.num_cols,
+            pattern=t.pattern,
+            polarization=t.polarization,
+            power_dbm=t.power_dbm,
+        ),
+        rx_height_m=doc.robot.rx_height_m,
+        robot_height_m=doc.robot.robot_height_m,
+        objects=(),
+        base=base,
         provenance={"xml": base.xml, "xml_path": base.path},
         rt_defaults=dict(OUTDOOR_RT_DEFAULTS) if base.xml.startswith("sionna:") else {},
     )
@@ -337,10 +382,14 @@ def grid_from_option(grid: tuple) -> Grid:
         x0, y0, cell, nx, ny = grid
         out = Grid(float(x0), float(y0), float(cell), int(nx), int(ny))
     except (TypeError, ValueError) as e:
-        raise SceneFileError(f"--grid {grid!r}: expected X0 Y0 CELL_M NX NY", hint="e.g. --grid -100 -100 5 40 40") from e
+        raise SceneFileError(
+            f"--grid {grid!r}: expected X0 Y0 CELL_M NX NY", hint="e.g. --grid -100 -100 5 40 40"
+        ) from e
     if not (out.cell_m > 0 and out.nx > 0 and out.ny > 0 and out.nx == nx and out.ny == ny):
-        raise SceneFileError(f"--grid {grid!r}: CELL_M must be positive, NX and NY positive integers",
-                             hint="e.g. --grid -100 -100 5 40 40")
+        raise SceneFileError(
+            f"--grid {grid!r}: CELL_M must be positive, NX and NY positive integers",
+            hint="e.g. --grid -100 -100 5 40 40",
+        )
     return out
 
 
@@ -369,8 +418,10 @@ def load_mesh_scene_file(path: str | Path, variant: str, *, grid=None, tx=None, 
         xml = Path(ref).expanduser()
         xml = xml if xml.is_absolute() else path.parent / xml
         if not xml.is_file():
-            raise SceneFileError(f"{path}: [xml] path: {ref!r} does not exist ({xml})",
-                                 hint="a relative path is relative to the scene file; or use sionna:<name>")
+            raise SceneFileError(
+                f"{path}: [xml] path: {ref!r} does not exist ({xml})",
+                hint="a relative path is relative to the scene file; or use sionna:<name>",
+            )
         base = mesh_scene(xml, xml.name, doc.xml.ground)
     return _spec(doc, base, variant, grid=grid, tx=tx, cell_m=cell_m, origin=str(path))
 
@@ -379,11 +430,22 @@ def load_sionna_spec(scene: str, variant: str, *, grid=None, tx=None, cell_m=Non
     """A bundled Sionna scene (``sionna:munich`` or ``sionna-munich``) with its defaults or the given overrides."""
     key = sionna_key(scene)
     d = SIONNA_DEFAULTS[key]
-    doc = _parse({"scene": {"name": dataset_scene_name(SIONNA_PREFIX + key), "title": d["title"],
-                            "description": d["description"], "source": f"sionna-rt {_sionna_version()}: "
-                            f"sionna/rt/scenes/{key}/{key}.xml", "licence": SIONNA_LICENCE,
-                            "attribution": SIONNA_ATTRIBUTION},
-                  "xml": {"path": SIONNA_PREFIX + key}, "grid": d["grid"], "tx": d["tx"]}, f"sionna:{key}")
+    doc = _parse(
+        {
+            "scene": {
+                "name": dataset_scene_name(SIONNA_PREFIX + key),
+                "title": d["title"],
+                "description": d["description"],
+                "source": f"sionna-rt {_sionna_version()}: sionna/rt/scenes/{key}/{key}.xml",
+                "licence": SIONNA_LICENCE,
+                "attribution": SIONNA_ATTRIBUTION,
+            },
+            "xml": {"path": SIONNA_PREFIX + key},
+            "grid": d["grid"],
+            "tx": d["tx"],
+        },
+        f"sionna:{key}",
+    )
     base = mesh_scene(sionna_xml(key), SIONNA_PREFIX + key)
     return _spec(doc, base, variant, grid=grid, tx=tx, cell_m=cell_m, origin=f"sionna:{key}")
 
@@ -393,15 +455,23 @@ def load_xml_spec(path: str | Path, variant: str, *, grid=None, tx=None, cell_m=
     and transmitter cannot be guessed from arbitrary geometry. The dataset is named after the file's stem."""
     path = Path(path).expanduser()
     if grid is None or tx is None:
-        raise SceneFileError(f"{path}: an XML scene needs a grid and a transmitter",
-                             hint="pass --grid X0 Y0 CELL_M NX NY and --tx X Y Z, or write a small scene file "
-                                  "with [xml] path = ... (README, 'Sionna scenes')")
+        raise SceneFileError(
+            f"{path}: an XML scene needs a grid and a transmitter",
+            hint="pass --grid X0 Y0 CELL_M NX NY and --tx X Y Z, or write a small scene file "
+            "with [xml] path = ... (README, 'Sionna scenes')",
+        )
     base = mesh_scene(path, path.name)
     stem = re.sub(r"[^a-z0-9_-]+", "-", path.stem.lower()).strip("-_") or "xml-scene"
     name = stem if SCENE_RE.fullmatch(stem) else f"xml-{stem}"
-    doc = _parse({"scene": {"name": name, "title": f"XML scene {path.name}"}, "xml": {"path": str(path)},
-                  "grid": {"x0_m": 0, "y0_m": 0, "cell_m": 1, "nx": 1, "ny": 1}, "tx": {"position_m": [0, 0, 0]}},
-                 str(path))
+    doc = _parse(
+        {
+            "scene": {"name": name, "title": f"XML scene {path.name}"},
+            "xml": {"path": str(path)},
+            "grid": {"x0_m": 0, "y0_m": 0, "cell_m": 1, "nx": 1, "ny": 1},
+            "tx": {"position_m": [0, 0, 0]},
+        },
+        str(path),
+    )
     return _spec(doc, base, variant, grid=grid, tx=tx, cell_m=cell_m, origin=str(path))
 
 

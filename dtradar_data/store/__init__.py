@@ -10,24 +10,40 @@
 
 from dtradar_data.store.catalog import as_id, known_names, known_scenes
 from dtradar_data.store.listing import (
-                                      DatasetEntry,
-                                      VersionInfo,
-                                      history,
-                                      list_datasets,
-                                      verify,
-                                      version_infos,
+    DatasetEntry,
+    VersionInfo,
+    history,
+    list_datasets,
+    verify,
+    version_infos,
 )
 from dtradar_data.store.local import (
-                                      InvalidTableError,
-                                      install_staged,
-                                      load,
-                                      read_meta,
-                                      read_table,
-                                      resolve,
-                                      version_exists,
-                                      write_version,
+    InvalidTableError,
+    install_staged,
+    load,
+    read_meta,
+    read_table,
+    resolve,
+    version_exists,
+    write_version,
 )
 
-__all__ = ["DatasetEntry", "InvalidTableError", "VersionInfo", "as_id", "history", "install_staged", "known_names",
-           "known_scenes", "list_datasets", "load", "read_meta", "read_table", "resolve", "verify", "version_exists",
-           "version_infos", "write_version"]
+__all__ = [
+    "DatasetEntry",
+    "InvalidTableError",
+    "VersionInfo",
+    "as_id",
+    "history",
+    "install_staged",
+    "known_names",
+    "known_scenes",
+    "list_datasets",
+    "load",
+    "read_meta",
+    "read_table",
+    "resolve",
+    "verify",
+    "version_exists",
+    "version_infos",
+    "write_version",
+]

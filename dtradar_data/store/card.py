@@ -26,18 +26,27 @@ from dtradar_data.core.schema import (
 )
 
 DEFAULT_HUB_NAMESPACE = "dtradar"
-TAGS = ("robotics", "reinforcement-learning", "wireless", "radio", "ray-tracing", "sionna", "digital-twin",
-        "parquet")
+TAGS = ("robotics", "reinforcement-learning", "wireless", "radio", "ray-tracing", "sionna", "digital-twin", "parquet")
 VARIANT_TEXT = {
     "blueprint": "the static twin: walls, floor and the fixed furniture or buildings (agents are trained here).",
     "dynamic": "the blueprint plus movable objects added or re-oriented (people, chairs, vehicles); agents trained "
-               "on the blueprint are evaluated here.",
+    "on the blueprint are evaluated here.",
 }
 _UNITS = (("_rad", "rad"), ("_db", "dB"), ("_hz", "Hz"), ("_m", "m"), ("_s", "s"))
 # Hub licence identifiers (https://huggingface.co/docs/hub/repositories-licenses) for the licences scenes use.
-_LICENCES = {"odbl": "odbl", "odbl-1.0": "odbl", "cc-by-4.0": "cc-by-4.0", "cc-by-sa-4.0": "cc-by-sa-4.0",
-             "cc0-1.0": "cc0-1.0", "cc0": "cc0-1.0", "apache-2.0": "apache-2.0", "mit": "mit",
-             "cc-by-nc-4.0": "cc-by-nc-4.0", "pddl": "pddl", "odc-by": "odc-by"}
+_LICENCES = {
+    "odbl": "odbl",
+    "odbl-1.0": "odbl",
+    "cc-by-4.0": "cc-by-4.0",
+    "cc-by-sa-4.0": "cc-by-sa-4.0",
+    "cc0-1.0": "cc0-1.0",
+    "cc0": "cc0-1.0",
+    "apache-2.0": "apache-2.0",
+    "mit": "mit",
+    "cc-by-nc-4.0": "cc-by-nc-4.0",
+    "pddl": "pddl",
+    "odc-by": "odc-by",
+}
 
 
 def default_hub_repo(name: str) -> str:
@@ -56,8 +65,13 @@ def license_id(licence: str | None) -> str:
 
 
 def size_category(n: int) -> str:
-    for limit, label in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"),
-                         (1_000_000, "100K<n<1M"), (10_000_000, "1M<n<10M")):
+    for limit, label in (
+        (1_000, "n<1K"),
+        (10_000, "1K<n<10K"),
+        (100_000, "10K<n<100K"),
+        (1_000_000, "100K<n<1M"),
+        (10_000_000, "1M<n<10M"),
+    ):
         if n < limit:
             return label
     return "10M<n<100M"
@@ -115,8 +129,16 @@ def _changes(prev: dict[str, Any] | None, cur: dict[str, Any]) -> str:
 
 
 def _columns(schema, descriptions) -> list[dict[str, Any]]:
-    return [{"name": f.name, "type": str(f.type), "nullable": f.nullable, "unit": _unit(f.name),
-             "description": descriptions.get(f.name, "").replace("|", "\\|")} for f in schema]
+    return [
+        {
+            "name": f.name,
+            "type": str(f.type),
+            "nullable": f.nullable,
+            "unit": _unit(f.name),
+            "description": descriptions.get(f.name, "").replace("|", "\\|"),
+        }
+        for f in schema
+    ]
 
 
 def card_data(rec: VersionRecord, *, tag: str | None, hub_repo: str) -> DatasetCardData:
@@ -129,11 +151,21 @@ def card_data(rec: VersionRecord, *, tag: str | None, hub_repo: str) -> DatasetC
     if lic == "other":
         extra["license_name"] = rec.licence or "unspecified"
     return DatasetCardData(
-        license=lic, pretty_name=_pretty_name(rec), tags=[*TAGS, setting, rec.variant],
-        size_categories=[size_category(rec.num_rows)], task_categories=["robotics", "reinforcement-learning"],
-        configs=configs, dtradar={"name": rec.name, "version": rec.version, "tag": tag,
-                                  "schema_version": rec.schema_version, "hub_repo": hub_repo},
-        **extra)
+        license=lic,
+        pretty_name=_pretty_name(rec),
+        tags=[*TAGS, setting, rec.variant],
+        size_categories=[size_category(rec.num_rows)],
+        task_categories=["robotics", "reinforcement-learning"],
+        configs=configs,
+        dtradar={
+            "name": rec.name,
+            "version": rec.version,
+            "tag": tag,
+            "schema_version": rec.schema_version,
+            "hub_repo": hub_repo,
+        },
+        **extra,
+    )
 
 
 def _is_odbl(rec: VersionRecord) -> bool:
@@ -145,52 +177,78 @@ def _pretty_name(rec: VersionRecord) -> str:
     return f"DT-RaDaR {title}" if rec.variant in title.lower() else f"DT-RaDaR {title} ({rec.variant})"
 
 
-def render_card(meta: dict[str, Any], *, tag: str | None, history: list[dict[str, Any]],
-                hub_repo: str | None = None) -> str:
+def render_card(
+    meta: dict[str, Any], *, tag: str | None, history: list[dict[str, Any]], hub_repo: str | None = None
+) -> str:
     """The card text for one version. ``history`` holds :func:`history_entry` dicts, oldest first."""
     rec = VersionRecord.from_meta(meta)
     hub_repo = hub_repo or default_hub_repo(rec.name)
     grid, rt, stats, libs = rec.grid, rec.rt, rec.stats, rec.library_versions
     n = rec.num_rows
     freq = rt.get("frequency_hz")
-    summary = (f"Radio features of every cell of a {grid.get('nx')} × {grid.get('ny')} grid over the "
-               f"**{rec.title or rec.scene}** digital twin ({rec.variant}), ray-traced with Sionna RT"
-               + (f" at {freq / 1e9:g} GHz" if isinstance(freq, (int, float)) else "")
-               + ": complex coefficient, phase, delay and angles of departure and arrival of the strongest path, "
-                 "total path gain and delay spread. Built for radio-only robot navigation with reinforcement "
-                 "learning, after DT-RaDaR (arXiv 2411.12284).")
+    summary = (
+        f"Radio features of every cell of a {grid.get('nx')} × {grid.get('ny')} grid over the "
+        f"**{rec.title or rec.scene}** digital twin ({rec.variant}), ray-traced with Sionna RT"
+        + (f" at {freq / 1e9:g} GHz" if isinstance(freq, (int, float)) else "")
+        + ": complex coefficient, phase, delay and angles of departure and arrival of the strongest path, "
+        "total path gain and delay spread. Built for radio-only robot navigation with reinforcement "
+        "learning, after DT-RaDaR (arXiv 2411.12284)."
+    )
     objects = [*(rec.scene_spec.get("objects") or []), *(rec.scene_spec.get("prisms") or [])]
     counts = Counter((o.get("kind", "?"), o.get("material", "?")) for o in objects)
     ranges = stats.get("columns") or {}
     hist = []
     for i, h in enumerate(history):
-        hist.append({**h, "created_utc": h.get("created_utc") or "—",
-                     "changes": _changes(history[i - 1] if i else None, h)})
+        hist.append(
+            {**h, "created_utc": h.get("created_utc") or "—", "changes": _changes(history[i - 1] if i else None, h)}
+        )
     card = DatasetCard.from_template(
         card_data(rec, tag=tag, hub_repo=hub_repo),
         template_path=str(resources.files("dtradar_data.store") / "templates" / "dataset_card.md"),
-        pretty_name=_pretty_name(rec), summary=summary, name=rec.name, version=rec.version, tag=tag,
-        schema_version=rec.schema_version, created_utc=rec.created_utc or "—", num_rows=n,
-        nx=grid.get("nx"), ny=grid.get("ny"), cell_m=grid.get("cell_m"), x0_m=grid.get("x0_m"),
-        y0_m=grid.get("y0_m"), rx_height_m=_fmt(rec.rx_height_m), robot_height_m=rec.robot_height_m,
+        pretty_name=_pretty_name(rec),
+        summary=summary,
+        name=rec.name,
+        version=rec.version,
+        tag=tag,
+        schema_version=rec.schema_version,
+        created_utc=rec.created_utc or "—",
+        num_rows=n,
+        nx=grid.get("nx"),
+        ny=grid.get("ny"),
+        cell_m=grid.get("cell_m"),
+        x0_m=grid.get("x0_m"),
+        y0_m=grid.get("y0_m"),
+        rx_height_m=_fmt(rec.rx_height_m),
+        robot_height_m=rec.robot_height_m,
         description=rec.description or "(no scene description recorded)",
-        variant=rec.variant, variant_text=VARIANT_TEXT.get(rec.variant, ""),
+        variant=rec.variant,
+        variant_text=VARIANT_TEXT.get(rec.variant, ""),
         transmitter_rows=[(k, _fmt(v)) for k, v in _flatten(rec.transmitter)],
-        object_rows=[(k, m, c) for (k, m), c in sorted(counts.items())], num_objects=len(objects),
-        source=rec.source or "not recorded", licence=rec.licence or "not recorded",
-        attribution=rec.attribution or "not recorded", odbl=_is_odbl(rec),
+        object_rows=[(k, m, c) for (k, m), c in sorted(counts.items())],
+        num_objects=len(objects),
+        source=rec.source or "not recorded",
+        licence=rec.licence or "not recorded",
+        attribution=rec.attribution or "not recorded",
+        odbl=_is_odbl(rec),
         sionna_version=f"sionna-rt {libs['sionna-rt']}" if "sionna-rt" in libs else "version not recorded",
         rt_rows=[(k, _fmt(v)) for k, v in _flatten(rt)] or [("(none recorded)", "—")],
         library_text=", ".join(f"{k} {v}" for k, v in sorted(libs.items())) or "not recorded",
         columns=_columns(CELL_SCHEMA, COLUMN_DESCRIPTIONS),
         path_columns=_columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS) if P.PATHS_FILE in rec.files else [],
-        num_free=stats.get("num_free", "—"), num_with_paths=stats.get("num_with_paths", "—"),
+        num_free=stats.get("num_free", "—"),
+        num_with_paths=stats.get("num_with_paths", "—"),
         num_blocked=(n - stats["num_free"]) if "num_free" in stats else "—",
         files=[{"name": k, "size": human_size(f.bytes), "sha256": f.sha256[:16]} for k, f in sorted(rec.files.items())],
-        range_rows=[{"name": c, "min": _fmt(r.get("min")), "max": _fmt(r.get("max")), "nulls": r.get("nulls", "—")}
-                    for c, r in ranges.items() if isinstance(r, dict)],
-        coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None, hub_repo=hub_repo, history=hist,
-        city=_city_section(rec), city_png=CITY_FILE if CITY_FILE in rec.files else None,
+        range_rows=[
+            {"name": c, "min": _fmt(r.get("min")), "max": _fmt(r.get("max")), "nulls": r.get("nulls", "—")}
+            for c, r in ranges.items()
+            if isinstance(r, dict)
+        ],
+        coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None,
+        hub_repo=hub_repo,
+        history=hist,
+        city=_city_section(rec),
+        city_png=CITY_FILE if CITY_FILE in rec.files else None,
         differential=(rec.model_extra or {}).get("differential"),
     )
     return str(card).rstrip("\n") + "\n"
@@ -211,25 +269,40 @@ def _city_section(rec: VersionRecord) -> dict[str, Any] | None:
     dynamic = None
     if dyn:
         roads = "; ".join(f"{r['name']} from {r['from_m']} to {r['to_m']}" for r in dyn.get("roads", []))
-        vehicles = ", ".join(f"{n} {k}{'es' if k == 'bus' and n != 1 else 's' if n != 1 else ''}"
-                             for k, n in (dyn.get("vehicles") or {}).items())
-        dynamic = (f"{vehicles} placed with seed {dyn.get('seed')} on {len(dyn.get('roads', []))} roads "
-                   f"({dyn.get('roads_from')}): {roads}")
+        vehicles = ", ".join(
+            f"{n} {k}{'es' if k == 'bus' and n != 1 else 's' if n != 1 else ''}"
+            for k, n in (dyn.get("vehicles") or {}).items()
+        )
+        dynamic = (
+            f"{vehicles} placed with seed {dyn.get('seed')} on {len(dyn.get('roads', []))} roads "
+            f"({dyn.get('roads_from')}): {roads}"
+        )
     return {
-        "city": city.get("city"), "quadrant": city.get("quadrant", ""), "crs": fp.get("crs"),
+        "city": city.get("city"),
+        "quadrant": city.get("quadrant", ""),
+        "crs": fp.get("crs"),
         "rect": ", ".join(_fmt(v) for v in city.get("quadrant_rect_m", [])),
-        "box": _fmt(fp.get("box", {})), "source": fp.get("source"), "retrieved_utc": fp.get("retrieved_utc"),
+        "box": _fmt(fp.get("box", {})),
+        "source": fp.get("source"),
+        "retrieved_utc": fp.get("retrieved_utc"),
         "content_hash": str(fp.get("content_hash", ""))[:16],
         "counts": ", ".join(f"{n} {_PLURALS.get(k, k) if n != 1 else k}" for k, n in (fp.get("counts") or {}).items()),
-        "report": "; ".join(f"{k} {_fmt(v)}" for k, v in sorted(report.items())
-                            if k not in ("skipped", "skipped_ids") and v not in ({}, [], None))
-                  + (f"; skipped {_fmt(skipped)}" if skipped else ""),
-        "tx_paper": tx.get("paper_m"), "tx_placed": tx.get("placed_m"), "tx_moved": tx.get("moved_m", 0),
-        "clearance": tx.get("clearance_m"), "dynamic": dynamic,
+        "report": "; ".join(
+            f"{k} {_fmt(v)}"
+            for k, v in sorted(report.items())
+            if k not in ("skipped", "skipped_ids") and v not in ({}, [], None)
+        )
+        + (f"; skipped {_fmt(skipped)}" if skipped else ""),
+        "tx_paper": tx.get("paper_m"),
+        "tx_placed": tx.get("placed_m"),
+        "tx_moved": tx.get("moved_m", 0),
+        "clearance": tx.get("clearance_m"),
+        "dynamic": dynamic,
     }
 
 
-def render_version_card(meta: dict[str, Any], *, tag: str | None, history: list[tuple[str, dict[str, Any]]],
-                        hub_repo: str | None = None) -> str:
+def render_version_card(
+    meta: dict[str, Any], *, tag: str | None, history: list[tuple[str, dict[str, Any]]], hub_repo: str | None = None
+) -> str:
     """The card of a stored version; ``history`` holds ``(tag, meta)`` pairs, oldest first (store's format)."""
     return render_card(meta, tag=tag, history=[history_entry(t, m) for t, m in history], hub_repo=hub_repo)

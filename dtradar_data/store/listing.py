@@ -65,14 +65,29 @@ def all_version_infos(did: DatasetId) -> list[VersionInfo]:
         try:
             meta = read_meta(vdir)
         except CorruptDatasetError as exc:
-            out.append(VersionInfo(tag=refs.tag_of(v), version=v, created_utc=None, num_rows=None,
-                                   size_bytes=sum(f.stat().st_size for f in vdir.iterdir() if f.is_file()),
-                                   path=vdir, problem=exc.message))
+            out.append(
+                VersionInfo(
+                    tag=refs.tag_of(v),
+                    version=v,
+                    created_utc=None,
+                    num_rows=None,
+                    size_bytes=sum(f.stat().st_size for f in vdir.iterdir() if f.is_file()),
+                    path=vdir,
+                    problem=exc.message,
+                )
+            )
             continue
         files = meta.get("files") or {}
-        out.append(VersionInfo(tag=refs.tag_of(v), version=v, created_utc=meta.get("created_utc"),
-                               num_rows=(meta.get("stats") or {}).get("num_cells", _grid_cells(meta)),
-                               size_bytes=sum(int(f.get("bytes", 0)) for f in files.values()), path=vdir))
+        out.append(
+            VersionInfo(
+                tag=refs.tag_of(v),
+                version=v,
+                created_utc=meta.get("created_utc"),
+                num_rows=(meta.get("stats") or {}).get("num_cells", _grid_cells(meta)),
+                size_bytes=sum(int(f.get("bytes", 0)) for f in files.values()),
+                path=vdir,
+            )
+        )
     return out
 
 
@@ -87,8 +102,13 @@ def list_datasets() -> list[DatasetEntry]:
     names = set(builtin_names())
     root = P.datasets_root()
     if root.is_dir():
-        names |= {f"{s.name}/{v.name}" for s in root.iterdir() if s.is_dir()
-                  for v in s.iterdir() if v.is_dir() and v.name in VARIANTS}
+        names |= {
+            f"{s.name}/{v.name}"
+            for s in root.iterdir()
+            if s.is_dir()
+            for v in s.iterdir()
+            if v.is_dir() and v.name in VARIANTS
+        }
     rows = []
     for name in sorted(names):
         scene, variant = name.split("/")
@@ -97,8 +117,17 @@ def list_datasets() -> list[DatasetEntry]:
         infos = [v for v in every if v.problem is None]
         refs = read_refs(P.refs_path(scene, variant))
         latest = refs.latest if refs.latest in {i.version for i in infos} else (infos[-1].version if infos else None)
-        rows.append(DatasetEntry(name, scene, variant, scene in builtin, tuple(infos), latest,
-                                 tuple(v for v in every if v.problem is not None)))
+        rows.append(
+            DatasetEntry(
+                name,
+                scene,
+                variant,
+                scene in builtin,
+                tuple(infos),
+                latest,
+                tuple(v for v in every if v.problem is not None),
+            )
+        )
     return rows
 
 

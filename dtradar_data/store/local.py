@@ -60,6 +60,7 @@ class InvalidTableError(DtradarError, ValueError):
 
 # ---------------------------------------------------------------------------------------------------------- schema
 
+
 def schema_diff(actual: pa.Schema, expected: pa.Schema) -> list[str]:
     """Human-readable differences (missing/extra columns, types, nullability); empty when the schemas agree."""
     have = {f.name: f for f in actual}
@@ -86,8 +87,10 @@ def conform(table: pa.Table, schema: pa.Schema, what: str) -> pa.Table:
         if not f.nullable and f.name in table.column_names and table.column(f.name).null_count:
             diff.append(f"column {f.name!r} has {table.column(f.name).null_count} nulls, expected none")
     if diff:
-        raise SchemaMismatchError(f"{what} does not match the schema (v{SCHEMA_VERSION}): " + "; ".join(diff),
-                                  hint="fix the table producer, or bump SCHEMA_VERSION with a new golden file")
+        raise SchemaMismatchError(
+            f"{what} does not match the schema (v{SCHEMA_VERSION}): " + "; ".join(diff),
+            hint="fix the table producer, or bump SCHEMA_VERSION with a new golden file",
+        )
     return pa.Table.from_arrays([table.column(f.name) for f in schema], schema=schema)
 
 
@@ -96,8 +99,10 @@ def _check_grid(cells: pa.Table, meta: dict[str, Any]) -> pa.Table:
     try:
         nx, ny = int(meta["grid"]["nx"]), int(meta["grid"]["ny"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise InvalidTableError("meta has no usable 'grid' (x0_m, y0_m, cell_m, nx, ny)",
-                                hint="pass meta['grid'] = scene_spec.grid.to_dict()") from exc
+        raise InvalidTableError(
+            "meta has no usable 'grid' (x0_m, y0_m, cell_m, nx, ny)",
+            hint="pass meta['grid'] = scene_spec.grid.to_dict()",
+        ) from exc
     cells = cells.sort_by([("iy", "ascending"), ("ix", "ascending")])
     ix = cells.column("ix").to_numpy()
     iy = cells.column("iy").to_numpy()
@@ -105,7 +110,9 @@ def _check_grid(cells: pa.Table, meta: dict[str, Any]) -> pa.Table:
     if cells.num_rows != nx * ny or not (np.array_equal(ix, gx) and np.array_equal(iy, gy)):
         raise InvalidTableError(
             f"cells has {cells.num_rows} rows that are not the {nx}x{ny} grid (one row per (ix, iy), "
-            f"0 <= ix < {nx}, 0 <= iy < {ny})", hint="emit one row per grid cell, blocked cells included")
+            f"0 <= ix < {nx}, 0 <= iy < {ny})",
+            hint="emit one row per grid cell, blocked cells included",
+        )
     return cells
 
 
@@ -119,20 +126,28 @@ def table_stats(cells: pa.Table) -> dict[str, Any]:
             mm = pc.min_max(cells.column(f.name)).as_py()
             ranges[f.name] = {"min": mm["min"], "max": mm["max"], "nulls": cells.column(f.name).null_count}
     blocked = cells.column("blocked")
-    return {"num_cells": cells.num_rows,
-            "num_free": cells.num_rows - int(pc.sum(blocked).as_py() or 0),
-            "num_with_paths": int(pc.sum(pc.greater(cells.column("num_paths"), 0)).as_py() or 0),
-            "num_los": int(pc.sum(cells.column("los")).as_py() or 0),
-            "columns": json_safe(ranges)}
+    return {
+        "num_cells": cells.num_rows,
+        "num_free": cells.num_rows - int(pc.sum(blocked).as_py() or 0),
+        "num_with_paths": int(pc.sum(pc.greater(cells.column("num_paths"), 0)).as_py() or 0),
+        "num_los": int(pc.sum(cells.column("los")).as_py() or 0),
+        "columns": json_safe(ranges),
+    }
 
 
 # ------------------------------------------------------------------------------------------------------ file utils
 
+
 def _write_parquet(table: pa.Table, path: Path, meta_json: bytes) -> None:
     schema_meta = dict(table.schema.metadata or {})
     schema_meta[META_KEY] = meta_json
-    pq.write_table(table.replace_schema_metadata(schema_meta), path, compression="zstd",
-                   write_page_checksum=True, write_statistics=True)
+    pq.write_table(
+        table.replace_schema_metadata(schema_meta),
+        path,
+        compression="zstd",
+        write_page_checksum=True,
+        write_statistics=True,
+    )
 
 
 def _locked(directory: Path) -> FileLock:
@@ -143,13 +158,21 @@ def _locked(directory: Path) -> FileLock:
 
 # ------------------------------------------------------------------------------------------------------- writing
 
+
 def version_exists(dataset_id: str | DatasetId, version: str) -> bool:
     did = as_id(dataset_id, check_known=False)
     return (P.version_dir(did.scene, did.variant, version) / P.META_FILE).is_file()
 
 
-def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, meta: dict[str, Any], *,
-                  paths: pa.Table | None = None, extra_files: dict[str, Path] | None = None) -> Path:
+def write_version(
+    dataset_id: str | DatasetId,
+    version: str,
+    cells: pa.Table,
+    meta: dict[str, Any],
+    *,
+    paths: pa.Table | None = None,
+    extra_files: dict[str, Path] | None = None,
+) -> Path:
     """Store one dataset version atomically and tag it; returns its directory.
 
     An existing ``version`` is reused as is (same inputs, same content). ``meta`` is stored verbatim plus
@@ -158,11 +181,15 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
     """
     did = as_id(dataset_id, check_known=False)
     if did.revision:
-        raise InvalidTableError(f"write_version takes a dataset name without a revision, got {did}",
-                                hint=f"pass {did.name!r} and the version separately")
+        raise InvalidTableError(
+            f"write_version takes a dataset name without a revision, got {did}",
+            hint=f"pass {did.name!r} and the version separately",
+        )
     if not isinstance(version, str) or not HASH_RE.fullmatch(version):
-        raise InvalidTableError(f"version {version!r} is not a lowercase hex content hash",
-                                hint="compute it with dtradar_data.store.versions.version_id(inputs)")
+        raise InvalidTableError(
+            f"version {version!r} is not a lowercase hex content hash",
+            hint="compute it with dtradar_data.store.versions.version_id(inputs)",
+        )
     final = P.version_dir(did.scene, did.variant, version)
     if version_exists(did, version):
         log.info("%s: version %s exists, reusing it", did.name, version)
@@ -170,24 +197,35 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
     check_can_store(did, version)
 
     if int(meta.get("schema_version", SCHEMA_VERSION)) != SCHEMA_VERSION:
-        raise SchemaMismatchError(f"meta says schema_version {meta['schema_version']}, this library writes "
-                                  f"v{SCHEMA_VERSION}", hint="rebuild the table with this library version")
+        raise SchemaMismatchError(
+            f"meta says schema_version {meta['schema_version']}, this library writes v{SCHEMA_VERSION}",
+            hint="rebuild the table with this library version",
+        )
     cells = _check_grid(conform(cells, CELL_SCHEMA, f"cells table of {did.name}"), meta)
     if paths is not None:
         paths = conform(paths, PATH_SCHEMA, f"paths table of {did.name}").sort_by(
-            [("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")])
+            [("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")]
+        )
     extra_files = dict(extra_files or {})
     for fname, src in extra_files.items():
         if fname in RESERVED_FILES or Path(fname).name != fname or fname.startswith("."):
-            raise InvalidTableError(f"extra file name {fname!r} is reserved or not a plain file name",
-                                    hint=f"use a plain name other than {sorted(RESERVED_FILES)}")
+            raise InvalidTableError(
+                f"extra file name {fname!r} is reserved or not a plain file name",
+                hint=f"use a plain name other than {sorted(RESERVED_FILES)}",
+            )
         if not Path(src).is_file():
             raise InvalidTableError(f"extra file {fname!r}: {src} does not exist", hint="write it before storing")
 
     meta = json_safe(copy.deepcopy(meta))
     meta["stats"] = {**table_stats(cells), **(meta.get("stats") or {})}
-    meta.update(name=did.name, scene=did.scene, variant=did.variant, version=version, schema_version=SCHEMA_VERSION,
-                record_format=RECORD_FORMAT)
+    meta.update(
+        name=did.name,
+        scene=did.scene,
+        variant=did.variant,
+        version=version,
+        schema_version=SCHEMA_VERSION,
+        record_format=RECORD_FORMAT,
+    )
     meta.setdefault("created_utc", datetime.now(timezone.utc).isoformat(timespec="seconds"))
     meta.pop("files", None)
     # The Parquet copy of the metadata is the content description only: file hashes cannot include themselves.
@@ -201,15 +239,17 @@ def write_version(dataset_id: str | DatasetId, version: str, cells: pa.Table, me
             _write_parquet(paths, stage / P.PATHS_FILE, meta_json)
         for fname, src in sorted(extra_files.items()):
             shutil.copyfile(src, stage / fname)
-        meta["files"] = {f.name: {"sha256": sha256_file(f), "bytes": f.stat().st_size}
-                         for f in sorted(stage.iterdir()) if f.is_file()}
+        meta["files"] = {
+            f.name: {"sha256": sha256_file(f), "bytes": f.stat().st_size}
+            for f in sorted(stage.iterdir())
+            if f.is_file()
+        }
         return _install(did, version, stage, meta)
     finally:
         shutil.rmtree(stage, ignore_errors=True)  # after a successful install the stage is gone already
 
 
-def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], preferred_tag: str | None = None
-             ) -> Path:
+def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], preferred_tag: str | None = None) -> Path:
     """Under the dataset lock: tag, write meta.json and the card into ``stage``, rename it into place."""
     ddir = P.dataset_dir(did.scene, did.variant)
     final = ddir / version
@@ -224,8 +264,9 @@ def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], pr
         history = history_metas(did, refs) + [(tag, meta)]
         (stage / P.CARD_FILE).write_text(render_version_card(meta, tag=tag, history=history))
         if final.exists():  # a leftover without meta.json (e.g. copied by hand): never merge into it
-            raise CorruptDatasetError(f"{final} exists but has no {P.META_FILE}",
-                                      hint="remove that directory and build again")
+            raise CorruptDatasetError(
+                f"{final} exists but has no {P.META_FILE}", hint="remove that directory and build again"
+            )
         os.rename(stage, final)
         refs.tags[tag] = version
         refs.latest = version if _is_newer(tag, refs) else refs.latest
@@ -248,18 +289,23 @@ def install_staged(dataset_id: str | DatasetId, stage: Path, *, preferred_tag: s
     meta = read_meta(stage)
     version = meta.get("version", "")
     if meta.get("name") != did.name or not HASH_RE.fullmatch(str(version)):
-        raise CorruptDatasetError(f"{stage / P.META_FILE} describes {meta.get('name')!r}@{version!r}, "
-                                  f"not a version of {did.name}", hint="check the repository you pulled from")
+        raise CorruptDatasetError(
+            f"{stage / P.META_FILE} describes {meta.get('name')!r}@{version!r}, not a version of {did.name}",
+            hint="check the repository you pulled from",
+        )
     problems = verify_dir(stage)
     if problems:
-        raise CorruptDatasetError(f"downloaded {did.name}@{version} failed verification: " + "; ".join(problems),
-                                  hint="pull again; if it persists the published files are damaged: re-publish")
+        raise CorruptDatasetError(
+            f"downloaded {did.name}@{version} failed verification: " + "; ".join(problems),
+            hint="pull again; if it persists the published files are damaged: re-publish",
+        )
     if version_exists(did, version):
         return P.version_dir(did.scene, did.variant, version)
     return _install(did, version, stage, meta, preferred_tag=preferred_tag)
 
 
 # ------------------------------------------------------------------------------------------------------- reading
+
 
 def read_meta(version_dir: Path) -> dict[str, Any]:
     """The ``meta.json`` of a version as a dict, checked against :class:`VersionRecord` (and migrated to its
@@ -270,8 +316,9 @@ def read_meta(version_dir: Path) -> dict[str, Any]:
     except FileNotFoundError as exc:
         raise CorruptDatasetError(f"{path} is missing", hint="rebuild the dataset or re-pull it") from exc
     except (ValueError, UnicodeDecodeError) as exc:
-        raise CorruptDatasetError(f"{path} is not valid JSON ({exc})", hint="rebuild the dataset or re-pull it"
-                                  ) from exc
+        raise CorruptDatasetError(
+            f"{path} is not valid JSON ({exc})", hint="rebuild the dataset or re-pull it"
+        ) from exc
     return VersionRecord.from_meta(meta, where=str(path)).to_meta()
 
 
@@ -287,8 +334,10 @@ def read_table(path: Path, schema: pa.Schema) -> pa.Table:
         raise CorruptDatasetError(f"{path} is not a readable Parquet file ({exc})", hint=fix) from exc
     diff = schema_diff(actual, schema)
     if diff:
-        raise SchemaMismatchError(f"{path} does not match the expected schema: " + "; ".join(diff),
-                                  hint="it was written by another schema version or edited: " + fix)
+        raise SchemaMismatchError(
+            f"{path} does not match the expected schema: " + "; ".join(diff),
+            hint="it was written by another schema version or edited: " + fix,
+        )
     try:
         table = pf.read()
     except (pa.ArrowException, OSError, ValueError) as exc:
@@ -299,10 +348,10 @@ def read_table(path: Path, schema: pa.Schema) -> pa.Table:
 def _check_hash(version_dir: Path, fname: str, meta: dict[str, Any]) -> None:
     expected = (meta.get("files") or {}).get(fname, {}).get("sha256")
     if expected and sha256_file(version_dir / fname) != expected:
-        raise CorruptDatasetError(f"{version_dir / fname} does not match the sha256 recorded in meta.json "
-                                  "(changed or damaged on disk)",
-                                  hint="rebuild the dataset or re-pull it; `python -m dtradar_data verify NAME` "
-                                       "checks every file")
+        raise CorruptDatasetError(
+            f"{version_dir / fname} does not match the sha256 recorded in meta.json (changed or damaged on disk)",
+            hint="rebuild the dataset or re-pull it; `python -m dtradar_data verify NAME` checks every file",
+        )
 
 
 def local_versions(did: DatasetId, *, damaged: bool = False) -> list[str]:
@@ -313,8 +362,11 @@ def local_versions(did: DatasetId, *, damaged: bool = False) -> list[str]:
     ddir = P.dataset_dir(did.scene, did.variant)
     if not ddir.is_dir():
         return []
-    found = [p.name for p in ddir.iterdir() if HASH_RE.fullmatch(p.name) and p.is_dir()
-             and (damaged or (p / P.META_FILE).is_file())]
+    found = [
+        p.name
+        for p in ddir.iterdir()
+        if HASH_RE.fullmatch(p.name) and p.is_dir() and (damaged or (p / P.META_FILE).is_file())
+    ]
     refs = read_refs(ddir / P.REFS_FILE)
     order = {v: i for i, (_, v) in enumerate(refs.ordered())}
 
@@ -345,32 +397,38 @@ def check_can_store(dataset_id: str | DatasetId, version: str) -> None:
     folder = P.version_dir(did.scene, did.variant, version)
     damaged = damaged_versions(did)
     if version in damaged:
-        raise CorruptDatasetError(f"{folder} exists but is damaged ({damaged[version]})",
-                                  hint=f"remove that folder (`rm -r {folder}`) and build again")
+        raise CorruptDatasetError(
+            f"{folder} exists but is damaged ({damaged[version]})",
+            hint=f"remove that folder (`rm -r {folder}`) and build again",
+        )
     unreadable = [v for v in damaged if (P.version_dir(did.scene, did.variant, v) / P.META_FILE).is_file()]
     if unreadable:
         paths = ", ".join(str(P.version_dir(did.scene, did.variant, v) / P.META_FILE) for v in unreadable)
-        raise CorruptDatasetError(f"{did.name} has stored versions with an unreadable {P.META_FILE}: {paths}",
-                                  hint=f"re-pull or remove those versions; `python -m dtradar_data verify {did.name}` "
-                                       "lists every problem")
+        raise CorruptDatasetError(
+            f"{did.name} has stored versions with an unreadable {P.META_FILE}: {paths}",
+            hint=f"re-pull or remove those versions; `python -m dtradar_data verify {did.name}` lists every problem",
+        )
 
 
-def resolve(name: str | DatasetId, revision: str | None = None, *, damaged: bool = False
-            ) -> tuple[DatasetId, str, Path]:
+def resolve(
+    name: str | DatasetId, revision: str | None = None, *, damaged: bool = False
+) -> tuple[DatasetId, str, Path]:
     """``(id, version, directory)`` of a stored version; typed errors say how to get a missing one. ``damaged``:
     also versions without ``meta.json`` (see :func:`local_versions`)."""
     did = as_id(name)
     if revision and did.revision and revision != did.revision:
-        raise RevisionNotFoundError(f"two revisions given: {did.revision!r} in the name and {revision!r}",
-                                    hint="give the revision once")
+        raise RevisionNotFoundError(
+            f"two revisions given: {did.revision!r} in the name and {revision!r}", hint="give the revision once"
+        )
     revision = revision or did.revision
     versions = local_versions(did, damaged=damaged)
     if not versions:
         raise DatasetNotFoundError(
             f"{did.name} has not been built or pulled into {P.data_root()}",
             hint=f"build it with `make dataset SCENE={did.scene}` (or `python -m dtradar_data build --scene "
-                 f"{did.scene} --variant {did.variant}`), or pull a published one with "
-                 f"`python -m dtradar_data pull {did.name}`")
+            f"{did.scene} --variant {did.variant}`), or pull a published one with "
+            f"`python -m dtradar_data pull {did.name}`",
+        )
     refs = read_refs(P.refs_path(did.scene, did.variant))
     version = resolve_revision(refs, versions, revision, did.name)
     return did.with_revision(revision), version, P.version_dir(did.scene, did.variant, version)
@@ -390,8 +448,10 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
     paths_table = None
     if paths:
         if not (vdir / P.PATHS_FILE).is_file():
-            raise DatasetNotFoundError(f"{did.name}@{version} was built without the per-path table",
-                                       hint="rebuild with per-path output enabled, or load without paths=True")
+            raise DatasetNotFoundError(
+                f"{did.name}@{version} was built without the per-path table",
+                hint="rebuild with per-path output enabled, or load without paths=True",
+            )
         if verify:
             _check_hash(vdir, P.PATHS_FILE, meta)
         paths_table = read_table(vdir / P.PATHS_FILE, PATH_SCHEMA)
@@ -399,8 +459,10 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
     meta["tag"] = refs.tag_of(version)  # tags live in refs.json; handed to consumers for logging
     grid = meta.get("grid", {})
     if table.num_rows != int(grid.get("nx", -1)) * int(grid.get("ny", -1)):
-        raise CorruptDatasetError(f"{vdir / P.CELLS_FILE} has {table.num_rows} rows, meta.json grid is "
-                                  f"{grid.get('nx')}x{grid.get('ny')}", hint="rebuild the dataset or re-pull it")
+        raise CorruptDatasetError(
+            f"{vdir / P.CELLS_FILE} has {table.num_rows} rows, meta.json grid is {grid.get('nx')}x{grid.get('ny')}",
+            hint="rebuild the dataset or re-pull it",
+        )
     return Dataset(name=did.name, table=table, meta=meta, version=version, path=vdir, paths_table=paths_table)
 
 

@@ -63,11 +63,16 @@ def library_versions(names: tuple[str, ...] = CONTENT_LIBRARIES) -> dict[str, st
     return out
 
 
-def build_inputs(scene_spec: dict[str, Any], rt: dict[str, Any], schema_version: int,
-                 libraries: dict[str, str] | None = None) -> dict[str, Any]:
+def build_inputs(
+    scene_spec: dict[str, Any], rt: dict[str, Any], schema_version: int, libraries: dict[str, str] | None = None
+) -> dict[str, Any]:
     """The dict :func:`version_id` hashes, in the shape the pipeline and the card both expect."""
-    return {"scene_spec": scene_spec, "rt": rt, "schema_version": int(schema_version),
-            "library_versions": library_versions() if libraries is None else dict(libraries)}
+    return {
+        "scene_spec": scene_spec,
+        "rt": rt,
+        "schema_version": int(schema_version),
+        "library_versions": library_versions() if libraries is None else dict(libraries),
+    }
 
 
 def tag_number(tag: str) -> int:
@@ -112,7 +117,8 @@ def read_refs(path: Path) -> Refs:
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise CorruptDatasetError(
             f"{path} is not a valid refs file ({exc})",
-            hint="delete it and re-run the build (versions on disk are kept and re-tagged), or re-pull") from exc
+            hint="delete it and re-run the build (versions on disk are kept and re-tagged), or re-pull",
+        ) from exc
     return Refs(tags, latest)
 
 
@@ -135,18 +141,24 @@ def resolve_revision(refs: Refs, versions: list[str], revision: str | None, name
     if is_tag(revision):
         version = refs.tags.get(revision)
         if version is None or version not in versions:
-            raise RevisionNotFoundError(f"{name} has no version tagged {revision!r}; it has {existing}",
-                                        hint=f"use one of those, e.g. {name}@{_example(refs, versions)}")
+            raise RevisionNotFoundError(
+                f"{name} has no version tagged {revision!r}; it has {existing}",
+                hint=f"use one of those, e.g. {name}@{_example(refs, versions)}",
+            )
         return version
     if is_hash(revision) and len(revision) >= MIN_HASH_PREFIX:
         matches = [v for v in versions if v.startswith(revision)]
         if len(matches) == 1:
             return matches[0]
         if len(matches) > 1:
-            raise RevisionNotFoundError(f"{revision!r} matches several versions of {name}: {', '.join(matches)}",
-                                        hint="give more characters of the hash")
-    raise RevisionNotFoundError(f"{name} has no version {revision!r}; it has {existing}",
-                                hint=f"use a tag or a hash prefix, e.g. {name}@{_example(refs, versions)}")
+            raise RevisionNotFoundError(
+                f"{revision!r} matches several versions of {name}: {', '.join(matches)}",
+                hint="give more characters of the hash",
+            )
+    raise RevisionNotFoundError(
+        f"{name} has no version {revision!r}; it has {existing}",
+        hint=f"use a tag or a hash prefix, e.g. {name}@{_example(refs, versions)}",
+    )
 
 
 def _listing(refs: Refs, versions: list[str]) -> str:

@@ -40,17 +40,23 @@ def read_checkpoint(path: str | Path, formats: tuple[str, ...], *, what: str, de
     not a torch file or of another format."""
     path = Path(path)
     if not path.is_file():
-        raise CheckpointError(f"no checkpoint at {path}" + (" (it is a folder)" if path.is_dir() else ""),
-                              hint="train one first, e.g. `make train SCENE=cubicle`, or pass the model.pt it wrote")
+        raise CheckpointError(
+            f"no checkpoint at {path}" + (" (it is a folder)" if path.is_dir() else ""),
+            hint="train one first, e.g. `make train SCENE=cubicle`, or pass the model.pt it wrote",
+        )
     try:
         state = torch.load(path, map_location=device, weights_only=False)
     except (RuntimeError, EOFError, OSError, ValueError, pickle.UnpicklingError, AttributeError, ImportError) as e:
-        raise CheckpointError(f"{path} is damaged or not a torch checkpoint ({type(e).__name__}: {e})",
-                              hint="delete it and train again (a run writes model.pt only when it finishes)") from e
+        raise CheckpointError(
+            f"{path} is damaged or not a torch checkpoint ({type(e).__name__}: {e})",
+            hint="delete it and train again (a run writes model.pt only when it finishes)",
+        ) from e
     if not isinstance(state, dict) or state.get("format") not in formats:
         found = state.get("format") if isinstance(state, dict) else type(state).__name__
-        raise CheckpointError(f"{path} is not a {what} (format {found!r}, expected {' or '.join(formats)})",
-                              hint="pass the model.pt written by `python -m dtradar_rl train` (or `offline`)")
+        raise CheckpointError(
+            f"{path} is not a {what} (format {found!r}, expected {' or '.join(formats)})",
+            hint="pass the model.pt written by `python -m dtradar_rl train` (or `offline`)",
+        )
     return state
 
 
@@ -60,13 +66,28 @@ def write_config(cfg: TwinConfig, directory: Path) -> Path:
     return path
 
 
-def save_checkpoint(path: Path, q: QNetwork, cfg: TwinConfig, normalizer: Normalizer, obs_names, ds: Dataset,
-                    stats: dict[str, Any] | None = None) -> Path:
+def save_checkpoint(
+    path: Path,
+    q: QNetwork,
+    cfg: TwinConfig,
+    normalizer: Normalizer,
+    obs_names,
+    ds: Dataset,
+    stats: dict[str, Any] | None = None,
+) -> Path:
     """A self-contained policy: weights, architecture, config, observation preset and normaliser."""
-    save_torch_atomic({"format": CHECKPOINT_FORMAT, "config": json.dumps(cfg.to_dict()),
-                       "arch": {"in_dim": len(obs_names), "hidden": list(cfg.hidden), "n_actions": 4},
-                       "obs": {"preset": cfg.obs, "names": list(obs_names)}, "normalizer": normalizer.to_dict(),
-                       "dataset": {"name": ds.name, "version": ds.version}, "stats": stats or {},
-                       "q": {k: v.detach().cpu() for k, v in q.state_dict().items()}}, path)
+    save_torch_atomic(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "config": json.dumps(cfg.to_dict()),
+            "arch": {"in_dim": len(obs_names), "hidden": list(cfg.hidden), "n_actions": 4},
+            "obs": {"preset": cfg.obs, "names": list(obs_names)},
+            "normalizer": normalizer.to_dict(),
+            "dataset": {"name": ds.name, "version": ds.version},
+            "stats": stats or {},
+            "q": {k: v.detach().cpu() for k, v in q.state_dict().items()},
+        },
+        path,
+    )
     write_config(cfg, Path(path).parent)
     return Path(path)

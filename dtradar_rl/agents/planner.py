@@ -14,8 +14,8 @@ What a user would pick without learning. At every step each robot
    forgets them and replans on the blueprint alone.
 
 :class:`FingerprintPlanner` has the part of :class:`~dtradar_rl.agents.policy.Policy` the evaluation loop uses
-(``env_for``, ``act``, ``obs_preset``, ``meta``), so :func:`~dtradar_rl.evaluation.evaluate.evaluate_twins` runs it unchanged.
-It keeps per-robot state between calls and starts afresh in ``env_for`` (one batch of episodes per env).
+(``env_for``, ``act``, ``obs_preset``, ``meta``), so :func:`~dtradar_rl.evaluation.evaluate.evaluate_twins` runs it
+unchanged. It keeps per-robot state between calls and starts afresh in ``env_for`` (one batch of episodes per env).
 """
 
 from __future__ import annotations
@@ -59,12 +59,16 @@ class FingerprintPlanner:
         self.wall = t(self.mdp.collides, torch.bool)  # moves the blueprint itself forbids
         self.blocked = t(self.mdp.blocked.ravel(), torch.bool)
         self.flags = flag_columns()
-        self.meta: dict[str, Any] = {"dataset": {"name": blueprint.name, "version": blueprint.version},
-                                     "stats": {}, "path": "planner"}
+        self.meta: dict[str, Any] = {
+            "dataset": {"name": blueprint.name, "version": blueprint.version},
+            "stats": {},
+            "path": "planner",
+        }
         self.config = None
         self._n = -1
 
-    # -- the Policy interface used by dtradar_rl.evaluation.evaluate -------------------------------------------------------------
+    # -- the Policy interface used by dtradar_rl.evaluation.evaluate
+    # -------------------------------------------------------------
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
         self._start(num_envs)
         return BatchedNavEnv.from_dataset(ds, num_envs, obs="neighbors", normalizer=self.normalizer, **kwargs)
@@ -141,8 +145,9 @@ class FingerprintPlanner:
         while bool(frontier.any()):
             step += 1
             new = torch.zeros_like(frontier)
-            new[:, 1:-1, 1:-1] = (frontier[:, :-2, 1:-1] | frontier[:, 2:, 1:-1] | frontier[:, 1:-1, :-2]
-                                  | frontier[:, 1:-1, 2:])
+            new[:, 1:-1, 1:-1] = (
+                frontier[:, :-2, 1:-1] | frontier[:, 2:, 1:-1] | frontier[:, 1:-1, :-2] | frontier[:, 1:-1, 2:]
+            )
             new &= open_
             open_ &= ~new
             dist[new] = step

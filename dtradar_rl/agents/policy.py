@@ -59,15 +59,23 @@ class Policy:
     def shield_columns(self) -> list[int]:
         """Observation columns of the four has-radio flags (``neighbors`` preset), in action order."""
         if self.obs_preset != "neighbors":
-            raise ConfigError(f"the obstacle shield needs the 'neighbors' observation preset, "
-                              f"this policy observes {self.obs_preset!r}")
+            raise ConfigError(
+                f"the obstacle shield needs the 'neighbors' observation preset, "
+                f"this policy observes {self.obs_preset!r}"
+            )
         k = len(RADIO_FEATURES) + 1
         return [len(PAPER_COLUMNS) + a * k + k - 1 for a in range(4)]
 
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
         """A batched env over ``ds`` that observes with this policy's preset and training normaliser."""
-        return batched_env(ds, num_envs, memory_radius=getattr(self.config, "memory_radius", 0), obs=self.obs_preset,
-                           normalizer=self.normalizer, **kwargs)
+        return batched_env(
+            ds,
+            num_envs,
+            memory_radius=getattr(self.config, "memory_radius", 0),
+            obs=self.obs_preset,
+            normalizer=self.normalizer,
+            **kwargs,
+        )
 
     def observations(self, ds: Dataset):
         return build_observations(ds, self.obs_preset, self.normalizer)

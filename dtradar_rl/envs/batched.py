@@ -55,21 +55,35 @@ AUG_POTENTIALS: tuple[str, ...] = ("replan", "blueprint")
 class BatchedNavEnv:
     """``num_envs`` independent navigation episodes on one grid, stepped together as torch tensors."""
 
-    def __init__(self, mdp: GridMDP, obs_table: ObservationTable, num_envs: int, *, reward: str = "geodesic",
-                 max_steps: int | None = None, device: str | torch.device = "cpu", seed: int = 0,
-                 target_pool: int | None = None, aug_obstacles: int = 0, aug_obstacle_size: int = 1,
-                 aug_potential: str = "replan"):
+    def __init__(
+        self,
+        mdp: GridMDP,
+        obs_table: ObservationTable,
+        num_envs: int,
+        *,
+        reward: str = "geodesic",
+        max_steps: int | None = None,
+        device: str | torch.device = "cpu",
+        seed: int = 0,
+        target_pool: int | None = None,
+        aug_obstacles: int = 0,
+        aug_obstacle_size: int = 1,
+        aug_potential: str = "replan",
+    ):
         if num_envs < 1:
             raise InvalidCoordinatesError(f"num_envs must be >= 1, got {num_envs}")
         if aug_obstacles < 0 or aug_obstacle_size < 1:
-            raise InvalidCoordinatesError(f"aug_obstacles must be >= 0 and aug_obstacle_size >= 1, got "
-                                          f"{aug_obstacles} and {aug_obstacle_size}")
+            raise InvalidCoordinatesError(
+                f"aug_obstacles must be >= 0 and aug_obstacle_size >= 1, got {aug_obstacles} and {aug_obstacle_size}"
+            )
         if aug_potential not in AUG_POTENTIALS:
             raise unknown_name("augmentation potential", aug_potential, AUG_POTENTIALS)
         if aug_obstacles and num_envs * mdp.num_cells > MAX_DISTANCE_TABLE:
             raise InvalidCoordinatesError(
                 f"obstacle augmentation keeps a [num_envs, cells] mask and distance table: {num_envs} x "
-                f"{mdp.num_cells} is over {MAX_DISTANCE_TABLE:,}", hint="use fewer robots (num_envs)")
+                f"{mdp.num_cells} is over {MAX_DISTANCE_TABLE:,}",
+                hint="use fewer robots (num_envs)",
+            )
         self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
         self.reward_name = check_reward(reward)
         self.potential = potential_kind(reward)
@@ -105,12 +119,18 @@ class BatchedNavEnv:
         rng = np.random.default_rng(seed)
         if target_pool is None and cells.size * mdp.num_cells > MAX_DISTANCE_TABLE and self.potential == "geodesic":
             target_pool = max(1, MAX_DISTANCE_TABLE // mdp.num_cells)
-        pool = cells if not target_pool or target_pool >= cells.size else np.sort(
-            rng.choice(cells, target_pool, replace=False))
+        pool = (
+            cells
+            if not target_pool or target_pool >= cells.size
+            else np.sort(rng.choice(cells, target_pool, replace=False))
+        )
         self.pool = t(pool, torch.long)
         self._pool_pos = {int(c): k for k, c in enumerate(pool)}
-        self.dist = (t(mdp.bfs_distances_many(pool), torch.int32) if self.potential == "geodesic"
-                     else torch.zeros((pool.size, 0), dtype=torch.int32, device=dev))
+        self.dist = (
+            t(mdp.bfs_distances_many(pool), torch.int32)
+            if self.potential == "geodesic"
+            else torch.zeros((pool.size, 0), dtype=torch.int32, device=dev)
+        )
 
         n = self.num_envs
         self.cell = torch.zeros(n, dtype=torch.long, device=dev)
@@ -137,8 +157,9 @@ class BatchedNavEnv:
         acts = [nm.split(":")[0] for nm in names if nm.endswith(":has_radio")]  # X-, X+, Y-, Y+ (action order)
         if not acts:
             return None
-        return torch.as_tensor([[k for k, nm in enumerate(names) if nm.startswith(f"{a}:")] for a in acts],
-                               dtype=torch.long)
+        return torch.as_tensor(
+            [[k for k, nm in enumerate(names) if nm.startswith(f"{a}:")] for a in acts], dtype=torch.long
+        )
 
     @property
     def state_keys(self) -> tuple[str, ...]:
@@ -146,8 +167,9 @@ class BatchedNavEnv:
         return ("cell", "target", "tpool", "steps") + (("extra", "adist") if self.aug_obstacles else ())
 
     @classmethod
-    def from_dataset(cls, ds: Dataset, num_envs: int, *, obs: str = "goal", normalizer: Normalizer | None = None,
-                     **kwargs) -> BatchedNavEnv:
+    def from_dataset(
+        cls, ds: Dataset, num_envs: int, *, obs: str = "goal", normalizer: Normalizer | None = None, **kwargs
+    ) -> BatchedNavEnv:
         """Build from a dataset; ``normalizer`` defaults to statistics of ``ds`` itself."""
         check_preset(obs)
         normalizer = normalizer or Normalizer.fit(ds)
@@ -220,8 +242,9 @@ class BatchedNavEnv:
         step = 0
         while True:
             step += 1
-            new = (frontier[:, :-2, 1:-1] | frontier[:, 2:, 1:-1] | frontier[:, 1:-1, :-2]
-                   | frontier[:, 1:-1, 2:]) & open_
+            new = (
+                frontier[:, :-2, 1:-1] | frontier[:, 2:, 1:-1] | frontier[:, 1:-1, :-2] | frontier[:, 1:-1, 2:]
+            ) & open_
             open_ ^= new
             frontier[:, 1:-1, 1:-1] = new
             waited += open_
@@ -265,12 +288,14 @@ class BatchedNavEnv:
             extra = torch.as_tensor(missing, dtype=torch.long, device=self.device)
             self.pool = torch.cat([self.pool, extra])
             if self.potential == "geodesic":
-                d = torch.as_tensor(self.mdp.bfs_distances_many(np.array(missing)), dtype=torch.int32,
-                                    device=self.device)
+                d = torch.as_tensor(
+                    self.mdp.bfs_distances_many(np.array(missing)), dtype=torch.int32, device=self.device
+                )
                 self.dist = torch.cat([self.dist, d])
             else:
-                self.dist = torch.cat([self.dist, torch.zeros((len(missing), 0), dtype=torch.int32,
-                                                              device=self.device)])
+                self.dist = torch.cat(
+                    [self.dist, torch.zeros((len(missing), 0), dtype=torch.int32, device=self.device)]
+                )
         return torch.as_tensor([self._pool_pos[c] for c in cells], dtype=torch.long, device=self.device)
 
     def observe(self) -> torch.Tensor:
@@ -295,13 +320,16 @@ class BatchedNavEnv:
         """``bool[num_envs, 4]``: the moves that take each robot one cell closer to its target along a breadth-first
         shortest path of the map the episode is played on (with obstacle augmentation, the robot's augmented grid).
 
-        This is the twin's own answer, known because the table is: :mod:`dtradar_rl.train.dqn` uses it as the expert of a
-        large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin (:mod:`dtradar_rl.experiments.adapt`).
-        A robot with no such move (cut off from its target) gets an all-false row. Needs the ``geodesic`` reward,
-        whose distance tables it reads."""
+        This is the twin's own answer, known because the table is: :mod:`dtradar_rl.train.dqn` uses it as the expert of
+        a large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin
+        (:mod:`dtradar_rl.experiments.adapt`). A robot with no such move (cut off from its target) gets an all-false
+        row. Needs the ``geodesic`` reward, whose distance tables it reads."""
         if self.potential != "geodesic":
-            raise InvalidCoordinatesError("shortest moves read the breadth-first distance tables of the geodesic "
-                                          f"reward; this env uses {self.reward_name!r}", hint="use reward='geodesic'")
+            raise InvalidCoordinatesError(
+                "shortest moves read the breadth-first distance tables of the geodesic "
+                f"reward; this env uses {self.reward_name!r}",
+                hint="use reward='geodesic'",
+            )
         nxt = self.next_cell[self.cell]  # [N, 4]; a colliding move stays on the cell, so it never gets closer
         if self.aug_obstacles:
             here, there = self.adist.gather(1, self.cell[:, None]), self.adist.gather(1, nxt)
@@ -328,8 +356,15 @@ class BatchedNavEnv:
             pb, pa = self._potential(cell), self._potential(nxt)
         else:
             pb = pa = torch.zeros((), device=self.device)
-        reward = reward_fn(self.reward_name, d2_after=dx * dx + dy * dy, pot_before=pb, pot_after=pa,
-                           collision=collision.float(), reached=reached.float(), diag2=self.mdp.diag2).float()
+        reward = reward_fn(
+            self.reward_name,
+            d2_after=dx * dx + dy * dy,
+            pot_before=pb,
+            pot_after=pa,
+            collision=collision.float(),
+            reached=reached.float(),
+            diag2=self.mdp.diag2,
+        ).float()
         self.cell = nxt
         self.steps += 1
         terminated = reached

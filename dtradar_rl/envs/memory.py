@@ -63,7 +63,7 @@ class MemoryLayout:
         #: ``int64[cells, (2R+1)^2]``: the window around each cell, rows of +y
         self.window = self.pad[:, None] + (d[:, None] * pw + d[None, :]).ravel()[None, :]
         init = np.ones((ny + 2 * r, pw), np.float32)
-        init[r:r + ny, r:r + nx] = 0.0
+        init[r : r + ny, r : r + nx] = 0.0
         #: ``float32[padded]``: an empty ``sensed`` map (only the padding set)
         self.sensed_init = init.ravel()
 
@@ -79,8 +79,10 @@ class MemoryLayout:
 
 def _require_neighbors(obs_table: ObservationTable) -> None:
     if obs_table.preset != "neighbors":
-        raise InvalidCoordinatesError(f"a memory agent senses obstacles through the 'neighbors' observation, "
-                                      f"got {obs_table.preset!r}", hint="use --obs neighbors")
+        raise InvalidCoordinatesError(
+            f"a memory agent senses obstacles through the 'neighbors' observation, got {obs_table.preset!r}",
+            hint="use --obs neighbors",
+        )
 
 
 class MemoryNavEnv(BatchedNavEnv):
@@ -99,8 +101,9 @@ class MemoryNavEnv(BatchedNavEnv):
         self.visited = torch.zeros_like(self.sensed)
 
     @classmethod
-    def from_dataset(cls, ds: Dataset, num_envs: int, *, obs: str = "neighbors",
-                     normalizer: Normalizer | None = None, **kwargs) -> MemoryNavEnv:
+    def from_dataset(
+        cls, ds: Dataset, num_envs: int, *, obs: str = "neighbors", normalizer: Normalizer | None = None, **kwargs
+    ) -> MemoryNavEnv:
         normalizer = normalizer or Normalizer.fit(ds)
         return cls(GridMDP.from_dataset(ds), build_observations(ds, obs, normalizer), num_envs, **kwargs)
 
@@ -152,16 +155,20 @@ class MemoryNavEnv(BatchedNavEnv):
 class MemoryGymEnv(DtradarNavEnv):
     """The gymnasium env with the same memory window appended (one robot; numpy)."""
 
-    def __init__(self, dataset: Dataset | str = "synthetic/blueprint", obs: str = "neighbors",
-                 memory_radius: int = 5, **kwargs):
+    def __init__(
+        self, dataset: Dataset | str = "synthetic/blueprint", obs: str = "neighbors", memory_radius: int = 5, **kwargs
+    ):
         super().__init__(dataset, obs=obs, **kwargs)
         _require_neighbors(self.table)
         self.layout = MemoryLayout(self.mdp.nx, self.mdp.ny, memory_radius)
         base = self.observation_space
         m = self.layout.dim
-        self.observation_space = spaces.Box(np.concatenate([base.low, np.zeros(m, np.float32)]),
-                                            np.concatenate([base.high, np.ones(m, np.float32)]),
-                                            (base.shape[0] + m,), np.float32)
+        self.observation_space = spaces.Box(
+            np.concatenate([base.low, np.zeros(m, np.float32)]),
+            np.concatenate([base.high, np.ones(m, np.float32)]),
+            (base.shape[0] + m,),
+            np.float32,
+        )
         self._sensed = self.layout.sensed_init.copy()
         self._visited = np.zeros_like(self._sensed)
 

@@ -65,9 +65,15 @@ class DtradarNavEnv(gym.Env):
 
     metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
 
-    def __init__(self, dataset: Dataset | str = "synthetic/blueprint", obs: str = "goal", reward: str = "paper",
-                 max_steps: int | None = None, normalizer: Normalizer | dict | None = None,
-                 render_mode: str | None = None):
+    def __init__(
+        self,
+        dataset: Dataset | str = "synthetic/blueprint",
+        obs: str = "goal",
+        reward: str = "paper",
+        max_steps: int | None = None,
+        normalizer: Normalizer | dict | None = None,
+        render_mode: str | None = None,
+    ):
         ds = load_dataset(dataset) if isinstance(dataset, str) else dataset
         self.dataset_name = ds.name
         self.obs_preset, self.reward_name = check_preset(obs), check_reward(reward)
@@ -104,8 +110,9 @@ class DtradarNavEnv(gym.Env):
                 raise InvalidCoordinatesError("reset options need both 'start' and 'target' as (ix, iy)")
             start, target = self._cell_of(options["start"]), self._cell_of(options["target"])
             if not self.mdp.connected(start, target):
-                raise InvalidCoordinatesError(f"start {options['start']} and target {options['target']} are not "
-                                              f"connected in {self.dataset_name}")
+                raise InvalidCoordinatesError(
+                    f"start {options['start']} and target {options['target']} are not connected in {self.dataset_name}"
+                )
         else:
             start, target = self.mdp.sample_pairs(1, self.np_random)[0]
         self._cell, self._target, self._steps = int(start), int(target), 0
@@ -121,9 +128,11 @@ class DtradarNavEnv(gym.Env):
         # Discrete.contains takes Python and numpy integers and 0-d integer arrays, and refuses 1.5 and '2' that
         # int() would have turned into moves; a bool is an int to Python but never a meant action.
         if isinstance(action, (bool, np.bool_)) or not self.action_space.contains(action):
-            raise InvalidActionError(f"action {action!r} ({type(action).__name__}) is not an integer in 0..3 "
-                                     f"({', '.join(f'{i} = {a}' for i, a in enumerate(ACTIONS))})",
-                                     hint="pass an int, a numpy integer or a 0-d integer array")
+            raise InvalidActionError(
+                f"action {action!r} ({type(action).__name__}) is not an integer in 0..3 "
+                f"({', '.join(f'{i} = {a}' for i, a in enumerate(ACTIONS))})",
+                hint="pass an int, a numpy integer or a 0-d integer array",
+            )
         if self._dist is None:
             raise InvalidActionError("step() called before reset()", hint="call env.reset() first")
         action = int(action)
@@ -132,19 +141,27 @@ class DtradarNavEnv(gym.Env):
         self._steps += 1
         reached = self._cell == self._target
         shaped = potential_kind(self.reward_name) is not None
-        reward = reward_fn(self.reward_name, d2_after=float(self.mdp.d2(self._cell, self._target)),
-                           pot_before=self._potential(before) if shaped else 0.0,
-                           pot_after=self._potential(self._cell) if shaped else 0.0,
-                           collision=collision, reached=reached, diag2=self.mdp.diag2)
+        reward = reward_fn(
+            self.reward_name,
+            d2_after=float(self.mdp.d2(self._cell, self._target)),
+            pot_before=self._potential(before) if shaped else 0.0,
+            pot_after=self._potential(self._cell) if shaped else 0.0,
+            collision=collision,
+            reached=reached,
+            diag2=self.mdp.diag2,
+        )
         truncated = self._steps >= self.max_steps and not reached
         obs = self.table.observe(self._cell, self._target)
         return obs, float(np.float32(reward)), bool(reached), bool(truncated), self._info(collision)
 
     def _info(self, collision: bool) -> dict:
-        return {"cell": tuple(int(v) for v in self.mdp.xy(self._cell)),
-                "target": tuple(int(v) for v in self.mdp.xy(self._target)),
-                "collision": bool(collision), "is_success": self._cell == self._target,
-                "distance": int(self._dist[self._cell]) if self._dist is not None else -1}
+        return {
+            "cell": tuple(int(v) for v in self.mdp.xy(self._cell)),
+            "target": tuple(int(v) for v in self.mdp.xy(self._target)),
+            "collision": bool(collision),
+            "is_success": self._cell == self._target,
+            "distance": int(self._dist[self._cell]) if self._dist is not None else -1,
+        }
 
     def render(self):
         if self.render_mode is None:

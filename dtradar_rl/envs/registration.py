@@ -30,8 +30,12 @@ def register_dataset_envs(**kwargs) -> list[str]:
     for name in ["synthetic/blueprint", "synthetic/dynamic", *built_datasets()]:
         eid = env_id(name)
         gym.registry.pop(eid, None)
-        gym.register(id=eid, entry_point="dtradar_rl.envs.nav_env:DtradarNavEnv",
-                     kwargs={"dataset": name, **kwargs}, disable_env_checker=True)
+        gym.register(
+            id=eid,
+            entry_point="dtradar_rl.envs.nav_env:DtradarNavEnv",
+            kwargs={"dataset": name, **kwargs},
+            disable_env_checker=True,
+        )
         ids.append(eid)
     return ids
 

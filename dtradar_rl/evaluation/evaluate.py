@@ -37,12 +37,12 @@ METRICS: tuple[str, ...] = ("success_rate", "spl", "collisions")
 class Rollouts:
     """Greedy episodes: per pair the visited cells, success, decisions, collisions, and the shortest length."""
 
-    pairs: np.ndarray          # int64[N, 2] (start, target) cells
-    paths: list[list[int]]     # visited cells, start first (repeated cells where a collision happened)
-    success: np.ndarray        # bool[N]
-    steps: np.ndarray          # int64[N] decisions taken
-    collisions: np.ndarray     # int64[N]
-    shortest: np.ndarray       # int64[N] BFS shortest path length on the evaluated twin
+    pairs: np.ndarray  # int64[N, 2] (start, target) cells
+    paths: list[list[int]]  # visited cells, start first (repeated cells where a collision happened)
+    success: np.ndarray  # bool[N]
+    steps: np.ndarray  # int64[N] decisions taken
+    collisions: np.ndarray  # int64[N]
+    shortest: np.ndarray  # int64[N] BFS shortest path length on the evaluated twin
 
 
 @dataclass
@@ -80,9 +80,16 @@ def spl(success: Sequence[bool], shortest: Sequence[int], travelled: Sequence[in
 
 def metrics_from_rollouts(r: Rollouts, latency_ms: float | None = None) -> Metrics:
     travelled = np.array([path_length(p) for p in r.paths])
-    return Metrics(pairs=len(r.paths), success_rate=float(r.success.mean()), spl=spl(r.success, r.shortest, travelled),
-                   collisions=float(r.collisions.mean()), steps=float(r.steps.mean()),
-                   path_length=float(travelled.mean()), shortest=float(r.shortest.mean()), latency_ms=latency_ms)
+    return Metrics(
+        pairs=len(r.paths),
+        success_rate=float(r.success.mean()),
+        spl=spl(r.success, r.shortest, travelled),
+        collisions=float(r.collisions.mean()),
+        steps=float(r.steps.mean()),
+        path_length=float(travelled.mean()),
+        shortest=float(r.shortest.mean()),
+        latency_ms=latency_ms,
+    )
 
 
 def sample_eval_pairs(ds: Dataset, n: int, seed: int) -> np.ndarray:
@@ -90,8 +97,15 @@ def sample_eval_pairs(ds: Dataset, n: int, seed: int) -> np.ndarray:
     return GridMDP.from_dataset(ds).sample_pairs(n, np.random.default_rng(seed))
 
 
-def rollout(policy: Policy, ds: Dataset, pairs: np.ndarray, *, max_steps: int | None = None,
-            device: str = "cpu", shield: bool = False) -> Rollouts:
+def rollout(
+    policy: Policy,
+    ds: Dataset,
+    pairs: np.ndarray,
+    *,
+    max_steps: int | None = None,
+    device: str = "cpu",
+    shield: bool = False,
+) -> Rollouts:
     """Run the greedy policy from every (start, target) pair at once in the batched environment.
 
     ``shield``: mask moves into neighbours sensed as occupied (see :meth:`Policy.act`)."""
@@ -136,16 +150,35 @@ def decision_latency_ms(policy: Policy, ds: Dataset, repeats: int = 300) -> floa
     return float(np.median(times) * 1e3)
 
 
-def evaluate(policy: Policy, ds: Dataset, *, pairs: int = 500, seed: int = 2024, max_steps: int | None = None,
-             latency: bool = True, device: str = "cpu", shield: bool = False) -> tuple[Metrics, Rollouts]:
+def evaluate(
+    policy: Policy,
+    ds: Dataset,
+    *,
+    pairs: int = 500,
+    seed: int = 2024,
+    max_steps: int | None = None,
+    latency: bool = True,
+    device: str = "cpu",
+    shield: bool = False,
+) -> tuple[Metrics, Rollouts]:
     """Metrics of ``policy`` on ``ds`` over ``pairs`` seeded (start, target) pairs."""
     r = rollout(policy, ds, sample_eval_pairs(ds, pairs, seed), max_steps=max_steps, device=device, shield=shield)
     return metrics_from_rollouts(r, decision_latency_ms(policy, ds) if latency else None), r
 
 
-def evaluate_twins(policy: Policy, scene: str, variants: Sequence[str], *, label: str = "", pairs: int = 500,
-                   seed: int = 2024, max_steps: int | None = None, device: str = "cpu", shield: bool = True,
-                   datasets: dict[str, Dataset] | None = None) -> list[tuple[dict[str, Any], Dataset, Rollouts]]:
+def evaluate_twins(
+    policy: Policy,
+    scene: str,
+    variants: Sequence[str],
+    *,
+    label: str = "",
+    pairs: int = 500,
+    seed: int = 2024,
+    max_steps: int | None = None,
+    device: str = "cpu",
+    shield: bool = True,
+    datasets: dict[str, Dataset] | None = None,
+) -> list[tuple[dict[str, Any], Dataset, Rollouts]]:
     """:func:`evaluate` on every twin ``<scene>/<variant>`` that is built (others are skipped with a message),
     unshielded and, with ``shield`` and the neighbors preset, shielded. Returns ``(row, dataset, rollouts)`` per
     case; a row is ``{"case": "<label><trained> -> <twin>[ (shielded)]", "dataset", "version", "shield",
@@ -163,15 +196,22 @@ def evaluate_twins(policy: Policy, scene: str, variants: Sequence[str], *, label
         for sh in [False] + ([True] if shield and policy.obs_preset == "neighbors" else []):
             metrics, roll = evaluate(policy, ds, pairs=pairs, seed=seed, max_steps=max_steps, device=device, shield=sh)
             case = f"{label}{trained} -> {ds.name}" + (" (shielded)" if sh else "")
-            out.append(({"case": case, "dataset": ds.name, "version": ds.version, "shield": sh, **metrics.to_dict()},
-                        ds, roll))
+            out.append(
+                ({"case": case, "dataset": ds.name, "version": ds.version, "shield": sh, **metrics.to_dict()}, ds, roll)
+            )
     return out
 
 
 # -- reports ------------------------------------------------------------------------------------------------------
-COLUMNS = (("pairs", "pairs", "{:d}"), ("success_rate", "success", "{:.3f}"), ("spl", "SPL", "{:.3f}"),
-           ("collisions", "collisions/ep", "{:.2f}"), ("steps", "mean steps", "{:.1f}"),
-           ("shortest", "mean shortest", "{:.1f}"), ("latency_ms", "decision (ms)", "{:.3f}"))
+COLUMNS = (
+    ("pairs", "pairs", "{:d}"),
+    ("success_rate", "success", "{:.3f}"),
+    ("spl", "SPL", "{:.3f}"),
+    ("collisions", "collisions/ep", "{:.2f}"),
+    ("steps", "mean steps", "{:.1f}"),
+    ("shortest", "mean shortest", "{:.1f}"),
+    ("latency_ms", "decision (ms)", "{:.3f}"),
+)
 
 
 def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
@@ -197,8 +237,14 @@ def write_results(rows: list[dict[str, Any]], out: Path, config: dict[str, Any],
     return md
 
 
-def cross_matrix(policies: dict[str, Policy], datasets: dict[str, Dataset], *, pairs: int = 500, seed: int = 2024,
-                 max_steps: int | None = None) -> dict[str, Any]:
+def cross_matrix(
+    policies: dict[str, Policy],
+    datasets: dict[str, Dataset],
+    *,
+    pairs: int = 500,
+    seed: int = 2024,
+    max_steps: int | None = None,
+) -> dict[str, Any]:
     """Evaluate every policy on every dataset (e.g. train on quadrant Qi, evaluate on Qj).
 
     Returns ``{"rows": [train names], "cols": [dataset names], "success": [[...]], "spl": [[...]]}``.

@@ -3,7 +3,8 @@
 An agent trained with ``--pair paper`` (or ``--start/--target``) has no target in its state, so random pairs say
 nothing about it; what the paper reports is whether, and in how many steps, it reaches *its* pair (Table VI,
 Figs. 10 and 22-24). The pair is the one recorded in the checkpoint; on another twin (the dynamic one) an end that
-became blocked, or cut off, is snapped to the nearest cell of the largest free region there (:mod:`dtradar_rl.task.pairs`).
+became blocked, or cut off, is snapped to the nearest cell of the largest free region there
+(:mod:`dtradar_rl.task.pairs`).
 """
 
 from __future__ import annotations
@@ -40,11 +41,12 @@ def policy_pair(policy: Policy, ds: Dataset) -> ResolvedPair | None:
     return resolve(mdp, ds.grid_info, cfg.scene, s2, t2)
 
 
-def evaluate_pair(policy: Policy, ds: Dataset, *, max_steps: int | None = None,
-                  device: str = "cpu") -> tuple[dict[str, Any], ResolvedPair, Rollouts]:
+def evaluate_pair(
+    policy: Policy, ds: Dataset, *, max_steps: int | None = None, device: str = "cpu"
+) -> tuple[dict[str, Any], ResolvedPair, Rollouts]:
     """One greedy episode of a fixed-pair policy on its pair on ``ds`` (capped like training: 10x the shortest
-    path unless ``max_steps``). Returns a results row (the columns of :func:`~dtradar_rl.evaluation.evaluate.markdown_table`
-    plus the pair), the pair and the rollout."""
+    path unless ``max_steps``). Returns a results row (the columns of
+    :func:`~dtradar_rl.evaluation.evaluate.markdown_table` plus the pair), the pair and the rollout."""
     pair = policy_pair(policy, ds)
     if pair is None:
         raise ValueError("evaluate_pair needs a policy trained on a fixed pair (--pair paper or --start/--target)")
@@ -52,11 +54,21 @@ def evaluate_pair(policy: Policy, ds: Dataset, *, max_steps: int | None = None,
     roll = rollout(policy, ds, cells, max_steps=max_steps or pair.cap, device=device)
     travelled = path_length(roll.paths[0])
     success = bool(roll.success[0])
-    row = {"case": f"{policy.meta['dataset']['name']} -> {ds.name} (pair {pair.start} -> {pair.target})",
-           "dataset": ds.name, "version": ds.version, "shield": False, "pairs": 1,
-           "success_rate": float(success), "spl": float(success) * pair.shortest / max(travelled, pair.shortest, 1),
-           "collisions": float(roll.collisions[0]), "steps": float(roll.steps[0]), "path_length": float(travelled),
-           "shortest": float(pair.shortest), "latency_ms": None, "pair": pair.to_dict()}
+    row = {
+        "case": f"{policy.meta['dataset']['name']} -> {ds.name} (pair {pair.start} -> {pair.target})",
+        "dataset": ds.name,
+        "version": ds.version,
+        "shield": False,
+        "pairs": 1,
+        "success_rate": float(success),
+        "spl": float(success) * pair.shortest / max(travelled, pair.shortest, 1),
+        "collisions": float(roll.collisions[0]),
+        "steps": float(roll.steps[0]),
+        "path_length": float(travelled),
+        "shortest": float(pair.shortest),
+        "latency_ms": None,
+        "pair": pair.to_dict(),
+    }
     return row, pair, roll
 
 

@@ -87,8 +87,11 @@ class CrossConfig(Config):
         if not self.scenes:
             raise ConfigError("--scenes is empty", hint="name at least one scene with a trained policy")
         if len(self.scenes) > 1 and "{scene}" not in self.checkpoint_pattern:
-            raise ConfigError(f"--checkpoint-pattern {self.checkpoint_pattern!r} has no {{scene}}: every scene "
-                              "would get the same policy", hint="e.g. runs/{scene}/dqn/model.pt")
+            raise ConfigError(
+                f"--checkpoint-pattern {self.checkpoint_pattern!r} has no {{scene}}: every scene "
+                "would get the same policy",
+                hint="e.g. runs/{scene}/dqn/model.pt",
+            )
         if self.variant not in VARIANTS:
             raise unknown_name("variant (--variant)", self.variant, VARIANTS)
         return self
@@ -101,19 +104,42 @@ def run_eval(cfg: EvalConfig) -> str:
     if getattr(policy.config, "fixed_pair", False):
         return _eval_pair(cfg, policy, ckpt, out)
     rows = []
-    for row, ds, roll in evaluate_twins(policy, cfg.scene, cfg.variants, pairs=cfg.pairs, seed=cfg.seed,
-                                        max_steps=cfg.max_steps or None, device=cfg.device, shield=cfg.shield):
+    for row, ds, roll in evaluate_twins(
+        policy,
+        cfg.scene,
+        cfg.variants,
+        pairs=cfg.pairs,
+        seed=cfg.seed,
+        max_steps=cfg.max_steps or None,
+        device=cfg.device,
+        shield=cfg.shield,
+    ):
         rows.append(row)
         k = min(cfg.plot_paths, len(roll.paths))
         out.mkdir(parents=True, exist_ok=True)
         png = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}.png"
-        plot_paths(ds, roll.paths[:k], out / png,
-                   successes=list(roll.success[:k]),
-                   title=f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}")
+        plot_paths(
+            ds,
+            roll.paths[:k],
+            out / png,
+            successes=list(roll.success[:k]),
+            title=f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}",
+        )
     if cfg.planner:
-        rows += [row for row, _, _ in evaluate_twins(planner_for_scene(cfg.scene, cfg.device), cfg.scene, cfg.variants,
-                                                     label="planner: ", pairs=cfg.pairs, seed=cfg.seed,
-                                                     max_steps=cfg.max_steps or None, device=cfg.device, shield=False)]
+        rows += [
+            row
+            for row, _, _ in evaluate_twins(
+                planner_for_scene(cfg.scene, cfg.device),
+                cfg.scene,
+                cfg.variants,
+                label="planner: ",
+                pairs=cfg.pairs,
+                seed=cfg.seed,
+                max_steps=cfg.max_steps or None,
+                device=cfg.device,
+                shield=False,
+            )
+        ]
     config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
     md = write_results(rows, out, config)
     print(md, end="")
@@ -134,8 +160,13 @@ def _eval_pair(cfg: EvalConfig, policy, ckpt: Path, out: Path) -> str:
         rows.append(row)
         out.mkdir(parents=True, exist_ok=True)
         verdict = f"reached in {int(row['steps'])} steps" if row["success_rate"] else "not reached"
-        plot_paths(ds, roll.paths, out / f"paths_{variant}.png", successes=list(roll.success),
-                   title=f"{ds.name}: pair {pair.start} -> {pair.target} {verdict}, shortest {pair.shortest}")
+        plot_paths(
+            ds,
+            roll.paths,
+            out / f"paths_{variant}.png",
+            successes=list(roll.success),
+            title=f"{ds.name}: pair {pair.start} -> {pair.target} {verdict}, shortest {pair.shortest}",
+        )
     config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
     md = write_results(rows, out, config)
     print(md, end="")
@@ -152,8 +183,11 @@ def run_cross(cfg: CrossConfig) -> None:
     for key in ("success", "spl"):
         plot_matrix(np.array(m[key]), m["rows"], m["cols"], out / f"cross_{key}.png", title=f"{key} (train x eval)")
         plot_bars(m[key], m["rows"], m["cols"], out / f"cross_{key}_bars.png", ylabel=key)
-    rows = [{"case": f"{r} -> {c}", "pairs": cfg.pairs, "success_rate": m["success"][i][j], "spl": m["spl"][i][j]}
-            for i, r in enumerate(m["rows"]) for j, c in enumerate(m["cols"])]
+    rows = [
+        {"case": f"{r} -> {c}", "pairs": cfg.pairs, "success_rate": m["success"][i][j], "spl": m["spl"][i][j]}
+        for i, r in enumerate(m["rows"])
+        for j, c in enumerate(m["cols"])
+    ]
     print(write_results(rows, out, {"cross": dataclasses.asdict(cfg), "matrix": m}, name="cross"), end="")
 
 

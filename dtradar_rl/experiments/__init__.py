@@ -6,5 +6,13 @@ from dtradar_rl.experiments.offline_bench import OfflineBenchConfig, run_bench
 from dtradar_rl.experiments.paper import PaperConfig, run_paper
 from dtradar_rl.experiments.sweep import SweepConfig, sweep
 
-__all__ = ["AdaptConfig", "OfflineBenchConfig", "PaperConfig", "SweepConfig", "adapt", "run_bench", "run_paper",
-           "sweep"]
+__all__ = [
+    "AdaptConfig",
+    "OfflineBenchConfig",
+    "PaperConfig",
+    "SweepConfig",
+    "adapt",
+    "run_bench",
+    "run_paper",
+    "sweep",
+]

@@ -110,11 +110,17 @@ def _curve(cfg: AdaptConfig, label: str, train_cfg, ds, init: Policy | None, out
         q.eval()
         m, _ = evaluate(policy, ds, pairs=cfg.pairs, seed=cfg.pair_seed, latency=False)
         q.train(was_training)
-        rows.append({"train_s": round(train_s, 3), "env_steps": env_steps, "success_rate": m.success_rate,
-                     "spl": m.spl, "collisions": m.collisions})
+        rows.append(
+            {
+                "train_s": round(train_s, 3),
+                "env_steps": env_steps,
+                "success_rate": m.success_rate,
+                "spl": m.spl,
+                "collisions": m.collisions,
+            }
+        )
         if cfg.verbose:
-            print(f"{label:>9s} {train_s:6.1f} s  {env_steps:>8d} steps  success {m.success_rate:.3f}  "
-                  f"SPL {m.spl:.3f}")
+            print(f"{label:>9s} {train_s:6.1f} s  {env_steps:>8d} steps  success {m.success_rate:.3f}  SPL {m.spl:.3f}")
 
     def callback(q, env_steps: int, train_s: float) -> bool:
         if train_s >= holder["next"] or train_s >= cfg.seconds:
@@ -143,17 +149,37 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
     ds = load_dataset(f"{cfg.scene}/{cfg.variant}")
     base = start.config
     if cfg.expert_weight > 0 and base.reward != "geodesic":
-        raise ConfigError(f"{ckpt} was trained with --reward {base.reward}; the expert loss reads the breadth-first "
-                          f"distance tables of the geodesic reward", hint="fine-tune with --expert-weight 0")
+        raise ConfigError(
+            f"{ckpt} was trained with --reward {base.reward}; the expert loss reads the breadth-first "
+            f"distance tables of the geodesic reward",
+            hint="fine-tune with --expert-weight 0",
+        )
     # the clock, not the step budget, ends both runs: exploration and learning rate stay at the fine-tuning values
-    common = {"scene": cfg.scene, "variant": cfg.variant, "seed": cfg.seed, "threads": cfg.threads,
-              "verbose": False, "checkpoint_every": 0, "save_replay": False, "total_env_steps": 50_000_000}
-    finetune_cfg = dataclasses.replace(base, **common, aug_obstacles=cfg.aug_obstacles if cfg.aug_obstacles >= 0
-                                       else base.aug_obstacles, eps_start=cfg.eps, eps_end=cfg.eps,
-                                       lr=cfg.lr, lr_end=-1.0, learning_starts=cfg.learning_starts,
-                                       env_steps_per_update=cfg.env_steps_per_update,
-                                       expert_weight=cfg.expert_weight, expert_margin=cfg.expert_margin,
-                                       out=str(out / "finetune"), resume=False).validate()
+    common = {
+        "scene": cfg.scene,
+        "variant": cfg.variant,
+        "seed": cfg.seed,
+        "threads": cfg.threads,
+        "verbose": False,
+        "checkpoint_every": 0,
+        "save_replay": False,
+        "total_env_steps": 50_000_000,
+    }
+    finetune_cfg = dataclasses.replace(
+        base,
+        **common,
+        aug_obstacles=cfg.aug_obstacles if cfg.aug_obstacles >= 0 else base.aug_obstacles,
+        eps_start=cfg.eps,
+        eps_end=cfg.eps,
+        lr=cfg.lr,
+        lr_end=-1.0,
+        learning_starts=cfg.learning_starts,
+        env_steps_per_update=cfg.env_steps_per_update,
+        expert_weight=cfg.expert_weight,
+        expert_margin=cfg.expert_margin,
+        out=str(out / "finetune"),
+        resume=False,
+    ).validate()
     curves = {"finetune": _curve(cfg, "finetune", finetune_cfg, ds, start, out)}
     if cfg.plain and cfg.expert_weight > 0:
         plain_cfg = dataclasses.replace(finetune_cfg, expert_weight=0.0, out=str(out / "finetune-dqn")).validate()
@@ -164,11 +190,19 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
         steps_per_s = curves["finetune"][-1]["env_steps"] / max(curves["finetune"][-1]["train_s"], 1e-9)
         expected = steps_per_s * cfg.seconds
         preset = config_for(getattr(base, "preset", "tuned"))
-        scratch_cfg = config_for(preset.preset, **{**common, "aug_obstacles": 0, "out": str(out / "scratch"),
-                                 "eps_decay_fraction": min(1.0, preset.eps_decay_fraction * expected
-                                                           / common["total_env_steps"]),
-                                 "lr_end": -1.0, "learning_starts": min(preset.learning_starts, int(expected / 4)),
-                                 "expert_weight": cfg.expert_weight, "expert_margin": cfg.expert_margin})
+        scratch_cfg = config_for(
+            preset.preset,
+            **{
+                **common,
+                "aug_obstacles": 0,
+                "out": str(out / "scratch"),
+                "eps_decay_fraction": min(1.0, preset.eps_decay_fraction * expected / common["total_env_steps"]),
+                "lr_end": -1.0,
+                "learning_starts": min(preset.learning_starts, int(expected / 4)),
+                "expert_weight": cfg.expert_weight,
+                "expert_margin": cfg.expert_margin,
+            },
+        )
         curves["scratch"] = _curve(cfg, "scratch", scratch_cfg, ds, None, out)
     md = _report(cfg, ckpt, curves, out)
     return AdaptResult(out, curves, md)
@@ -185,17 +219,20 @@ def _report(cfg: AdaptConfig, ckpt: Path, curves: dict[str, list[dict[str, float
         w = csv.writer(f)
         w.writerow(["run", "train_s", "env_steps", "success_rate", "spl", "collisions"])
         for run, rows in curves.items():
-            w.writerows([run, r["train_s"], r["env_steps"], r["success_rate"], r["spl"], r["collisions"]]
-                        for r in rows)
+            w.writerows([run, r["train_s"], r["env_steps"], r["success_rate"], r["spl"], r["collisions"]] for r in rows)
     plot_adapt_curves(curves, out / "curve.png", title=f"{cfg.scene}/{cfg.variant}: success vs training seconds")
     lines = ["| run | start | end: success / SPL | seconds to >= 0.95 | seconds to >= 0.99 |", "|---|---|---|---|---|"]
     for run, rows in curves.items():
         t95, t99 = first_time_at(rows, 0.95), first_time_at(rows, 0.99)
-        lines.append(f"| {run} | {rows[0]['success_rate']:.3f} | {rows[-1]['success_rate']:.3f} / "
-                     f"{rows[-1]['spl']:.3f} | {'-' if t95 is None else f'{t95:.1f}'} | "
-                     f"{'-' if t99 is None else f'{t99:.1f}'} |")
+        lines.append(
+            f"| {run} | {rows[0]['success_rate']:.3f} | {rows[-1]['success_rate']:.3f} / "
+            f"{rows[-1]['spl']:.3f} | {'-' if t95 is None else f'{t95:.1f}'} | "
+            f"{'-' if t99 is None else f'{t99:.1f}'} |"
+        )
     md = "\n".join(lines) + "\n"
     write_atomic(out / "adapt.md", md)
-    write_atomic(out / "adapt.json", json.dumps({"config": dataclasses.asdict(cfg), "checkpoint": str(ckpt),
-                                                 "curves": curves}, indent=2) + "\n")
+    write_atomic(
+        out / "adapt.json",
+        json.dumps({"config": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "curves": curves}, indent=2) + "\n",
+    )
     return md

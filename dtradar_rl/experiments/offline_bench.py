@@ -42,8 +42,14 @@ from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
 
-NAMES = {"cql": "DiscreteCQL", "bcq": "DiscreteBCQ", "bc": "DiscreteBC", "dqn": "DQN", "ddqn": "DoubleDQN",
-         "nfq": "NFQ"}
+NAMES = {
+    "cql": "DiscreteCQL",
+    "bcq": "DiscreteBCQ",
+    "bc": "DiscreteBC",
+    "dqn": "DQN",
+    "ddqn": "DoubleDQN",
+    "nfq": "NFQ",
+}
 
 
 @dataclass(frozen=True)
@@ -112,19 +118,29 @@ def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, An
 
     say(f"no online DQN at {path}: training one (tuned, {cfg.online_steps} env steps)")
     t0 = time.perf_counter()
-    dqn_cfg = replace(config_for("tuned", scene=cfg.scene), total_env_steps=cfg.online_steps, device=cfg.device,
-                      out=str(cfg.out_dir / "online_dqn"), verbose=False)
+    dqn_cfg = replace(
+        config_for("tuned", scene=cfg.scene),
+        total_env_steps=cfg.online_steps,
+        device=cfg.device,
+        out=str(cfg.out_dir / "online_dqn"),
+        verbose=False,
+    )
     result = train(dqn_cfg.validate())
-    return result.checkpoint, {"trained_here": True, "train_s": time.perf_counter() - t0,
-                               "env_steps": result.env_steps}
+    return result.checkpoint, {"trained_here": True, "train_s": time.perf_counter() - t0, "env_steps": result.env_steps}
 
 
-def evaluate_behaviour(cfg: OfflineBenchConfig, behaviour: str, checkpoint: str | Path | None,
-                       twins: dict[str, Any], blueprint: Any) -> dict[str, dict[str, float]]:
+def evaluate_behaviour(
+    cfg: OfflineBenchConfig, behaviour: str, checkpoint: str | Path | None, twins: dict[str, Any], blueprint: Any
+) -> dict[str, dict[str, float]]:
     """The behaviour policy itself, rolled out with our evaluation (same seeded pairs as the trained agents) on
     every twin: ``{variant: {success_rate, spl, collisions}}``."""
-    log_cfg = LogConfig(scene=cfg.scene, behaviour=behaviour, shortest_prob=cfg.shortest_prob, epsilon=cfg.epsilon,
-                        checkpoint=str(checkpoint or ""))
+    log_cfg = LogConfig(
+        scene=cfg.scene,
+        behaviour=behaviour,
+        shortest_prob=cfg.shortest_prob,
+        epsilon=cfg.epsilon,
+        checkpoint=str(checkpoint or ""),
+    )
     bp = behaviour_policy(log_cfg.spec(), blueprint, obs=log_cfg.obs, seed=2024, device=cfg.device)
     out = {}
     for name, ds in twins.items():
@@ -143,8 +159,14 @@ def aggregate(values: list[float]) -> dict[str, float]:
     return {"mean": float(v.mean()), "std": float(v.std(ddof=0)), "n": int(len(v))}
 
 
-def _finish(cfg: OfflineBenchConfig, online: dict[str, Any], datasets: dict[str, Any], runs: list[dict[str, Any]],
-            m_start: dict[str, Any], t_start: float) -> dict[str, Any]:
+def _finish(
+    cfg: OfflineBenchConfig,
+    online: dict[str, Any],
+    datasets: dict[str, Any],
+    runs: list[dict[str, Any]],
+    m_start: dict[str, Any],
+    t_start: float,
+) -> dict[str, Any]:
     """Aggregate the runs so far (mean ± std over seeds) and write ``bench.{json,md,png}``."""
     out = cfg.out_dir
     summary = []
@@ -153,16 +175,26 @@ def _finish(cfg: OfflineBenchConfig, online: dict[str, Any], datasets: dict[str,
             rs = [r for r in runs if r["behaviour"] == beh and r["algorithm"] == algo]
             if not rs:
                 continue
-            entry = {"behaviour": beh, "algorithm": algo, "seeds": [r["seed"] for r in rs],
-                     "train_s": aggregate([r["train_s"] for r in rs])}
+            entry = {
+                "behaviour": beh,
+                "algorithm": algo,
+                "seeds": [r["seed"] for r in rs],
+                "train_s": aggregate([r["train_s"] for r in rs]),
+            }
             for v in cfg.variants:
                 if all(v in r for r in rs):
                     entry[v] = {m: aggregate([r[v][m] for r in rs]) for m in METRICS}
             summary.append(entry)
-    result = {"config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.__dict__.items()},
-              "algorithms": {a: NAMES[a] for a in cfg.algorithms}, "online_dqn": online, "datasets": datasets,
-              "summary": summary, "runs": runs, "machine": {"start": m_start, "end": machine()},
-              "wall_s": time.perf_counter() - t_start}
+    result = {
+        "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.__dict__.items()},
+        "algorithms": {a: NAMES[a] for a in cfg.algorithms},
+        "online_dqn": online,
+        "datasets": datasets,
+        "summary": summary,
+        "runs": runs,
+        "machine": {"start": m_start, "end": machine()},
+        "wall_s": time.perf_counter() - t_start,
+    }
     write_atomic(out / "bench.json", json.dumps(result, indent=2) + "\n")
     write_atomic(out / "bench.md", markdown(result))
     plot(result, out / "bench.png")
@@ -185,42 +217,95 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     if needs_dqn or cfg.checkpoint or dqn_checkpoint(cfg.scene).is_file():
         ckpt, info = _online_checkpoint(cfg, say)
         policy = load_policy(ckpt, cfg.device)
-        rows = [r for r, _, _ in evaluate_twins(policy, cfg.scene, cfg.variants, pairs=cfg.pairs, seed=2024,
-                                                  device=cfg.device, shield=False, datasets=twins)]
-        online = {"checkpoint": str(ckpt), **info,
-                  **{r["dataset"].split("/")[1]: {m: float(r[m]) for m in METRICS} for r in rows}}
-        say(f"online DQN {ckpt}: " + ", ".join(f"{v} success {online[v]['success_rate']:.3f}" for v in cfg.variants
-                                                if v in online))
+        rows = [
+            r
+            for r, _, _ in evaluate_twins(
+                policy,
+                cfg.scene,
+                cfg.variants,
+                pairs=cfg.pairs,
+                seed=2024,
+                device=cfg.device,
+                shield=False,
+                datasets=twins,
+            )
+        ]
+        online = {
+            "checkpoint": str(ckpt),
+            **info,
+            **{r["dataset"].split("/")[1]: {m: float(r[m]) for m in METRICS} for r in rows},
+        }
+        say(
+            f"online DQN {ckpt}: "
+            + ", ".join(f"{v} success {online[v]['success_rate']:.3f}" for v in cfg.variants if v in online)
+        )
 
     datasets: dict[str, Any] = {}
     runs: list[dict[str, Any]] = []
     for beh in cfg.behaviours:
-        log_cfg = LogConfig(scene=cfg.scene, behaviour=beh, steps=cfg.steps, shortest_prob=cfg.shortest_prob,
-                            epsilon=cfg.epsilon, checkpoint=str(ckpt or ""), num_envs=cfg.num_envs,
-                            device=cfg.device, minari=False, verbose=cfg.verbose)
+        log_cfg = LogConfig(
+            scene=cfg.scene,
+            behaviour=beh,
+            steps=cfg.steps,
+            shortest_prob=cfg.shortest_prob,
+            epsilon=cfg.epsilon,
+            checkpoint=str(ckpt or ""),
+            num_envs=cfg.num_envs,
+            device=cfg.device,
+            minari=False,
+            verbose=cfg.verbose,
+        )
         t0 = time.perf_counter()
         logged = log_dataset(log_cfg, blueprint)
         # recomputed, not read from the card: logs stored by an older dtradar counted end-of-log cuts as failures
         s = episode_stats(logged.table, (logged.meta.get("settings") or {}).get("max_steps"))
-        datasets[beh] = {"name": logged.name, "version": logged.version, "tag": logged.tag, "steps": s["steps"],
-                         "episodes": s["episodes"], "cut_by_end_of_log": s["cut_by_end_of_log"],
-                         "success_rate": s["success_rate"], "reached_of_all": s["reached_of_all"],
-                         "mean_return": s["mean_return"], "log_s": time.perf_counter() - t0,
-                         "eval": evaluate_behaviour(cfg, beh, ckpt, twins, blueprint)}
+        datasets[beh] = {
+            "name": logged.name,
+            "version": logged.version,
+            "tag": logged.tag,
+            "steps": s["steps"],
+            "episodes": s["episodes"],
+            "cut_by_end_of_log": s["cut_by_end_of_log"],
+            "success_rate": s["success_rate"],
+            "reached_of_all": s["reached_of_all"],
+            "mean_return": s["mean_return"],
+            "log_s": time.perf_counter() - t0,
+            "eval": evaluate_behaviour(cfg, beh, ckpt, twins, blueprint),
+        }
         for algo in cfg.algorithms:
             for seed in cfg.seeds:
-                ocfg = OfflineConfig(scene=cfg.scene, algorithm=algo, seed=seed, n_steps=cfg.n_steps,
-                                     pairs=cfg.pairs, eval_variants=tuple(cfg.variants), shield=False,
-                                     device=cfg.device, num_envs=cfg.num_envs, verbose=False,
-                                     out=str(out / "runs" / beh / algo / f"seed{seed}"))
+                ocfg = OfflineConfig(
+                    scene=cfg.scene,
+                    algorithm=algo,
+                    seed=seed,
+                    n_steps=cfg.n_steps,
+                    pairs=cfg.pairs,
+                    eval_variants=tuple(cfg.variants),
+                    shield=False,
+                    device=cfg.device,
+                    num_envs=cfg.num_envs,
+                    verbose=False,
+                    out=str(out / "runs" / beh / algo / f"seed{seed}"),
+                )
                 r = train_offline(ocfg, dataset=logged)
-                run = {"behaviour": beh, "algorithm": algo, "seed": seed, "train_s": r.train_s, "wall_s": r.wall_s,
-                       **{v: _row_metrics(r.rows, f"{cfg.scene}/{v}") for v in cfg.variants
-                          if any(x["dataset"] == f"{cfg.scene}/{v}" for x in r.rows)}}
+                run = {
+                    "behaviour": beh,
+                    "algorithm": algo,
+                    "seed": seed,
+                    "train_s": r.train_s,
+                    "wall_s": r.wall_s,
+                    **{
+                        v: _row_metrics(r.rows, f"{cfg.scene}/{v}")
+                        for v in cfg.variants
+                        if any(x["dataset"] == f"{cfg.scene}/{v}" for x in r.rows)
+                    },
+                }
                 runs.append(run)
-                say(f"[{time.perf_counter() - t_start:7.1f}s] {beh:<15} {NAMES[algo]:<12} seed {seed}: "
+                say(
+                    f"[{time.perf_counter() - t_start:7.1f}s] {beh:<15} {NAMES[algo]:<12} seed {seed}: "
                     + ", ".join(f"{v} {run[v]['success_rate']:.3f}" for v in cfg.variants if v in run)
-                    + f" ({r.train_s:.1f} s training)")
+                    + f" ({r.train_s:.1f} s training)"
+                )
         _finish(cfg, online, datasets, runs, m_start, t_start)  # partial results survive an interrupted run
 
     result = _finish(cfg, online, datasets, runs, m_start, t_start)
@@ -239,12 +324,19 @@ def markdown(result: dict[str, Any]) -> str:
     """The benchmark table: one row per behaviour dataset, then one per algorithm trained on it (mean ± std)."""
     cfg = result["config"]
     variants = cfg["variants"]
-    head = "| dataset | policy | " + " | ".join(f"{v}: success | {v}: SPL | {v}: collisions/ep" for v in variants) \
+    head = (
+        "| dataset | policy | "
+        + " | ".join(f"{v}: success | {v}: SPL | {v}: collisions/ep" for v in variants)
         + " | train (s) |"
-    lines = [f"Offline RL on `{cfg['scene']}` ({len(cfg['seeds'])} seed(s): {', '.join(map(str, cfg['seeds']))}; "
-             f"{cfg['n_steps']} d3rlpy updates; {cfg['steps']} logged steps per behaviour; {cfg['pairs']} seeded "
-             "pairs per twin, unshielded; mean ± std over seeds)", "", head,
-             "|" + "---|" * (3 + 3 * len(variants))]
+    )
+    lines = [
+        f"Offline RL on `{cfg['scene']}` ({len(cfg['seeds'])} seed(s): {', '.join(map(str, cfg['seeds']))}; "
+        f"{cfg['n_steps']} d3rlpy updates; {cfg['steps']} logged steps per behaviour; {cfg['pairs']} seeded "
+        "pairs per twin, unshielded; mean ± std over seeds)",
+        "",
+        head,
+        "|" + "---|" * (3 + 3 * len(variants)),
+    ]
     online = result.get("online_dqn") or {}
     if online:
         cells = []
@@ -255,22 +347,33 @@ def markdown(result: dict[str, Any]) -> str:
         lines.append("| (online) | DQN, tuned | " + " | ".join(cells) + " | - |")
     for beh, d in result["datasets"].items():
         ev = d.get("eval") or {}
-        blank = " | ".join(f"{ev[v]['success_rate']:.3f} | {ev[v]['spl']:.3f} | {ev[v]['collisions']:.2f}" if v in ev
-                           else "- | - | -" for v in variants)
-        lines.append(f"| `{d['name']}`@{d['tag']} | behaviour itself (its logged episodes on the blueprint: success "
-                     f"{d['success_rate']:.3f} of finished episodes, {d.get('reached_of_all', 0):.3f} of all; mean return {d['mean_return']:.2f}, {d['episodes']} episodes, "
-                     f"{d.get('cut_by_end_of_log', 0)} cut by the end of logging) | "
-                     f"{blank} | - |")
+        blank = " | ".join(
+            f"{ev[v]['success_rate']:.3f} | {ev[v]['spl']:.3f} | {ev[v]['collisions']:.2f}" if v in ev else "- | - | -"
+            for v in variants
+        )
+        lines.append(
+            f"| `{d['name']}`@{d['tag']} | behaviour itself (its logged episodes on the blueprint: success "
+            f"{d['success_rate']:.3f} of finished episodes, {d.get('reached_of_all', 0):.3f} of all; "
+            f"mean return {d['mean_return']:.2f}, {d['episodes']} episodes, "
+            f"{d.get('cut_by_end_of_log', 0)} cut by the end of logging) | "
+            f"{blank} | - |"
+        )
         for e in (e for e in result["summary"] if e["behaviour"] == beh):
             cells = []
             for v in variants:
                 m = e.get(v) or {}
                 cells += [_pm(m.get("success_rate")), _pm(m.get("spl")), _pm(m.get("collisions"), "{:.2f}")]
-            lines.append(f"| {beh} | {result['algorithms'][e['algorithm']]} | " + " | ".join(cells)
-                         + f" | {e['train_s']['mean']:.1f} |")
+            lines.append(
+                f"| {beh} | {result['algorithms'][e['algorithm']]} | "
+                + " | ".join(cells)
+                + f" | {e['train_s']['mean']:.1f} |"
+            )
     mach = result["machine"]
-    lines += ["", f"Machine: {describe(mach['start'])}; load average (1/5/15 min) at start "
-                  f"{_load(mach['start'])}, at end {_load(mach['end'])}; total wall time {result['wall_s']:.0f} s."]
+    lines += [
+        "",
+        f"Machine: {describe(mach['start'])}; load average (1/5/15 min) at start "
+        f"{_load(mach['start'])}, at end {_load(mach['end'])}; total wall time {result['wall_s']:.0f} s.",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -300,10 +403,17 @@ def plot(result: dict[str, Any], path: Path) -> Path:
                 m = (e.get(v) or {}).get("success_rate") or {"mean": np.nan, "std": 0.0}
                 means.append(m["mean"])
                 stds.append(m["std"])
-            ax.bar(x + (k - (len(algos) - 1) / 2) * width, means, width, yerr=stds, capsize=2,
-                   label=result["algorithms"][a])
-        beh_success = [((result["datasets"][b].get("eval") or {}).get(v) or {}).get("success_rate", np.nan)
-                       for b in behs]
+            ax.bar(
+                x + (k - (len(algos) - 1) / 2) * width,
+                means,
+                width,
+                yerr=stds,
+                capsize=2,
+                label=result["algorithms"][a],
+            )
+        beh_success = [
+            ((result["datasets"][b].get("eval") or {}).get(v) or {}).get("success_rate", np.nan) for b in behs
+        ]
         ax.scatter(x, beh_success, marker="x", color="k", zorder=3, label="behaviour itself")
         online = (result.get("online_dqn") or {}).get(v)
         if online:

@@ -38,8 +38,18 @@ from dtradar_rl.train.dqn import train
 from dtradar_rl.viz.figures import plot_bars, plot_episode_curves
 from dtradar_rl.viz.plots import plot_matrix, plot_paths
 
-DEFAULT_SCENES = ("cubicle", "meeting", "dallas-q1", "dallas-q2", "dallas-q3", "dallas-q4",
-                  "houston-q1", "houston-q2", "houston-q3", "houston-q4")
+DEFAULT_SCENES = (
+    "cubicle",
+    "meeting",
+    "dallas-q1",
+    "dallas-q2",
+    "dallas-q3",
+    "dallas-q4",
+    "houston-q1",
+    "houston-q2",
+    "houston-q3",
+    "houston-q4",
+)
 
 _QUADRANT = re.compile(r"^(.+)-q(\d)$")
 
@@ -185,9 +195,18 @@ def run_paper(cfg: PaperConfig) -> Report:
                 say(f"  {name}: not built, skipped -- build it with: {build_command(scene)}")
     for name, ds in twins.items():
         free = int((~ds.blocked).sum())
-        report.datasets.append({"dataset": name, "nx": ds.shape[1], "ny": ds.shape[0],
-                                "cell_m": ds.grid_info.cell_m, "rows": ds.table.num_rows, "free": free,
-                                "bytes": _size_on_disk(ds), "version": ds.version})
+        report.datasets.append(
+            {
+                "dataset": name,
+                "nx": ds.shape[1],
+                "ny": ds.shape[0],
+                "cell_m": ds.grid_info.cell_m,
+                "rows": ds.table.num_rows,
+                "free": free,
+                "bytes": _size_on_disk(ds),
+                "version": ds.version,
+            }
+        )
         png = figs / f"coverage_{name.replace('/', '_')}.png"
         src = Path(ds.path) / "coverage.png" if ds.path else None
         if src is not None and src.is_file():
@@ -203,9 +222,15 @@ def run_paper(cfg: PaperConfig) -> Report:
         if bp is None:
             continue
         say(f"training the paper's agent on {scene}/blueprint (Table VI pair)")
-        tcfg = config_for("paper", scene=scene, seed=cfg.seed, threads=cfg.threads, device=cfg.device,
-                          out=str(out / "train" / scene / "paper"),
-                          **({"episodes": cfg.episodes} if cfg.episodes else {}))
+        tcfg = config_for(
+            "paper",
+            scene=scene,
+            seed=cfg.seed,
+            threads=cfg.threads,
+            device=cfg.device,
+            out=str(out / "train" / scene / "paper"),
+            **({"episodes": cfg.episodes} if cfg.episodes else {}),
+        )
         ckpt, reused = _train_or_reuse(tcfg, bp, cfg.retrain, say)
         policy = load_policy(ckpt, cfg.device)
         stats, pair = policy.meta["stats"], policy.meta["stats"]["pair"]
@@ -215,14 +240,28 @@ def run_paper(cfg: PaperConfig) -> Report:
         near = next((e for e in reached if e[3] <= 1.1 * pair["shortest"]), None)
         row = paper_pair(scene)
         png = figs / f"training_{scene}.png"
-        plot_episode_curves(episodes, png, shortest=pair["shortest"], paper_min=row.min_steps if row else None,
-                            title=f"{scene}/blueprint: the paper's agent, pair {pair['start']} -> {pair['target']}")
-        entry = {"scene": scene, "png": png.name, "pair": pair, "reused": reused,
-                 "episodes": stats["episodes"], "env_steps": stats["env_steps"], "updates": stats["updates"],
-                 "wall_s": stats["wall_s"], "reached": len(reached),
-                 "min_steps": best[3] if best else None, "min_episode": best[0] + 1 if best else None,
-                 "first_within_10pct": near[0] + 1 if near else None,
-                 "paper": asdict(row) if row else None}
+        plot_episode_curves(
+            episodes,
+            png,
+            shortest=pair["shortest"],
+            paper_min=row.min_steps if row else None,
+            title=f"{scene}/blueprint: the paper's agent, pair {pair['start']} -> {pair['target']}",
+        )
+        entry = {
+            "scene": scene,
+            "png": png.name,
+            "pair": pair,
+            "reused": reused,
+            "episodes": stats["episodes"],
+            "env_steps": stats["env_steps"],
+            "updates": stats["updates"],
+            "wall_s": stats["wall_s"],
+            "reached": len(reached),
+            "min_steps": best[3] if best else None,
+            "min_episode": best[0] + 1 if best else None,
+            "first_within_10pct": near[0] + 1 if near else None,
+            "paper": asdict(row) if row else None,
+        }
         for variant in ("blueprint", "dynamic"):
             ds = twins.get(f"{scene}/{variant}")
             if ds is None:
@@ -230,23 +269,42 @@ def run_paper(cfg: PaperConfig) -> Report:
             r, placed, roll = evaluate_pair(policy, ds, device=cfg.device)
             png = figs / f"paths_{scene}_{variant}.png"
             verdict = f"reached in {int(r['steps'])} steps" if r["success_rate"] else f"not reached ({placed.cap} cap)"
-            plot_paths(ds, roll.paths, png, successes=list(roll.success),
-                       title=f"{ds.name}: the paper's agent, {verdict}; shortest {placed.shortest}"
-                             + (f"; paper: {row.min_steps} (its grid)" if row else ""))
-            report.inference.append({"scene": scene, "variant": variant, "png": png.name,
-                                     "reached": bool(r["success_rate"]), "steps": int(r["steps"]),
-                                     "path_length": int(r["path_length"]), "collisions": int(r["collisions"]),
-                                     "shortest": placed.shortest, "start": placed.start, "target": placed.target})
+            plot_paths(
+                ds,
+                roll.paths,
+                png,
+                successes=list(roll.success),
+                title=f"{ds.name}: the paper's agent, {verdict}; shortest {placed.shortest}"
+                + (f"; paper: {row.min_steps} (its grid)" if row else ""),
+            )
+            report.inference.append(
+                {
+                    "scene": scene,
+                    "variant": variant,
+                    "png": png.name,
+                    "reached": bool(r["success_rate"]),
+                    "steps": int(r["steps"]),
+                    "path_length": int(r["path_length"]),
+                    "collisions": int(r["collisions"]),
+                    "shortest": placed.shortest,
+                    "start": placed.start,
+                    "target": placed.target,
+                }
+            )
         greedy = next((i for i in report.inference if i["scene"] == scene and i["variant"] == "blueprint"), None)
         entry["greedy_steps"] = greedy["steps"] if greedy and greedy["reached"] else None
         report.training.append(entry)
-        say(f"  {scene}: {entry['episodes']} episodes, {entry['env_steps']} env steps, {entry['wall_s']:.0f} s; "
-            f"min steps {entry['min_steps']} (episode {entry['min_episode']}), shortest {pair['shortest']}")
+        say(
+            f"  {scene}: {entry['episodes']} episodes, {entry['env_steps']} env steps, {entry['wall_s']:.0f} s; "
+            f"min steps {entry['min_steps']} (episode {entry['min_episode']}), shortest {pair['shortest']}"
+        )
 
     if cfg.cross:
         for group, scenes in cross_groups(cfg, twins):
-            say(f"cross-quadrant matrix of {group}: goal-conditioned agents ({cfg.cross_preset}, "
-                f"{cfg.cross_steps:,} steps each) on {', '.join(scenes)}")
+            say(
+                f"cross-quadrant matrix of {group}: goal-conditioned agents ({cfg.cross_preset}, "
+                f"{cfg.cross_steps:,} steps each) on {', '.join(scenes)}"
+            )
             report.cross.append(_cross(cfg, group, scenes, twins, out, figs, say))
 
     report.wall_s = time.perf_counter() - say.t0
@@ -271,13 +329,21 @@ def cross_groups(cfg: PaperConfig, twins: dict[str, Dataset]) -> list[tuple[str,
     return groups
 
 
-def _cross(cfg: PaperConfig, group: str, scenes: list[str], twins: dict[str, Dataset], out: Path, figs: Path,
-           say) -> dict[str, Any]:
+def _cross(
+    cfg: PaperConfig, group: str, scenes: list[str], twins: dict[str, Dataset], out: Path, figs: Path, say
+) -> dict[str, Any]:
     datasets = {s: twins.get(f"{s}/blueprint") or load_dataset(f"{s}/blueprint") for s in scenes}
     policies, own, times = {}, {}, {}
     for s in scenes:
-        tcfg = config_for(cfg.cross_preset, scene=s, seed=cfg.seed, threads=cfg.threads, device=cfg.device,
-                          total_env_steps=cfg.cross_steps, out=str(out / "train" / s / cfg.cross_preset))
+        tcfg = config_for(
+            cfg.cross_preset,
+            scene=s,
+            seed=cfg.seed,
+            threads=cfg.threads,
+            device=cfg.device,
+            total_env_steps=cfg.cross_steps,
+            out=str(out / "train" / s / cfg.cross_preset),
+        )
         ckpt, _ = _train_or_reuse(tcfg, datasets[s], cfg.retrain, say)
         policies[s] = load_policy(ckpt, cfg.device)
         times[s] = policies[s].meta["stats"].get("wall_s")
@@ -287,12 +353,31 @@ def _cross(cfg: PaperConfig, group: str, scenes: list[str], twins: dict[str, Dat
         own[s] = {"success": m["success"][i][i], "spl": m["spl"][i][i]}
     pngs = {}
     for key in ("success", "spl"):
-        pngs[f"heatmap_{key}"] = plot_matrix(m[key], scenes, scenes, figs / f"cross_{group}_{key}.png",
-                                             title=f"{group}: {key} (trained on row, evaluated on column)").name
-    pngs["bars"] = plot_bars(m["success"], scenes, scenes, figs / f"cross_{group}_bars.png",
-                             title=f"{group}: cross-quadrant inference, success over {cfg.cross_pairs} pairs").name
-    return {"group": group, "scenes": scenes, "matrix": m, "own": own, "train_s": times, "png": pngs,
-            "preset": cfg.cross_preset, "steps": cfg.cross_steps, "pairs": cfg.cross_pairs}
+        pngs[f"heatmap_{key}"] = plot_matrix(
+            m[key],
+            scenes,
+            scenes,
+            figs / f"cross_{group}_{key}.png",
+            title=f"{group}: {key} (trained on row, evaluated on column)",
+        ).name
+    pngs["bars"] = plot_bars(
+        m["success"],
+        scenes,
+        scenes,
+        figs / f"cross_{group}_bars.png",
+        title=f"{group}: cross-quadrant inference, success over {cfg.cross_pairs} pairs",
+    ).name
+    return {
+        "group": group,
+        "scenes": scenes,
+        "matrix": m,
+        "own": own,
+        "train_s": times,
+        "png": pngs,
+        "preset": cfg.cross_preset,
+        "steps": cfg.cross_steps,
+        "pairs": cfg.cross_pairs,
+    }
 
 
 __all__ = ["PaperConfig", "Report", "run_paper", "machine_info", "cross_groups", "DEFAULT_SCENES"]

@@ -5,9 +5,9 @@
     python -m dtradar_rl sweep --scenes cubicle --ray-address auto               # an existing Ray cluster
 
 Each run is the same as ``make train`` then ``make eval`` (:func:`~dtradar_rl.train.dqn.train`,
-:func:`~dtradar_rl.evaluation.evaluate.evaluate_twins`), with its own output folder ``<out>/<scene>/seed<k>``; a Ray task asks
-for ``threads`` CPUs and uses that many torch threads, so runs do not fight over cores. The results are gathered
-into ``sweep.json``, ``sweep.md`` (mean and standard deviation over seeds per scene and evaluation case) and
+:func:`~dtradar_rl.evaluation.evaluate.evaluate_twins`), with its own output folder ``<out>/<scene>/seed<k>``; a Ray
+task asks for ``threads`` CPUs and uses that many torch threads, so runs do not fight over cores. The results are
+gathered into ``sweep.json``, ``sweep.md`` (mean and standard deviation over seeds per scene and evaluation case) and
 ``sweep.png`` (bars with the spread).
 """
 
@@ -64,8 +64,7 @@ class SweepConfig:
         if self.preset not in PRESETS:
             raise ConfigError(f"{flag('preset')} {self.preset!r} is not a preset", hint=", ".join(PRESETS))
         if self.threads < 1 or self.pairs < 1 or self.total_env_steps < 0:
-            raise ConfigError(f"{flag('threads')} and {flag('pairs')} must be >= 1, "
-                              f"{flag('total_env_steps')} >= 0")
+            raise ConfigError(f"{flag('threads')} and {flag('pairs')} must be >= 1, {flag('total_env_steps')} >= 0")
         if self.executor == "serial" and self.ray_address:
             raise ConfigError("--ray-address applies to --executor ray only")
         return self
@@ -77,23 +76,39 @@ def run_one(scene: str, seed: int, cfg: SweepConfig) -> dict[str, Any]:
 
     torch.set_num_threads(cfg.threads)
     overrides = {"total_env_steps": cfg.total_env_steps} if cfg.total_env_steps else {}
-    dq = config_for(cfg.preset, scene=scene, seed=seed, threads=cfg.threads, verbose=False,
-                    out=str(Path(cfg.out) / scene / f"seed{seed}"), **overrides)
+    dq = config_for(
+        cfg.preset,
+        scene=scene,
+        seed=seed,
+        threads=cfg.threads,
+        verbose=False,
+        out=str(Path(cfg.out) / scene / f"seed{seed}"),
+        **overrides,
+    )
     t0 = time.perf_counter()
     result = train(dq)
     train_s = time.perf_counter() - t0
     policy = load_policy(result.checkpoint)
     rows = [row for row, _, _ in evaluate_twins(policy, scene, cfg.variants, pairs=cfg.pairs, shield=False)]
-    return {"scene": scene, "seed": seed, "train_s": round(train_s, 2), "env_steps": result.env_steps,
-            "rows": rows, "checkpoint": str(result.checkpoint), "pid": os.getpid()}
+    return {
+        "scene": scene,
+        "seed": seed,
+        "train_s": round(train_s, 2),
+        "env_steps": result.env_steps,
+        "rows": rows,
+        "checkpoint": str(result.checkpoint),
+        "pid": os.getpid(),
+    }
 
 
 def _import_ray():
     try:
         import ray
     except ImportError as e:
-        raise MissingDependencyError("--executor ray needs Ray, which is not installed",
-                                     hint="pip install 'dtradar[ray]', or use --executor serial") from e
+        raise MissingDependencyError(
+            "--executor ray needs Ray, which is not installed",
+            hint="pip install 'dtradar[ray]', or use --executor serial",
+        ) from e
     return ray
 
 
@@ -117,8 +132,12 @@ def sweep(cfg: SweepConfig) -> dict[str, Any]:
     else:
         runs = [run_one(s, k, cfg) for s, k in jobs]
     summary = summarise(runs)
-    result = {"config": dataclasses.asdict(cfg), "wall_s": round(time.perf_counter() - t0, 2), "runs": runs,
-              "summary": summary}
+    result = {
+        "config": dataclasses.asdict(cfg),
+        "wall_s": round(time.perf_counter() - t0, 2),
+        "runs": runs,
+        "summary": summary,
+    }
     write_report(result, Path(cfg.out))
     return result
 
@@ -143,9 +162,13 @@ def write_report(result: dict[str, Any], out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     write_atomic(out / "sweep.json", json.dumps(result, indent=2) + "\n")
     cfg = result["config"]
-    lines = [f"# Sweep: {', '.join(cfg['scenes'])} x seeds {', '.join(map(str, cfg['seeds']))} "
-             f"({cfg['preset']} preset, {cfg['executor']}, {result['wall_s']} s)", "",
-             "| trained on | evaluated on | seeds | success | SPL | collisions / episode |", "|---|---|---:|---|---|---|"]
+    lines = [
+        f"# Sweep: {', '.join(cfg['scenes'])} x seeds {', '.join(map(str, cfg['seeds']))} "
+        f"({cfg['preset']} preset, {cfg['executor']}, {result['wall_s']} s)",
+        "",
+        "| trained on | evaluated on | seeds | success | SPL | collisions / episode |",
+        "|---|---|---:|---|---|---|",
+    ]
     for e in result["summary"]:
         cells = " | ".join(f"{e[m]['mean']:.3f} ± {e[m]['std']:.3f}" for m in METRICS)
         lines.append(f"| {e['scene']}/blueprint | {e['evaluated_on']} | {e['seeds']} | {cells} |")
@@ -160,8 +183,14 @@ def _plot(summary: list[dict[str, Any]], path: Path) -> None:
     labels = [f"{e['scene']} →\n{e['evaluated_on'].split('/')[-1]}" for e in summary]
     x = np.arange(len(summary))
     for i, m in enumerate(("success_rate", "spl")):
-        ax.bar(x + (i - 0.5) * 0.35, [e[m]["mean"] for e in summary], 0.35, yerr=[e[m]["std"] for e in summary],
-               capsize=3, label=m.replace("_", " "))
+        ax.bar(
+            x + (i - 0.5) * 0.35,
+            [e[m]["mean"] for e in summary],
+            0.35,
+            yerr=[e[m]["std"] for e in summary],
+            capsize=3,
+            label=m.replace("_", " "),
+        )
     ax.set_xticks(x, labels, fontsize=8)
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("mean over seeds (± std)")

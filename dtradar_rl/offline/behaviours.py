@@ -1,6 +1,7 @@
 """Behaviour policies that log offline-RL data, and the batched rollout that logs them.
 
-Kinds (:data:`BEHAVIOURS`), all seeded, each acting for every robot of a :class:`~dtradar_rl.envs.batched.BatchedNavEnv`:
+Kinds (:data:`BEHAVIOURS`), all seeded, each acting for every robot of a
+:class:`~dtradar_rl.envs.batched.BatchedNavEnv`:
 
 - ``random``: a uniformly random move at every step.
 - ``noisy-shortest``: with probability ``shortest_prob`` a breadth-first shortest-path move towards the target
@@ -59,11 +60,15 @@ class BehaviourSpec:
         if self.kind == "mixture" and not self.components:
             raise ConfigError("--components must list at least one behaviour for a mixture")
         if "epsilon-greedy" in self.used and not self.checkpoint:
-            raise ConfigError(f"the {self.kind} behaviour needs a trained DQN checkpoint",
-                              hint="pass --checkpoint runs/<scene>/dqn/model.pt (train one with `make train`)")
+            raise ConfigError(
+                f"the {self.kind} behaviour needs a trained DQN checkpoint",
+                hint="pass --checkpoint runs/<scene>/dqn/model.pt (train one with `make train`)",
+            )
         if "epsilon-greedy" in self.used and not Path(self.checkpoint).is_file():
-            raise ConfigError(f"--checkpoint {self.checkpoint} does not exist",
-                              hint="train one with `make train SCENE=<scene>` or pass the model.pt it wrote")
+            raise ConfigError(
+                f"--checkpoint {self.checkpoint} does not exist",
+                hint="train one with `make train SCENE=<scene>` or pass the model.pt it wrote",
+            )
         return self
 
     @property
@@ -91,14 +96,16 @@ class BehaviourSpec:
         text = {
             "random": "a uniformly random move (X−, X+, Y−, Y+) at every step",
             "noisy-shortest": f"with probability {self.shortest_prob} a breadth-first shortest-path move towards the "
-                              "target (ties broken at random), otherwise a uniformly random move",
+            "target (ties broken at random), otherwise a uniformly random move",
             "epsilon-greedy": f"the greedy move of a trained DQN checkpoint (sha256 recorded below), replaced with "
-                              f"probability {self.epsilon} by a uniformly random move",
+            f"probability {self.epsilon} by a uniformly random move",
         }
         if self.kind == "mixture":
             parts = "; ".join(f"component {i} `{c}`: {text[c]}" for i, c in enumerate(self.components))
-            return (f"A mixture (the D4RL medium-replay idea): robot i acts with component i mod "
-                    f"{len(self.components)} for the whole log. {parts}.")
+            return (
+                f"A mixture (the D4RL medium-replay idea): robot i acts with component i mod "
+                f"{len(self.components)} for the whole log. {parts}."
+            )
         return f"`{self.kind}`: {text[self.kind]}."
 
 
@@ -119,8 +126,7 @@ class BehaviourConfig(TwinConfig):
     """mixture: the behaviours robots are split between (robot i uses component i mod k)"""
 
     def spec(self) -> BehaviourSpec:
-        return BehaviourSpec(self.behaviour, self.shortest_prob, self.epsilon, self.checkpoint,
-                             tuple(self.components))
+        return BehaviourSpec(self.behaviour, self.shortest_prob, self.epsilon, self.checkpoint, tuple(self.components))
 
     def validate(self):
         super().validate()
@@ -208,20 +214,27 @@ def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, dev
         return None
     policy = load_policy(spec.checkpoint, device)
     if policy.obs_preset != obs:
-        raise ConfigError(f"the checkpoint {spec.checkpoint} observes {policy.obs_preset!r}, the log {obs!r}",
-                          hint=f"pass --obs {policy.obs_preset}")
-    if not np.allclose(policy.normalizer.mean, normalizer.mean, rtol=1e-5, atol=1e-6) or \
-            not np.allclose(policy.normalizer.std, normalizer.std, rtol=1e-5, atol=1e-6):
-        raise ConfigError(f"the checkpoint {spec.checkpoint} was trained on another twin (its feature normaliser "
-                          "differs from the logged twin's)", hint="log on the twin the checkpoint was trained on")
+        raise ConfigError(
+            f"the checkpoint {spec.checkpoint} observes {policy.obs_preset!r}, the log {obs!r}",
+            hint=f"pass --obs {policy.obs_preset}",
+        )
+    if not np.allclose(policy.normalizer.mean, normalizer.mean, rtol=1e-5, atol=1e-6) or not np.allclose(
+        policy.normalizer.std, normalizer.std, rtol=1e-5, atol=1e-6
+    ):
+        raise ConfigError(
+            f"the checkpoint {spec.checkpoint} was trained on another twin (its feature normaliser "
+            "differs from the logged twin's)",
+            hint="log on the twin the checkpoint was trained on",
+        )
     return policy
 
 
 @dataclass
 class BehaviourPolicy(Policy):
-    """A behaviour as a :class:`~dtradar_rl.agents.policy.Policy`, so :func:`dtradar_rl.evaluation.evaluate.rollout` measures it on
-    any twin like a trained agent: the env it asks for gets an :class:`Actor` (its shortest-path oracle plans on the
-    twin being evaluated; robot ``i`` of a mixture uses component ``i mod k``). Stochastic, seeded by ``seed``."""
+    """A behaviour as a :class:`~dtradar_rl.agents.policy.Policy`, so :func:`dtradar_rl.evaluation.evaluate.rollout`
+    measures it on any twin like a trained agent: the env it asks for gets an :class:`Actor` (its shortest-path oracle
+    plans on the twin being evaluated; robot ``i`` of a mixture uses component ``i mod k``). Stochastic, seeded by
+    ``seed``."""
 
     spec: BehaviourSpec = field(default_factory=BehaviourSpec)
     seed: int = 0
@@ -237,19 +250,37 @@ class BehaviourPolicy(Policy):
 
     def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
         if self._actor is None:
-            raise ConfigError("a behaviour policy acts only in the env it made (use dtradar_rl.evaluation.evaluate.rollout)")
+            raise ConfigError(
+                "a behaviour policy acts only in the env it made (use dtradar_rl.evaluation.evaluate.rollout)"
+            )
         return self._actor(obs)
 
 
-def behaviour_policy(spec: BehaviourSpec, ds: Dataset, obs: str = "neighbors", seed: int = 0,
-                     device: str = "cpu") -> BehaviourPolicy:
+def behaviour_policy(
+    spec: BehaviourSpec, ds: Dataset, obs: str = "neighbors", seed: int = 0, device: str = "cpu"
+) -> BehaviourPolicy:
     """The behaviour ``spec`` observing like a log on ``ds`` (its preset, the normaliser fitted on ``ds``)."""
     spec.validate()
     normalizer = Normalizer.fit(ds)
-    return BehaviourPolicy(q=None, config=None, normalizer=normalizer, obs_preset=obs,
-                           meta={"dataset": {"name": ds.name, "version": ds.version}}, spec=spec, seed=seed,
-                           greedy=checkpoint_policy(spec, obs, normalizer, device))
+    return BehaviourPolicy(
+        q=None,
+        config=None,
+        normalizer=normalizer,
+        obs_preset=obs,
+        meta={"dataset": {"name": ds.name, "version": ds.version}},
+        spec=spec,
+        seed=seed,
+        greedy=checkpoint_policy(spec, obs, normalizer, device),
+    )
 
 
-__all__ = ["BEHAVIOURS", "Actor", "BehaviourConfig", "BehaviourPolicy", "BehaviourSpec", "ShortestPathOracle", "behaviour_policy",
-           "checkpoint_policy"]
+__all__ = [
+    "BEHAVIOURS",
+    "Actor",
+    "BehaviourConfig",
+    "BehaviourPolicy",
+    "BehaviourSpec",
+    "ShortestPathOracle",
+    "behaviour_policy",
+    "checkpoint_policy",
+]

@@ -30,15 +30,33 @@ class Rollout:
     stats: dict[str, Any]
 
 
-def roll(ds: Dataset, spec: BehaviourSpec, *, steps: int, num_envs: int = 256, obs: str = "neighbors",
-         normalizer: Normalizer | None = None, reward: str = "geodesic", max_steps: int | None = None,
-         seed: int = 0, device: str = "cpu") -> Rollout:
+def roll(
+    ds: Dataset,
+    spec: BehaviourSpec,
+    *,
+    steps: int,
+    num_envs: int = 256,
+    obs: str = "neighbors",
+    normalizer: Normalizer | None = None,
+    reward: str = "geodesic",
+    max_steps: int | None = None,
+    seed: int = 0,
+    device: str = "cpu",
+) -> Rollout:
     """Run ``spec`` on ``ds`` for ``ceil(steps / num_envs)`` steps of all robots; see the module docstring."""
     spec.validate()
     t0 = time.perf_counter()
     normalizer = normalizer or Normalizer.fit(ds)
-    env = BatchedNavEnv.from_dataset(ds, num_envs, obs=obs, normalizer=normalizer, reward=reward,
-                                     max_steps=max_steps or None, device=device, seed=seed)
+    env = BatchedNavEnv.from_dataset(
+        ds,
+        num_envs,
+        obs=obs,
+        normalizer=normalizer,
+        reward=reward,
+        max_steps=max_steps or None,
+        device=device,
+        seed=seed,
+    )
     gen = torch.Generator(device=env.device)
     gen.manual_seed(seed + 1)
     actor = Actor(spec, env, gen, policy=checkpoint_policy(spec, obs, normalizer, device))
@@ -72,11 +90,23 @@ def roll(ds: Dataset, spec: BehaviourSpec, *, steps: int, num_envs: int = 256, o
     episode = np.r_[0, np.cumsum(ends)[:-1]].astype(np.int64)
     starts = np.flatnonzero(np.r_[True, episode[1:] != episode[:-1]])
     step = np.arange(len(episode)) - np.repeat(starts, np.diff(np.r_[starts, len(episode)]))
-    out = {**flat, "episode": episode, "step": step,
-           "robot": np.repeat(np.arange(n), horizon), "component": np.repeat(actor.component.cpu().numpy(), horizon)}
-    stats = {"robots": n, "horizon": horizon, "steps": int(n * horizon), "episodes": int(ends.sum()),
-             "terminated": int(flat["terminated"].sum()), "truncated_step_limit": int(cols["truncated"].sum() - cut.sum()),
-             "truncated_end_of_log": int(cut.sum()), "wall_s": time.perf_counter() - t0}
+    out = {
+        **flat,
+        "episode": episode,
+        "step": step,
+        "robot": np.repeat(np.arange(n), horizon),
+        "component": np.repeat(actor.component.cpu().numpy(), horizon),
+    }
+    stats = {
+        "robots": n,
+        "horizon": horizon,
+        "steps": int(n * horizon),
+        "episodes": int(ends.sum()),
+        "terminated": int(flat["terminated"].sum()),
+        "truncated_step_limit": int(cols["truncated"].sum() - cut.sum()),
+        "truncated_end_of_log": int(cut.sum()),
+        "wall_s": time.perf_counter() - t0,
+    }
     return Rollout(out, stats)
 
 

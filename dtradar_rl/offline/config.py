@@ -16,8 +16,14 @@ from dtradar_rl.task.runs import run_dir
 
 OFFLINE_FORMAT = "dtradar-offline/1"
 #: Algorithm names and the d3rlpy config class each one uses.
-ALGORITHMS: dict[str, str] = {"cql": "DiscreteCQLConfig", "bcq": "DiscreteBCQConfig", "bc": "DiscreteBCConfig",
-                              "dqn": "DQNConfig", "ddqn": "DoubleDQNConfig", "nfq": "NFQConfig"}
+ALGORITHMS: dict[str, str] = {
+    "cql": "DiscreteCQLConfig",
+    "bcq": "DiscreteBCQConfig",
+    "bc": "DiscreteBCConfig",
+    "dqn": "DQNConfig",
+    "ddqn": "DoubleDQNConfig",
+    "nfq": "NFQConfig",
+}
 
 
 @dataclass(frozen=True)

@@ -67,8 +67,13 @@ def d3rlpy_arrays(data: LoggedDataset | dict[str, np.ndarray]) -> dict[str, np.n
     rewards = np.insert(a["reward"].astype(np.float32), at, 0.0)
     terminals = np.insert(a["terminated"].astype(np.float32), at, 0.0)
     timeouts = np.insert(np.zeros(len(trunc), np.float32), at, 1.0)
-    return {"observations": obs.astype(np.float32), "actions": actions, "rewards": rewards, "terminals": terminals,
-            "timeouts": timeouts}
+    return {
+        "observations": obs.astype(np.float32),
+        "actions": actions,
+        "rewards": rewards,
+        "terminals": terminals,
+        "timeouts": timeouts,
+    }
 
 
 def to_mdp_dataset(data: LoggedDataset | str | LoggedId):
@@ -77,9 +82,14 @@ def to_mdp_dataset(data: LoggedDataset | str | LoggedId):
     arr = d3rlpy_arrays(as_logged(data))
     with quiet_d3rlpy():
         return d3rlpy.dataset.MDPDataset(
-            observations=arr["observations"], actions=arr["actions"], rewards=arr["rewards"],
-            terminals=arr["terminals"], timeouts=arr["timeouts"],
-            action_space=d3rlpy.constants.ActionSpace.DISCRETE, action_size=4)
+            observations=arr["observations"],
+            actions=arr["actions"],
+            rewards=arr["rewards"],
+            terminals=arr["terminals"],
+            timeouts=arr["timeouts"],
+            action_space=d3rlpy.constants.ActionSpace.DISCRETE,
+            action_size=4,
+        )
 
 
 # -- Minari --------------------------------------------------------------------------------------------------------
@@ -88,8 +98,9 @@ def _minari():
         with contextlib.redirect_stderr(io.StringIO()):
             import minari
     except ImportError as e:
-        raise MissingDependencyError("Minari is not installed",
-                                     hint="pip install 'dtradar[offline]' (or: pip install minari)") from e
+        raise MissingDependencyError(
+            "Minari is not installed", hint="pip install 'dtradar[offline]' (or: pip install minari)"
+        ) from e
     return minari
 
 
@@ -99,13 +110,21 @@ def minari_episodes(a: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
     starts = np.r_[0, ends[:-1]]
     out = []
     for s, e in zip(starts, ends):
-        out.append({"observations": np.concatenate([a["obs"][s:e], a["next_obs"][e - 1:e]]),
-                    "actions": a["action"][s:e].astype(np.int64), "rewards": a["reward"][s:e].astype(np.float64),
-                    "terminations": a["terminated"][s:e].astype(bool), "truncations": a["truncated"][s:e].astype(bool)})
+        out.append(
+            {
+                "observations": np.concatenate([a["obs"][s:e], a["next_obs"][e - 1 : e]]),
+                "actions": a["action"][s:e].astype(np.int64),
+                "rewards": a["reward"][s:e].astype(np.float64),
+                "terminations": a["terminated"][s:e].astype(bool),
+                "truncations": a["truncated"][s:e].astype(bool),
+            }
+        )
     return out
 
 
-def export_minari(data: LoggedDataset | str | LoggedId, *, dataset_id: str | None = None, overwrite: bool = False) -> str:
+def export_minari(
+    data: LoggedDataset | str | LoggedId, *, dataset_id: str | None = None, overwrite: bool = False
+) -> str:
     """Write the Minari copy of a logged version (in Minari's data path) and return its id; an existing copy of the
     same version is kept, one of another version is replaced only with ``overwrite``."""
     logged = as_logged(data)
@@ -120,24 +139,39 @@ def export_minari(data: LoggedDataset | str | LoggedId, *, dataset_id: str | Non
         if marker in desc:
             return mid
         if not overwrite:
-            raise ConfigError(f"the Minari dataset {mid!r} exists but holds another dataset ({desc[:80]!r})",
-                              hint=f"delete it (minari.delete_dataset({mid!r})) or pass overwrite=True")
+            raise ConfigError(
+                f"the Minari dataset {mid!r} exists but holds another dataset ({desc[:80]!r})",
+                hint=f"delete it (minari.delete_dataset({mid!r})) or pass overwrite=True",
+            )
         minari.delete_dataset(mid)
     a = logged.arrays()
-    buffers = [EpisodeBuffer(id=i, observations=ep["observations"], actions=ep["actions"], rewards=list(ep["rewards"]),
-                             terminations=list(ep["terminations"]), truncations=list(ep["truncations"]))
-               for i, ep in enumerate(minari_episodes(a))]
+    buffers = [
+        EpisodeBuffer(
+            id=i,
+            observations=ep["observations"],
+            actions=ep["actions"],
+            rewards=list(ep["rewards"]),
+            terminations=list(ep["terminations"]),
+            truncations=list(ep["truncations"]),
+        )
+        for i, ep in enumerate(minari_episodes(a))
+    ]
     d = a["obs"].shape[1]
     s = logged.meta.get("stats") or {}
     with contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # no author e-mail, no gymnasium env spec: by design
         minari.create_dataset_from_buffers(
-            dataset_id=mid, buffer=buffers, observation_space=gym.spaces.Box(-np.inf, np.inf, (d,), np.float32),
-            action_space=gym.spaces.Discrete(4), algorithm_name=str((logged.meta.get("behaviour") or {}).get("kind")),
-            author="dtradar", code_permalink="https://github.com/dtradar/dtradar",
+            dataset_id=mid,
+            buffer=buffers,
+            observation_space=gym.spaces.Box(-np.inf, np.inf, (d,), np.float32),
+            action_space=gym.spaces.Discrete(4),
+            algorithm_name=str((logged.meta.get("behaviour") or {}).get("kind")),
+            author="dtradar",
+            code_permalink="https://github.com/dtradar/dtradar",
             description=f"{marker}; parent {logged.meta.get('parent')}@{logged.meta.get('parent_version')}; "
-                        f"behaviour success {s.get('success_rate', 0):.3f}; see the dtradar card (README.md) at "
-                        f"{logged.path}")
+            f"behaviour success {s.get('success_rate', 0):.3f}; see the dtradar card (README.md) at "
+            f"{logged.path}",
+        )
     return mid
 
 
@@ -146,14 +180,17 @@ def from_minari(dataset: Any) -> dict[str, np.ndarray]:
     (a ``MinariDataset`` or its id)."""
     minari = _minari()
     ds = minari.load_dataset(dataset) if isinstance(dataset, str) else dataset
-    cols: dict[str, list[np.ndarray]] = {k: [] for k in ("episode", "step", "obs", "action", "reward", "next_obs",
-                                                         "terminated", "truncated")}
+    cols: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("episode", "step", "obs", "action", "reward", "next_obs", "terminated", "truncated")
+    }
     for i, ep in enumerate(ds.iterate_episodes()):
         obs = np.asarray(ep.observations, np.float32)
         n = len(ep.actions)
         if len(obs) != n + 1:
-            raise SchemaMismatchError(f"Minari episode {ep.id} has {len(obs)} observations for {n} actions "
-                                      "(expected actions + 1)", hint="export it again with export_minari")
+            raise SchemaMismatchError(
+                f"Minari episode {ep.id} has {len(obs)} observations for {n} actions (expected actions + 1)",
+                hint="export it again with export_minari",
+            )
         cols["episode"].append(np.full(n, i, np.int64))
         cols["step"].append(np.arange(n, dtype=np.int32))
         cols["obs"].append(obs[:-1])
@@ -169,10 +206,29 @@ def table_from_columns(c: dict[str, np.ndarray]):
     """A checked transition table from :func:`from_minari`'s columns (robot, cell, target, component unknown: -1/0)."""
     n = len(c["action"])
     minus = np.full(n, -1, np.int32)
-    return transitions_table(episode=c["episode"], step=c["step"], obs=c["obs"], action=c["action"],
-                             reward=c["reward"], next_obs=c["next_obs"], terminated=c["terminated"],
-                             truncated=c["truncated"], robot=minus, cell=minus, target=minus)
+    return transitions_table(
+        episode=c["episode"],
+        step=c["step"],
+        obs=c["obs"],
+        action=c["action"],
+        reward=c["reward"],
+        next_obs=c["next_obs"],
+        terminated=c["terminated"],
+        truncated=c["truncated"],
+        robot=minus,
+        cell=minus,
+        target=minus,
+    )
 
 
-__all__ = ["as_logged", "d3rlpy_arrays", "export_minari", "from_minari", "import_d3rlpy", "minari_episodes",
-           "quiet_d3rlpy", "table_from_columns", "to_mdp_dataset"]
+__all__ = [
+    "as_logged",
+    "d3rlpy_arrays",
+    "export_minari",
+    "from_minari",
+    "import_d3rlpy",
+    "minari_episodes",
+    "quiet_d3rlpy",
+    "table_from_columns",
+    "to_mdp_dataset",
+]

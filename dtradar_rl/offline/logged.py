@@ -8,9 +8,9 @@
     minari_id = export_minari(logged)       # minari.load_dataset("dtradar/cubicle-blueprint-noisy-shortest-v0")
 
 Storage, names, versions and cards are :mod:`dtradar_data.store.logged` (no torch there); the behaviour
-policies are :mod:`dtradar_rl.offline.behaviours` and the one rollout engine :mod:`dtradar_rl.offline.collection`. This module joins them: :func:`log_dataset` computes the
-version from the logging inputs *first*, so logging the same name with the same settings again only loads the stored
-version.
+policies are :mod:`dtradar_rl.offline.behaviours` and the one rollout engine :mod:`dtradar_rl.offline.collection`. This
+module joins them: :func:`log_dataset` computes the version from the logging inputs *first*, so logging the same name
+with the same settings again only loads the stored version.
 
 Its formats (Parquet in the store, Minari, d3rlpy) are :mod:`dtradar_rl.offline.formats`.
 """
@@ -75,13 +75,24 @@ def parent_version(ds: Dataset) -> str:
 
 def settings_of(cfg: LogConfig, ds: Dataset) -> dict[str, Any]:
     max_steps = cfg.max_steps or GridMDP.from_dataset(ds).max_steps
-    return {"num_envs": cfg.num_envs, "obs": cfg.obs, "reward": cfg.reward, "max_steps": int(max_steps),
-            "device_kind": "cuda" if cfg.device.startswith("cuda") else "cpu"}
+    return {
+        "num_envs": cfg.num_envs,
+        "obs": cfg.obs,
+        "reward": cfg.reward,
+        "max_steps": int(max_steps),
+        "device_kind": "cuda" if cfg.device.startswith("cuda") else "cpu",
+    }
 
 
 def log_inputs(cfg: LogConfig, ds: Dataset) -> dict[str, Any]:
-    return logging_inputs(parent=ds.name, parent_version=parent_version(ds), behaviour=cfg.spec().to_dict(),
-                          steps=cfg.steps, seed=cfg.seed, settings=settings_of(cfg, ds))
+    return logging_inputs(
+        parent=ds.name,
+        parent_version=parent_version(ds),
+        behaviour=cfg.spec().to_dict(),
+        steps=cfg.steps,
+        seed=cfg.seed,
+        settings=settings_of(cfg, ds),
+    )
 
 
 def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset:
@@ -103,21 +114,47 @@ def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset
         normalizer = Normalizer.fit(ds)
         spec = cfg.spec()
         settings = inputs["settings"]
-        r = roll(ds, spec, steps=cfg.steps, num_envs=cfg.num_envs, obs=cfg.obs, normalizer=normalizer,
-                 reward=cfg.reward, max_steps=settings["max_steps"], seed=cfg.seed, device=cfg.device)
+        r = roll(
+            ds,
+            spec,
+            steps=cfg.steps,
+            num_envs=cfg.num_envs,
+            obs=cfg.obs,
+            normalizer=normalizer,
+            reward=cfg.reward,
+            max_steps=settings["max_steps"],
+            seed=cfg.seed,
+            device=cfg.device,
+        )
         c = r.columns
-        table = transitions_table(episode=c["episode"], step=c["step"], obs=c["obs"], action=c["action"],
-                                  reward=c["reward"], next_obs=c["next_obs"], terminated=c["terminated"],
-                                  truncated=c["truncated"], robot=c["robot"], cell=c["cell"], target=c["target"],
-                                  component=c["component"])
+        table = transitions_table(
+            episode=c["episode"],
+            step=c["step"],
+            obs=c["obs"],
+            action=c["action"],
+            reward=c["reward"],
+            next_obs=c["next_obs"],
+            terminated=c["terminated"],
+            truncated=c["truncated"],
+            robot=c["robot"],
+            cell=c["cell"],
+            target=c["target"],
+            component=c["component"],
+        )
         names = list(build_observations(ds, cfg.obs, normalizer).names)
-        meta = {"behaviour_text": spec.describe(), "normalizer": normalizer.to_dict(),
-                "observations": {"preset": cfg.obs, "names": names}, "stats": {"rollout": r.stats}}
+        meta = {
+            "behaviour_text": spec.describe(),
+            "normalizer": normalizer.to_dict(),
+            "observations": {"preset": cfg.obs, "names": names},
+            "stats": {"rollout": r.stats},
+        }
         version, _ = write_logged(lid, inputs, table, meta)
         logged = load_logged(lid, version)
         s = logged.meta["stats"]
-        say(f"logged {lid.name}@{logged.tag} ({version}): {s['steps']} steps, {s['episodes']} episodes, behaviour "
-            f"success {s['success_rate']:.3f}, mean return {s['mean_return']:.2f} in {r.stats['wall_s']:.1f} s")
+        say(
+            f"logged {lid.name}@{logged.tag} ({version}): {s['steps']} steps, {s['episodes']} episodes, behaviour "
+            f"success {s['success_rate']:.3f}, mean return {s['mean_return']:.2f} in {r.stats['wall_s']:.1f} s"
+        )
     if cfg.minari:
         mid = export_minari(logged)
         say(f"Minari copy: minari.load_dataset({mid!r})")
@@ -132,21 +169,26 @@ def check_compatible(logged: LoggedDataset, cfg: TwinConfig, ds: Dataset) -> Non
     if meta.get("parent") != ds.name:
         problems.append(f"it was logged on {meta.get('parent')!r}, the trainer uses {ds.name!r}")
     elif meta.get("parent_version") != parent_version(ds):
-        problems.append(f"it was logged on version {meta.get('parent_version')} of {ds.name}, the trainer loaded "
-                        f"{parent_version(ds)}")
+        problems.append(
+            f"it was logged on version {meta.get('parent_version')} of {ds.name}, the trainer loaded "
+            f"{parent_version(ds)}"
+        )
     preset = (meta.get("observations") or {}).get("preset")
     if preset != cfg.obs:
         problems.append(f"its observation preset is {preset!r}, the trainer's {cfg.obs!r}")
     stored = meta.get("normalizer")
     if stored and not problems:
         fitted = Normalizer.fit(ds)
-        if not np.allclose(stored["mean"], fitted.mean, rtol=1e-5) or not np.allclose(stored["std"], fitted.std,
-                                                                                         rtol=1e-5):
+        if not np.allclose(stored["mean"], fitted.mean, rtol=1e-5) or not np.allclose(
+            stored["std"], fitted.std, rtol=1e-5
+        ):
             problems.append("its feature normaliser differs from the one fitted on the twin")
     if problems:
-        raise SchemaMismatchError(f"logged dataset {logged.name}@{logged.version} does not fit: " + "; ".join(problems),
-                                  hint=f"train with --scene/--variant/--obs of the log (parent {meta.get('parent')}, "
-                                       f"preset {preset}), or log again on this twin")
+        raise SchemaMismatchError(
+            f"logged dataset {logged.name}@{logged.version} does not fit: " + "; ".join(problems),
+            hint=f"train with --scene/--variant/--obs of the log (parent {meta.get('parent')}, "
+            f"preset {preset}), or log again on this twin",
+        )
 
 
 __all__ = ["LogConfig", "check_compatible", "log_dataset", "log_inputs", "parent_version", "settings_of"]

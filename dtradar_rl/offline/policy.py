@@ -46,8 +46,8 @@ class ActionScores:
 
 @dataclass
 class OfflinePolicy(Policy):
-    """A trained d3rlpy algorithm as a :class:`dtradar_rl.agents.policy.Policy`: greedy moves from ``algo.predict``, the same
-    observation preset, normaliser and twin environment, and the same obstacle shield."""
+    """A trained d3rlpy algorithm as a :class:`dtradar_rl.agents.policy.Policy`: greedy moves from ``algo.predict``, the
+    same observation preset, normaliser and twin environment, and the same obstacle shield."""
 
     algo: Any = None
     algorithm: str = ""
@@ -71,32 +71,51 @@ def load_offline_policy(path: str | Path, device: str = "cpu") -> OfflinePolicy:
     model = path / "model.d3" if path.is_dir() else path
     meta_path = model.parent / "config.json"
     if not model.exists() or not meta_path.exists():
-        raise CheckpointError(f"no offline model at {model} (with config.json beside it)",
-                              hint="train one first, e.g. `make offline SCENE=cubicle`")
+        raise CheckpointError(
+            f"no offline model at {model} (with config.json beside it)",
+            hint="train one first, e.g. `make offline SCENE=cubicle`",
+        )
     try:
         meta = json.loads(meta_path.read_text())
     except (OSError, ValueError) as e:
         raise CheckpointError(f"{meta_path} cannot be read ({e})", hint="train again with `make offline`") from e
     if not isinstance(meta, dict) or meta.get("format") != OFFLINE_FORMAT:
-        raise CheckpointError(f"{meta_path} is not a dtradar offline-RL config",
-                              hint="pass the model.d3 written by `python -m dtradar_rl offline`")
+        raise CheckpointError(
+            f"{meta_path} is not a dtradar offline-RL config",
+            hint="pass the model.d3 written by `python -m dtradar_rl offline`",
+        )
     d3rlpy = import_d3rlpy()
     with quiet_d3rlpy():
         algo = d3rlpy.load_learnable(str(model), device=d3rlpy_device(device))
     cfg = OfflineConfig.from_dict(meta["config"])
-    return OfflinePolicy(q=ActionScores(algo, cfg.algorithm), config=cfg,
-                         normalizer=Normalizer.from_dict(meta["normalizer"]), obs_preset=meta["obs"]["preset"],
-                         meta={"dataset": meta["dataset"], "stats": meta["stats"], "path": str(model)},
-                         algo=algo, algorithm=cfg.algorithm)
+    return OfflinePolicy(
+        q=ActionScores(algo, cfg.algorithm),
+        config=cfg,
+        normalizer=Normalizer.from_dict(meta["normalizer"]),
+        obs_preset=meta["obs"]["preset"],
+        meta={"dataset": meta["dataset"], "stats": meta["stats"], "path": str(model)},
+        algo=algo,
+        algorithm=cfg.algorithm,
+    )
 
 
-def evaluate_offline(policy: OfflinePolicy, cfg: OfflineConfig,
-                     datasets: dict[str, Dataset] | None = None) -> list[dict[str, Any]]:
+def evaluate_offline(
+    policy: OfflinePolicy, cfg: OfflineConfig, datasets: dict[str, Dataset] | None = None
+) -> list[dict[str, Any]]:
     """Rows of :func:`dtradar_rl.evaluation.evaluate.evaluate` on every twin in ``cfg.eval_variants`` (missing ones are
     skipped), unshielded and, with ``cfg.shield`` and the neighbors preset, shielded."""
-    rows = evaluate_twins(policy, cfg.scene, cfg.eval_variants, label=f"{cfg.algorithm}: ", pairs=cfg.pairs,
-                          seed=cfg.eval_seed, max_steps=cfg.max_steps or None, device=cfg.device, shield=cfg.shield,
-                          datasets=datasets)
+    rows = evaluate_twins(
+        policy,
+        cfg.scene,
+        cfg.eval_variants,
+        label=f"{cfg.algorithm}: ",
+        pairs=cfg.pairs,
+        seed=cfg.eval_seed,
+        max_steps=cfg.max_steps or None,
+        device=cfg.device,
+        shield=cfg.shield,
+        datasets=datasets,
+    )
     return [{**row, "algorithm": cfg.algorithm} for row, _, _ in rows]
 
 

@@ -9,17 +9,19 @@ Three stages, each usable on its own:
 1. **Data**: a stored logged dataset (:mod:`dtradar_rl.offline.logged`), named with ``--logged`` or logged (or
    reused, by the logged datasets' own version rules) as ``<scene>/<variant>/<behaviour>`` with this config's
    behaviour, ``transitions`` and ``seed``. Every result names the dataset version it was trained on
-   (``config.json`` ``logged``), and opens it as a d3rlpy ``MDPDataset`` (:func:`dtradar_rl.offline.formats.to_mdp_dataset`).
+   (``config.json`` ``logged``), and opens it as a d3rlpy ``MDPDataset``
+   (:func:`dtradar_rl.offline.formats.to_mdp_dataset`).
 2. **Training** (:func:`train_offline`): d3rlpy's config → ``create`` → ``fit`` with ``DiscreteCQL``,
-   ``DiscreteBCQ``, ``DiscreteBC``, ``DQN``, ``DoubleDQN`` or ``NFQ`` (:data:`ALGORITHMS`), seeded with ``d3rlpy.seed``, d3rlpy's own
-   file logging and progress bars off (our ``losses.csv`` holds the per-epoch losses). d3rlpy's defaults are
-   tuned for Atari (learning rate 6.25e-5, target sync every 8000 updates, γ = 0.99); here γ, learning rate,
+   ``DiscreteBCQ``, ``DiscreteBC``, ``DQN``, ``DoubleDQN`` or ``NFQ`` (:data:`ALGORITHMS`), seeded with ``d3rlpy.seed``,
+   d3rlpy's own file logging and progress bars off (our ``losses.csv`` holds the per-epoch losses). d3rlpy's defaults
+   are tuned for Atari (learning rate 6.25e-5, target sync every 8000 updates, γ = 0.99); here γ, learning rate,
    target interval and hidden sizes come from :class:`OfflineConfig`, with defaults measured on the cubicle twin.
-3. **Evaluation**: :class:`~dtradar_rl.offline.policy.OfflinePolicy` wraps the trained algorithm as a :class:`dtradar_rl.agents.policy.Policy`, so
-   :func:`dtradar_rl.evaluation.evaluate.evaluate` runs it unchanged (greedy action = ``algo.predict``). The obstacle shield of
-   :meth:`Policy.act <dtradar_rl.agents.policy.Policy.act>` is reused: a vetoed greedy move is replaced by the best allowed
-   one by the algorithm's action values (``predict_value``; BC: its policy logits). Blueprint → blueprint and
-   blueprint → dynamic go to ``results.json`` / ``results.md`` as for ``make eval``.
+3. **Evaluation**: :class:`~dtradar_rl.offline.policy.OfflinePolicy` wraps the trained algorithm as a
+:class:`dtradar_rl.agents.policy.Policy`, so
+   :func:`dtradar_rl.evaluation.evaluate.evaluate` runs it unchanged (greedy action = ``algo.predict``). The obstacle
+   shield of :meth:`Policy.act <dtradar_rl.agents.policy.Policy.act>` is reused: a vetoed greedy move is replaced by the
+   best allowed one by the algorithm's action values (``predict_value``; BC: its policy logits). Blueprint → blueprint
+   and blueprint → dynamic go to ``results.json`` / ``results.md`` as for ``make eval``.
 
 ``model.d3`` (``algo.save``) and ``config.json`` (this config, the feature normaliser, the observation preset and
 the training dataset) make a run reloadable: :func:`dtradar_rl.offline.policy.load_offline_policy`.
@@ -58,17 +60,21 @@ def make_algorithm(cfg: OfflineConfig):
     """The d3rlpy algorithm of ``cfg`` (created, not yet built: ``fit`` builds it from the data)."""
     d3rlpy = import_d3rlpy()
     check_algorithm(cfg.algorithm)
-    common = {"batch_size": cfg.batch_size, "learning_rate": cfg.lr,
-              "encoder_factory": d3rlpy.models.VectorEncoderFactory(hidden_units=list(cfg.hidden))}
+    common = {
+        "batch_size": cfg.batch_size,
+        "learning_rate": cfg.lr,
+        "encoder_factory": d3rlpy.models.VectorEncoderFactory(hidden_units=list(cfg.hidden)),
+    }
     q_learning = {**common, "gamma": cfg.gamma, "target_update_interval": cfg.target_update_interval}
     algos = d3rlpy.algos
-    config = {"cql": lambda: algos.DiscreteCQLConfig(**q_learning, alpha=cfg.cql_alpha),
-              "bcq": lambda: algos.DiscreteBCQConfig(**q_learning, action_flexibility=cfg.bcq_flexibility,
-                                                     beta=cfg.bc_beta),
-              "bc": lambda: algos.DiscreteBCConfig(**common, beta=cfg.bc_beta),
-              "dqn": lambda: algos.DQNConfig(**q_learning),
-              "ddqn": lambda: algos.DoubleDQNConfig(**q_learning),
-              "nfq": lambda: algos.NFQConfig(**common, gamma=cfg.gamma)}[cfg.algorithm]()
+    config = {
+        "cql": lambda: algos.DiscreteCQLConfig(**q_learning, alpha=cfg.cql_alpha),
+        "bcq": lambda: algos.DiscreteBCQConfig(**q_learning, action_flexibility=cfg.bcq_flexibility, beta=cfg.bc_beta),
+        "bc": lambda: algos.DiscreteBCConfig(**common, beta=cfg.bc_beta),
+        "dqn": lambda: algos.DQNConfig(**q_learning),
+        "ddqn": lambda: algos.DoubleDQNConfig(**q_learning),
+        "nfq": lambda: algos.NFQConfig(**common, gamma=cfg.gamma),
+    }[cfg.algorithm]()
     return config.create(device=d3rlpy_device(cfg.device))
 
 
@@ -136,8 +142,10 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | N
     obs_names = list(build_observations(ds, cfg.obs, normalizer).names)
     obs_dim = logged_data.episodes[0].observations.shape[-1]
     if obs_dim != len(obs_names):
-        raise ConfigError(f"the logged observations have {obs_dim} features, the {cfg.obs!r} preset "
-                          f"{len(obs_names)}", hint="pass the --obs preset the data was logged with")
+        raise ConfigError(
+            f"the logged observations have {obs_dim} features, the {cfg.obs!r} preset {len(obs_names)}",
+            hint="pass the --obs preset the data was logged with",
+        )
     stats["transitions"] = int(logged_data.transition_count)
 
     d3rlpy.seed(cfg.seed)
@@ -146,25 +154,41 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | N
     losses: list[dict[str, float]] = []
     t_fit = time.perf_counter()
     with quiet_d3rlpy():
-        for epoch, metrics in algo.fitter(logged_data, n_steps=cfg.n_steps, n_steps_per_epoch=cfg.n_steps // epochs,
-                                          experiment_name=cfg.algorithm, with_timestamp=False,
-                                          logger_adapter=d3rlpy.logging.NoopAdapterFactory(),
-                                          show_progress=False, save_interval=epochs + 1):
-            row = {"epoch": epoch, "step": epoch * (cfg.n_steps // epochs),
-                   **{k: float(v) for k, v in metrics.items() if not k.startswith("time_")}}
+        for epoch, metrics in algo.fitter(
+            logged_data,
+            n_steps=cfg.n_steps,
+            n_steps_per_epoch=cfg.n_steps // epochs,
+            experiment_name=cfg.algorithm,
+            with_timestamp=False,
+            logger_adapter=d3rlpy.logging.NoopAdapterFactory(),
+            show_progress=False,
+            save_interval=epochs + 1,
+        ):
+            row = {
+                "epoch": epoch,
+                "step": epoch * (cfg.n_steps // epochs),
+                **{k: float(v) for k, v in metrics.items() if not k.startswith("time_")},
+            }
             losses.append(row)
-            say(f"[{time.perf_counter() - t_start:6.1f}s] {cfg.algorithm} epoch {epoch}/{epochs} step {row['step']}  "
-                + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step")))
+            say(
+                f"[{time.perf_counter() - t_start:6.1f}s] {cfg.algorithm} epoch {epoch}/{epochs} step {row['step']}  "
+                + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step"))
+            )
     train_s = time.perf_counter() - t_fit
 
     model = out / "model.d3"
     tmp_model = out / ".model.d3.tmp"
     algo.save(str(tmp_model))
     os.replace(tmp_model, model)  # a kill mid-save leaves the previous model, never half of one
-    meta = {"format": OFFLINE_FORMAT, "config": cfg.to_dict(), "normalizer": normalizer.to_dict(),
-            "obs": {"preset": cfg.obs, "names": obs_names}, "dataset": {"name": ds.name, "version": ds.version},
-            "logged": source,
-            "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s}}
+    meta = {
+        "format": OFFLINE_FORMAT,
+        "config": cfg.to_dict(),
+        "normalizer": normalizer.to_dict(),
+        "obs": {"preset": cfg.obs, "names": obs_names},
+        "dataset": {"name": ds.name, "version": ds.version},
+        "logged": source,
+        "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s},
+    }
     write_atomic(out / "config.json", json.dumps(meta, indent=2) + "\n")
     _write_losses(losses, out / "losses.csv")
 

@@ -6,5 +6,14 @@ from dtradar_rl.task.mdp import ACTIONS, REWARDS, GridMDP
 from dtradar_rl.task.observations import OBS_PRESETS, Normalizer, build_observations
 from dtradar_rl.task.twins import load_dataset
 
-__all__ = ["ACTIONS", "OBS_PRESETS", "REWARDS", "ConfigError", "GridMDP", "Normalizer", "TwinConfig",
-           "build_observations", "load_dataset"]
+__all__ = [
+    "ACTIONS",
+    "OBS_PRESETS",
+    "REWARDS",
+    "ConfigError",
+    "GridMDP",
+    "Normalizer",
+    "TwinConfig",
+    "build_observations",
+    "load_dataset",
+]

@@ -37,11 +37,13 @@ def check_device(name: str) -> torch.device:
     except RuntimeError as e:
         raise ConfigError(f"--device {name!r} is not a torch device ({e})", hint="use cpu, cuda or cuda:<n>") from e
     if device.type == "cuda" and not torch.cuda.is_available():
-        raise ConfigError(f"--device {name} asked for, but torch sees no CUDA GPU on this machine",
-                          hint="use --device cpu")
+        raise ConfigError(
+            f"--device {name} asked for, but torch sees no CUDA GPU on this machine", hint="use --device cpu"
+        )
     if device.type == "cuda" and device.index is not None and device.index >= torch.cuda.device_count():
-        raise ConfigError(f"--device {name}: this machine has {torch.cuda.device_count()} CUDA device(s)",
-                          hint="use --device cuda:0")
+        raise ConfigError(
+            f"--device {name}: this machine has {torch.cuda.device_count()} CUDA device(s)", hint="use --device cuda:0"
+        )
     if device.type not in ("cpu", "cuda"):
         raise ConfigError(f"--device {name}: only cpu and cuda are supported", hint="use --device cpu")
     return device

@@ -121,8 +121,9 @@ class GridMDP:
         target = np.where(inside, ny_ * w + nx_, 0)
         collides = ~inside | blocked.ravel()[target]
         next_cell = np.where(collides, np.arange(h * w)[:, None], target)
-        mdp = cls(name=name, blocked=blocked, next_cell=next_cell, collides=collides,
-                  component=np.full(h * w, -1, np.int64))
+        mdp = cls(
+            name=name, blocked=blocked, next_cell=next_cell, collides=collides, component=np.full(h * w, -1, np.int64)
+        )
         mdp.component = mdp._components()
         return mdp
 
@@ -225,7 +226,7 @@ class GridMDP:
         path = [int(start)]
         while path[-1] != target:
             u = path[-1]
-            path.append(int(min(self.next_cell[u], key=lambda v: (d[v] if d[v] >= 0 else 1 << 60))))
+            path.append(int(min(self.next_cell[u], key=lambda v: d[v] if d[v] >= 0 else 1 << 60)))
         return path
 
     # -- pairs ---------------------------------------------------------------------------------------------------
@@ -239,7 +240,8 @@ class GridMDP:
         if cells.size == 0:
             raise NoConnectedPairError(
                 f"{self.name}: no two free cells are connected, so no (start, target) pair exists",
-                hint="check the blocked mask of the dataset")
+                hint="check the blocked mask of the dataset",
+            )
         targets = rng.choice(cells, size=n)
         starts = np.empty(n, np.int64)
         for i, t in enumerate(targets):

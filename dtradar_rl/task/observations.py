@@ -34,8 +34,18 @@ from dtradar_data.core.errors import unknown_name
 from dtradar_rl.task.mdp import ACTION_DELTAS
 
 #: The paper's ten inputs, in order (see the module docstring for the tenth).
-PAPER_COLUMNS: tuple[str, ...] = ("x_m", "y_m", "aoa_az_rad", "aoa_zen_rad", "aod_az_rad", "aod_zen_rad",
-                                  "a_re", "a_im", "tau_s", "phase_rad")
+PAPER_COLUMNS: tuple[str, ...] = (
+    "x_m",
+    "y_m",
+    "aoa_az_rad",
+    "aoa_zen_rad",
+    "aod_az_rad",
+    "aod_zen_rad",
+    "a_re",
+    "a_im",
+    "tau_s",
+    "phase_rad",
+)
 RADIO_FEATURES: tuple[str, ...] = PAPER_COLUMNS[2:]
 OBS_PRESETS: tuple[str, ...] = ("paper", "goal", "neighbors")
 OBS_DIMS: dict[str, int] = {"paper": 10, "goal": 12, "neighbors": 10 + 4 * (len(RADIO_FEATURES) + 1) + 2}
@@ -87,7 +97,7 @@ class ObservationTable:
     """Lookup tables of one preset on one dataset: ``obs(cell, target) = [cell_part[cell], target_part[target]]``."""
 
     preset: str
-    cell_part: np.ndarray    # float32[H*W, Dc]
+    cell_part: np.ndarray  # float32[H*W, Dc]
     target_part: np.ndarray  # float32[H*W, Dt]
     names: tuple[str, ...]
 

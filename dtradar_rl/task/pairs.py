@@ -50,18 +50,20 @@ def _row(scene, start, target, frame, steps, episode) -> tuple[str, PaperPair]:
 
 
 #: Paper Table VI, start -> target, minimum steps reached in training and the episode it was reached in.
-TABLE_VI: dict[str, PaperPair] = dict([
-    _row("cubicle", (-8, -9), (17, 8), "cells", 45, 13),
-    _row("meeting", (-20, -22), (17, 17), "cells", 78, 389),
-    _row("dallas-q1", (-275, -328), (-175, -1), "metres", 808, 19),
-    _row("dallas-q2", (-160, 0), (-200, 360), "metres", 1475, 32),
-    _row("dallas-q3", (200, 0), (0, 160), "metres", 416, 37),
-    _row("dallas-q4", (75, -328), (0, -160), "metres", 307, 25),
-    _row("houston-q1", (-570, -473), (-1, -161), "metres", 2245, 14),
-    _row("houston-q2", (-297, 0), (-1, 140), "metres", 1668, 67),
-    _row("houston-q3", (460, 0), (0, 300), "metres", 2246, 55),
-    _row("houston-q4", (-462, -301), (200, -1), "metres", 6431, 72),
-])
+TABLE_VI: dict[str, PaperPair] = dict(
+    [
+        _row("cubicle", (-8, -9), (17, 8), "cells", 45, 13),
+        _row("meeting", (-20, -22), (17, 17), "cells", 78, 389),
+        _row("dallas-q1", (-275, -328), (-175, -1), "metres", 808, 19),
+        _row("dallas-q2", (-160, 0), (-200, 360), "metres", 1475, 32),
+        _row("dallas-q3", (200, 0), (0, 160), "metres", 416, 37),
+        _row("dallas-q4", (75, -328), (0, -160), "metres", 307, 25),
+        _row("houston-q1", (-570, -473), (-1, -161), "metres", 2245, 14),
+        _row("houston-q2", (-297, 0), (-1, 140), "metres", 1668, 67),
+        _row("houston-q3", (460, 0), (0, 300), "metres", 2246, 55),
+        _row("houston-q4", (-462, -301), (200, -1), "metres", 6431, 72),
+    ]
+)
 
 #: With a fixed pair, the episode cap is this many times the pair's breadth-first shortest path (the paper's
 #: episodes run until the target; this is only a safety net against a policy stuck against a wall forever).
@@ -74,12 +76,12 @@ class ResolvedPair:
 
     start: tuple[int, int]
     target: tuple[int, int]
-    source: str                     # "table6", "given" or "stand-in"
-    raw_start: tuple[int, int]      # before snapping (after clamping onto the grid)
+    source: str  # "table6", "given" or "stand-in"
+    raw_start: tuple[int, int]  # before snapping (after clamping onto the grid)
     raw_target: tuple[int, int]
-    snapped_cells: tuple[float, float]   # how far each end moved when snapped (cells)
-    shortest: int                   # breadth-first steps on this twin
-    cap: int                        # episode safety cap: CAP_FACTOR x shortest, at least the MDP's default limit
+    snapped_cells: tuple[float, float]  # how far each end moved when snapped (cells)
+    shortest: int  # breadth-first steps on this twin
+    cap: int  # episode safety cap: CAP_FACTOR x shortest, at least the MDP's default limit
 
     def cells(self, nx: int) -> tuple[int, int]:
         """``(start, target)`` as cell indices ``iy * nx + ix``."""
@@ -96,6 +98,7 @@ def paper_pair(scene: str) -> PaperPair | None:
 
 def to_grid(pair: PaperPair, grid: Grid) -> tuple[tuple[int, int], tuple[int, int]]:
     """The pair's two ends as grid cells ``(ix, iy)``, clamped onto the grid (see the module docstring)."""
+
     def one(p):
         if pair.frame == "cells":
             ix, iy = grid.nx // 2 + int(p[0]), grid.ny // 2 + int(p[1])
@@ -103,6 +106,7 @@ def to_grid(pair: PaperPair, grid: Grid) -> tuple[tuple[int, int], tuple[int, in
             ix = int(round((p[0] - grid.x0_m) / grid.cell_m))
             iy = int(round((p[1] - grid.y0_m) / grid.cell_m))
         return int(np.clip(ix, 0, grid.nx - 1)), int(np.clip(iy, 0, grid.ny - 1))
+
     return one(pair.start), one(pair.target)
 
 
@@ -132,8 +136,9 @@ def stand_in(mdp: GridMDP) -> tuple[tuple[int, int], tuple[int, int]]:
     return start, tuple(int(v) for v in mdp.xy(far))
 
 
-def resolve(mdp: GridMDP, grid: Grid, scene: str, start: tuple[int, int] | None = None,
-            target: tuple[int, int] | None = None) -> ResolvedPair:
+def resolve(
+    mdp: GridMDP, grid: Grid, scene: str, start: tuple[int, int] | None = None, target: tuple[int, int] | None = None
+) -> ResolvedPair:
     """The training pair of ``scene`` on a twin: ``start``/``target`` cells when given (they must be free and
     connected: a user's choice is not moved), else the Table VI pair transformed and snapped, else a stand-in."""
     region = largest_region(mdp)
@@ -144,8 +149,10 @@ def resolve(mdp: GridMDP, grid: Grid, scene: str, start: tuple[int, int] | None 
             if not (0 <= ix < mdp.nx and 0 <= iy < mdp.ny):
                 raise PairError(f"{name} {ix} {iy} is outside the {mdp.nx} x {mdp.ny} grid")
             if mdp.blocked[iy, ix]:
-                raise PairError(f"{name} {ix} {iy} is a blocked cell of {mdp.name}",
-                                hint="pick a free cell (the twin's coverage map shows obstacles)")
+                raise PairError(
+                    f"{name} {ix} {iy} is a blocked cell of {mdp.name}",
+                    hint="pick a free cell (the twin's coverage map shows obstacles)",
+                )
         s, t = tuple(start), tuple(target)
         if not mdp.connected(mdp.cell(*s), mdp.cell(*t)):
             raise PairError(f"--start {s} and --target {t} are not connected on {mdp.name}")
@@ -173,5 +180,17 @@ def training_pair(cfg, ds: Dataset) -> ResolvedPair | None:
     return resolve(GridMDP.from_dataset(ds), ds.grid_info, cfg.scene, cfg.start, cfg.target)
 
 
-__all__ = ["TABLE_VI", "CAP_FACTOR", "training_pair", "PaperPair", "ResolvedPair", "PairError", "paper_pair", "to_grid", "snap",
-           "stand_in", "resolve", "largest_region"]
+__all__ = [
+    "TABLE_VI",
+    "CAP_FACTOR",
+    "training_pair",
+    "PaperPair",
+    "ResolvedPair",
+    "PairError",
+    "paper_pair",
+    "to_grid",
+    "snap",
+    "stand_in",
+    "resolve",
+    "largest_region",
+]

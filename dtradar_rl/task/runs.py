@@ -1,10 +1,10 @@
 """Where runs go: every default output path of a job is built here, so ``runs/`` has one definition.
 
-    runs/<scene>/dqn/model.pt            make train (config.json, curves.csv, curves.png, last.pt beside it)
-    runs/<scene>/eval/                   make eval
-    runs/<scene>/adapt/                  make adapt
-    runs/<scene>/offline/<algorithm>/    make offline
-    runs/paper/  runs/sweep/  runs/cross/
+runs/<scene>/dqn/model.pt            make train (config.json, curves.csv, curves.png, last.pt beside it)
+runs/<scene>/eval/                   make eval
+runs/<scene>/adapt/                  make adapt
+runs/<scene>/offline/<algorithm>/    make offline
+runs/paper/  runs/sweep/  runs/cross/
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ def machine() -> dict[str, Any]:
 def idle_cores(interval_s: float = 0.25) -> float:
     """Cores left idle by other processes right now (from ``/proc/stat`` over ``interval_s``; Linux), else from
     the 1-minute load average."""
+
     def snapshot():
         with open("/proc/stat") as f:
             v = [int(x) for x in f.readline().split()[1:]]

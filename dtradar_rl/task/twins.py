@@ -4,7 +4,8 @@ Names
 -----
 ``"<scene>/<variant>[@<revision>]"``  a dataset in the data root (``dtradar_data.load``), e.g. ``cubicle/blueprint``.
 ``"synthetic/<variant>"``            a synthetic cubicle-sized 42 x 18 table (0.25 m cells, free-space line-of-sight
-                                     radio features from :mod:`dtradar_data.pipeline.synthetic`) with desk-like obstacles; the
+                                     radio features from :mod:`dtradar_data.pipeline.synthetic`) with desk-like
+                                     obstacles; the
                                      ``dynamic`` variant adds a chair and two people, like the paper's dynamic twin.
 ``"synthetic-<nx>x<ny>/<variant>"``  the same generator at another size (tests use tiny ones).
 """
@@ -46,15 +47,15 @@ def synthetic_blocked(nx: int, ny: int, variant: str = "blueprint") -> np.ndarra
         def box(x0, y0, w, h):
             x0, y0 = int(round(x0 * sx)), int(round(y0 * sy))
             w, h = max(1, int(round(w * sx))), max(1, int(round(h * sy)))
-            b[y0:y0 + h, x0:x0 + w] = True
+            b[y0 : y0 + h, x0 : x0 + w] = True
 
-        for k in range(4):               # lower row of cubicles (U-shaped: back + one side)
+        for k in range(4):  # lower row of cubicles (U-shaped: back + one side)
             box(3 + 9 * k, 2, 6, 1)
             box(3 + 9 * k, 3, 1, 3)
-        for k in range(3):               # upper row
+        for k in range(3):  # upper row
             box(7 + 10 * k, 12, 6, 1)
             box(12 + 10 * k, 9, 1, 3)
-        box(36, 8, 3, 3)                 # table
+        box(36, 8, 3, 3)  # table
         for x, y in [(6, 7), (15, 7), (24, 7), (33, 14), (2, 13), (20, 15)]:  # chairs
             box(x, y, 1, 1)
         if variant == "dynamic":

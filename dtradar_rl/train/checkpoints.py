@@ -23,8 +23,15 @@ def load_policy(path: str | Path, device: str = "cpu") -> Policy:
         normalizer = Normalizer.from_dict(state["normalizer"])
         preset = state["obs"]["preset"]
     except (KeyError, TypeError, ValueError, RuntimeError) as e:
-        raise CheckpointError(f"{path} is a DQN checkpoint with missing or inconsistent parts ({e})",
-                              hint="train again; a checkpoint edited by hand cannot be repaired") from e
+        raise CheckpointError(
+            f"{path} is a DQN checkpoint with missing or inconsistent parts ({e})",
+            hint="train again; a checkpoint edited by hand cannot be repaired",
+        ) from e
     q.eval()
-    return Policy(q, cfg, normalizer, preset, {"dataset": state.get("dataset"), "stats": state.get("stats", {}),
-                                                "path": str(path)})
+    return Policy(
+        q,
+        cfg,
+        normalizer,
+        preset,
+        {"dataset": state.get("dataset"), "stats": state.get("stats", {}), "path": str(path)},
+    )

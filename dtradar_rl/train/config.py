@@ -99,32 +99,49 @@ class DQNConfig(TwinConfig):
         super().validate()
         if self.preset not in PRESETS:
             raise unknown_name("training preset", self.preset, PRESETS)
-        self.check_at_least(1, "total_env_steps", "batch_size", "buffer_size", "env_steps_per_update",
-                            "target_update_every", "aug_obstacle_size")
+        self.check_at_least(
+            1,
+            "total_env_steps",
+            "batch_size",
+            "buffer_size",
+            "env_steps_per_update",
+            "target_update_every",
+            "aug_obstacle_size",
+        )
         self.check_at_least(0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every", "memory_radius")
         if self.memory_radius and self.obs != "neighbors":
-            raise ConfigError(f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
-                              f"radio features), got --obs {self.obs}")
+            raise ConfigError(
+                f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
+                f"radio features), got --obs {self.obs}"
+            )
         if self.pair not in PAIR_MODES:
             raise unknown_name("pair mode (--pair)", self.pair, PAIR_MODES)
         if (self.start is None) != (self.target is None):
             raise ConfigError("--start and --target go together", hint="give both cells (ix iy), or neither")
         if self.fixed_pair and self.aug_obstacles:
-            raise ConfigError("obstacle augmentation draws a new pair at every reset; it does not combine with a "
-                              "fixed pair", hint="use --pair random, or --aug-obstacles 0")
+            raise ConfigError(
+                "obstacle augmentation draws a new pair at every reset; it does not combine with a fixed pair",
+                hint="use --pair random, or --aug-obstacles 0",
+            )
         if self.aug_potential not in AUG_POTENTIALS:
             raise unknown_name("augmentation potential", self.aug_potential, AUG_POTENTIALS)
         if not self.lr > 0:
             raise ConfigError(f"--lr must be > 0, got {self.lr}", hint="the presets use 1e-3")
         if self.lr_end == 0:
-            raise ConfigError("--lr-end 0 stops learning at the end of the budget",
-                              hint="use a positive end rate, or a negative one for a constant --lr")
+            raise ConfigError(
+                "--lr-end 0 stops learning at the end of the budget",
+                hint="use a positive end rate, or a negative one for a constant --lr",
+            )
         if self.expert_weight < 0 or not self.expert_margin > 0:
-            raise ConfigError(f"--expert-weight must be >= 0 and --expert-margin > 0, got {self.expert_weight} and "
-                              f"{self.expert_margin}")
+            raise ConfigError(
+                f"--expert-weight must be >= 0 and --expert-margin > 0, got {self.expert_weight} and "
+                f"{self.expert_margin}"
+            )
         if self.expert_weight > 0 and self.reward != "geodesic":
-            raise ConfigError(f"--expert-weight reads the breadth-first distances of the geodesic reward, got "
-                              f"--reward {self.reward}", hint="use --reward geodesic, or --expert-weight 0")
+            raise ConfigError(
+                f"--expert-weight reads the breadth-first distances of the geodesic reward, got --reward {self.reward}",
+                hint="use --reward geodesic, or --expert-weight 0",
+            )
         if self.max_grad_norm < 0:
             raise ConfigError(f"--max-grad-norm must be >= 0 (0 = off), got {self.max_grad_norm}")
         self.check_within(0, 1, "gamma", open_interval=True)
@@ -137,11 +154,26 @@ PRESETS: dict[str, dict[str, Any]] = {
     "robust": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan"},
     "memory": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan", "memory_radius": 5},
     # The episodes decide the paper's budget; total_env_steps is only a backstop far above what they use.
-    "paper": dict(obs="paper", reward="paper", pair="paper", num_envs=1, episodes=500, total_env_steps=10_000_000,
-                  hidden=(256,) * 5, lr=1e-3, lr_end=-1.0,
-                  gamma=0.9,
-                  batch_size=64, buffer_size=100_000, learning_starts=1_000, env_steps_per_update=1,
-                  target_update_every=500, double_dqn=False, eps_start=0.1, eps_end=0.1),
+    "paper": dict(
+        obs="paper",
+        reward="paper",
+        pair="paper",
+        num_envs=1,
+        episodes=500,
+        total_env_steps=10_000_000,
+        hidden=(256,) * 5,
+        lr=1e-3,
+        lr_end=-1.0,
+        gamma=0.9,
+        batch_size=64,
+        buffer_size=100_000,
+        learning_starts=1_000,
+        env_steps_per_update=1,
+        target_update_every=500,
+        double_dqn=False,
+        eps_start=0.1,
+        eps_end=0.1,
+    ),
 }
 
 
@@ -154,5 +186,3 @@ def config_for(preset: str = "tuned", **overrides) -> DQNConfig:
     if preset == "paper" and scene.split("-")[0] not in INDOOR_SCENES and not is_synthetic(scene):
         values["episodes"] = 80
     return DQNConfig(**{**values, **overrides}).validate()
-
-

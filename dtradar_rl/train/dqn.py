@@ -4,7 +4,8 @@
     result = train(config_for("tuned", scene="synthetic", total_env_steps=100_000))
     result.checkpoint   # runs/synthetic/dqn/model.pt, with config.json, curves.csv and curves.png beside it
 
-Four presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`); what each reaches is
+Four presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`); what each reaches
+is
 measured in the docs (Navigation, Benchmarks), not here:
 
 ``paper``  the paper's protocol: its Table VI start/target pair per run (:mod:`dtradar_rl.task.pairs`), ``paper``
@@ -88,13 +89,19 @@ def epsilon(cfg: DQNConfig, env_steps: int) -> float:
     return cfg.eps_start + frac * (cfg.eps_end - cfg.eps_start)
 
 
-def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, Any] | None = None,
-          normalizer: Normalizer | None = None, callback: Callable[..., bool] | None = None) -> TrainResult:
+def train(
+    config: DQNConfig,
+    dataset: Dataset | None = None,
+    *,
+    init: dict[str, Any] | None = None,
+    normalizer: Normalizer | None = None,
+    callback: Callable[..., bool] | None = None,
+) -> TrainResult:
     """Train a DQN agent on ``dataset`` (default: load ``config.dataset_name``); write checkpoints and curves.
 
-    Fine-tuning (:mod:`dtradar_rl.experiments.adapt`): ``init`` is a Q-network state dict to start from and ``normalizer`` the
-    one it was trained with; ``callback(q, env_steps, train_s)`` runs after every batch of steps with the seconds
-    spent in the training loop (set-up excluded), its own time is not counted there or in ``wall_s``, and it
+    Fine-tuning (:mod:`dtradar_rl.experiments.adapt`): ``init`` is a Q-network state dict to start from and
+    ``normalizer`` the one it was trained with; ``callback(q, env_steps, train_s)`` runs after every batch of steps with
+    the seconds spent in the training loop (set-up excluded), its own time is not counted there or in ``wall_s``, and it
     stops training by returning True."""
     cfg = config.validate()
     t_start = time.perf_counter()
@@ -108,11 +115,20 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
     write_config(cfg, out)  # only once the dataset loaded: a failed start leaves an earlier run's config alone
     normalizer = normalizer or Normalizer.fit(ds)
     pair = training_pair(cfg, ds)
-    env = batched_env(ds, cfg.num_envs, memory_radius=cfg.memory_radius, obs=cfg.obs, normalizer=normalizer,
-                      reward=cfg.reward, max_steps=cfg.max_steps or (pair.cap if pair else None), device=device,
-                      seed=cfg.seed,
-                      aug_obstacles=cfg.aug_obstacles, aug_obstacle_size=cfg.aug_obstacle_size,
-                      aug_potential=cfg.aug_potential)
+    env = batched_env(
+        ds,
+        cfg.num_envs,
+        memory_radius=cfg.memory_radius,
+        obs=cfg.obs,
+        normalizer=normalizer,
+        reward=cfg.reward,
+        max_steps=cfg.max_steps or (pair.cap if pair else None),
+        device=device,
+        seed=cfg.seed,
+        aug_obstacles=cfg.aug_obstacles,
+        aug_obstacle_size=cfg.aug_obstacle_size,
+        aug_potential=cfg.aug_potential,
+    )
     q = QNetwork(env.obs_dim, cfg.hidden).to(device)
     if init is not None:
         q.load_state_dict(init)
@@ -138,11 +154,14 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
 
     reset_where(torch.ones(n, dtype=torch.bool, device=device))
     if pair and cfg.verbose:
-        print(f"pair ({pair.source}): start {pair.start} -> target {pair.target}, shortest {pair.shortest} steps, "
-              f"episode cap {env.max_steps}")
+        print(
+            f"pair ({pair.source}): start {pair.start} -> target {pair.target}, shortest {pair.shortest} steps, "
+            f"episode cap {env.max_steps}"
+        )
     if cfg.resume and (out / "last.pt").exists():
-        state = read_checkpoint(out / "last.pt", (CHECKPOINT_FORMAT,), what="resumable DQN run (last.pt)",
-                                device=cfg.device)
+        state = read_checkpoint(
+            out / "last.pt", (CHECKPOINT_FORMAT,), what="resumable DQN run (last.pt)", device=cfg.device
+        )
         q.load_state_dict(state["q"])
         q_target.load_state_dict(state["q_target"])
         optimizer.load_state_dict(state["optimizer"])
@@ -158,13 +177,22 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
             print(f"resumed from {out / 'last.pt'} at {env_steps} env steps, {updates} updates")
 
     def save_last():
-        state = {"format": CHECKPOINT_FORMAT, "config": json.dumps(cfg.to_dict()), "q": q.state_dict(),
-                 "q_target": q_target.state_dict(), "optimizer": optimizer.state_dict(),
-                 "env_steps": env_steps, "updates": updates, "episodes": episodes,
-                 "gen": gen.get_state(), "env_gen": env.gen.get_state(),
-                 "env": {k: getattr(env, k) for k in env.state_keys},
-                 "ep_reward": ep_reward, "ep_collisions": ep_collisions,
-                 "normalizer": normalizer.to_dict()}
+        state = {
+            "format": CHECKPOINT_FORMAT,
+            "config": json.dumps(cfg.to_dict()),
+            "q": q.state_dict(),
+            "q_target": q_target.state_dict(),
+            "optimizer": optimizer.state_dict(),
+            "env_steps": env_steps,
+            "updates": updates,
+            "episodes": episodes,
+            "gen": gen.get_state(),
+            "env_gen": env.gen.get_state(),
+            "env": {k: getattr(env, k) for k in env.state_keys},
+            "ep_reward": ep_reward,
+            "ep_collisions": ep_collisions,
+            "normalizer": normalizer.to_dict(),
+        }
         if cfg.save_replay:
             state["replay"] = buffer.state_dict()
         save_torch_atomic(state, out / "last.pt")
@@ -197,8 +225,16 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
         done = terminated | truncated
         if done.any():
             for i in torch.nonzero(done, as_tuple=True)[0].tolist():
-                episodes.append((len(episodes), env_steps, float(ep_reward[i]), int(info["steps"][i]),
-                                 int(ep_collisions[i]), bool(terminated[i])))
+                episodes.append(
+                    (
+                        len(episodes),
+                        env_steps,
+                        float(ep_reward[i]),
+                        int(info["steps"][i]),
+                        int(ep_collisions[i]),
+                        bool(terminated[i]),
+                    )
+                )
             ep_reward[done], ep_collisions[done] = 0.0, 0
             reset_where(done)
         obs = env.observe()
@@ -242,18 +278,32 @@ def train(config: DQNConfig, dataset: Dataset | None = None, *, init: dict[str, 
             next_checkpoint += cfg.checkpoint_every
         if cfg.verbose and (len(episodes) >= next_log_ep if log_every_ep else env_steps >= next_log):
             s = _summary(episodes)
-            print(f"[{time.perf_counter() - t_start:6.1f}s] steps {env_steps:>8d}  updates {updates:>6d}  "
-                  f"episodes {len(episodes):>6d}  eps {eps:.3f}  success {s.get('success_rate', 0):.3f}  "
-                  f"collisions/ep {s.get('collisions', 0):.2f}")
+            print(
+                f"[{time.perf_counter() - t_start:6.1f}s] steps {env_steps:>8d}  updates {updates:>6d}  "
+                f"episodes {len(episodes):>6d}  eps {eps:.3f}  success {s.get('success_rate', 0):.3f}  "
+                f"collisions/ep {s.get('collisions', 0):.2f}"
+            )
             next_log += cfg.total_env_steps // 10
             next_log_ep += log_every_ep
 
     wall = time.perf_counter() - t_start - callback_s
     save_last()
     ckpt = out / "model.pt"
-    save_checkpoint(ckpt, q, cfg, normalizer, getattr(env, "obs_names", env.obs_table.names), ds,
-                    stats={"env_steps": env_steps, "updates": updates, "episodes": len(episodes), "wall_s": wall,
-                           **({"pair": pair.to_dict()} if pair else {})})
+    save_checkpoint(
+        ckpt,
+        q,
+        cfg,
+        normalizer,
+        getattr(env, "obs_names", env.obs_table.names),
+        ds,
+        stats={
+            "env_steps": env_steps,
+            "updates": updates,
+            "episodes": len(episodes),
+            "wall_s": wall,
+            **({"pair": pair.to_dict()} if pair else {}),
+        },
+    )
     write_curves(episodes, out)
     return TrainResult(ckpt, out, env_steps, updates, len(episodes), wall, _summary(episodes))
 
@@ -273,9 +323,13 @@ def expert_margin_loss(q_all: torch.Tensor, expert: torch.Tensor, margin: float)
 def _summary(episodes: list[tuple]) -> dict[str, float]:
     if not episodes:
         return {}
-    tail = np.array([e[2:] for e in episodes[-max(1, len(episodes) // 10):]], dtype=np.float64)
-    return {"reward": float(tail[:, 0].mean()), "steps": float(tail[:, 1].mean()),
-            "collisions": float(tail[:, 2].mean()), "success_rate": float(tail[:, 3].mean())}
+    tail = np.array([e[2:] for e in episodes[-max(1, len(episodes) // 10) :]], dtype=np.float64)
+    return {
+        "reward": float(tail[:, 0].mean()),
+        "steps": float(tail[:, 1].mean()),
+        "collisions": float(tail[:, 2].mean()),
+        "success_rate": float(tail[:, 3].mean()),
+    }
 
 
 # -- curves ----------------------------------------------------------------------------------------------------------

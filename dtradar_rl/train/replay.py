@@ -35,14 +35,26 @@ class ReplayBuffer:
 
     def sample(self, batch_size: int, gen: torch.Generator):
         idx = torch.randint(self.size, (batch_size,), generator=gen, device=self.obs.device)
-        return (self.obs[idx], self.action[idx], self.reward[idx], self.next_obs[idx], self.terminated[idx],
-                None if self.expert is None else self.expert[idx])
+        return (
+            self.obs[idx],
+            self.action[idx],
+            self.reward[idx],
+            self.next_obs[idx],
+            self.terminated[idx],
+            None if self.expert is None else self.expert[idx],
+        )
 
     def state_dict(self) -> dict[str, Any]:
         n = self.size
-        state = {"ptr": self.ptr, "size": n, "obs": self.obs[:n].clone(), "next_obs": self.next_obs[:n].clone(),
-                 "action": self.action[:n].clone(), "reward": self.reward[:n].clone(),
-                 "terminated": self.terminated[:n].clone()}
+        state = {
+            "ptr": self.ptr,
+            "size": n,
+            "obs": self.obs[:n].clone(),
+            "next_obs": self.next_obs[:n].clone(),
+            "action": self.action[:n].clone(),
+            "reward": self.reward[:n].clone(),
+            "terminated": self.terminated[:n].clone(),
+        }
         if self.expert is not None:
             state["expert"] = self.expert[:n].clone()
         return state

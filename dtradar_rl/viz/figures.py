@@ -1,5 +1,5 @@
-"""The paper's figures that :mod:`dtradar_rl.viz.plots` does not draw: training curves per episode with the paper's minimum beside
-ours (Figs. 9, 11-16, 18-21) and the cross-quadrant bars (Fig. 17)."""
+"""The paper's figures that :mod:`dtradar_rl.viz.plots` does not draw: training curves per episode with the paper's
+minimum beside ours (Figs. 9, 11-16, 18-21) and the cross-quadrant bars (Fig. 17)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ import numpy as np
 from dtradar_rl.viz.plots import _save, moving_average, plt
 
 
-def plot_episode_curves(episodes: Sequence[tuple], path: Path, *, shortest: int | None = None,
-                        paper_min: int | None = None, title: str = "") -> Path:
+def plot_episode_curves(
+    episodes: Sequence[tuple], path: Path, *, shortest: int | None = None, paper_min: int | None = None, title: str = ""
+) -> Path:
     """Reward, steps and collisions per training episode (as the paper plots them), with the breadth-first optimum
     and the paper's minimum steps drawn on the steps panel. ``episodes``: rows ``(episode, env_step, reward,
     steps, collisions, success)`` as :func:`dtradar_rl.train.dqn.train` writes them to ``curves.csv``."""
@@ -23,7 +24,7 @@ def plot_episode_curves(episodes: Sequence[tuple], path: Path, *, shortest: int 
         if len(e):
             ax.plot(e[:, 0] + 1, e[:, col], ".", ms=3, alpha=0.35, color="gray", label="per episode")
             if len(e) >= k > 1:
-                ax.plot(e[k - 1:, 0] + 1, moving_average(e[:, col], k), color="C0", label=f"mean of {k}")
+                ax.plot(e[k - 1 :, 0] + 1, moving_average(e[:, col], k), color="C0", label=f"mean of {k}")
         ax.set_xlabel("episode")
         ax.set_title(f"{label} per episode")
         if col == 3:
@@ -41,8 +42,9 @@ def plot_episode_curves(episodes: Sequence[tuple], path: Path, *, shortest: int 
     return _save(fig, path)
 
 
-def plot_bars(matrix, rows: Sequence[str], cols: Sequence[str], path: Path, *, ylabel: str = "success rate",
-              title: str = "") -> Path:
+def plot_bars(
+    matrix, rows: Sequence[str], cols: Sequence[str], path: Path, *, ylabel: str = "success rate", title: str = ""
+) -> Path:
     """Grouped bars of a train x evaluation matrix: one group per evaluated twin, one bar per trained agent
     (the paper's Fig. 17 shows cross-quadrant inference this way)."""
     m = np.asarray(matrix, np.float64)

@@ -43,7 +43,7 @@ def plot_curves(episodes: Sequence[tuple], path: Path) -> Path:
     if episodes:
         e = np.asarray(episodes, dtype=np.float64)
         k = max(1, len(e) // 50)
-        x = e[k - 1:, 1] if len(e) >= k else e[:, 1]
+        x = e[k - 1 :, 1] if len(e) >= k else e[:, 1]
         for ax, col, label in zip(axes, (2, 3, 4, 5), ("reward", "steps", "collisions", "success rate")):
             ax.plot(e[:, 1], e[:, col], ".", ms=1, alpha=0.15, color="gray")
             ax.plot(x, moving_average(e[:, col], k), color="C0")
@@ -60,17 +60,21 @@ def _draw_obstacles(ax, ds: Dataset, extent) -> str:
         draw_floorplan(ax, load_scene_spec(scene, variant.partition("@")[0]))
         return "floorplan"
     mask = np.ma.masked_where(~ds.blocked, np.ones(ds.shape))
-    ax.imshow(mask, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1.4, alpha=0.9,
-              interpolation="nearest")
+    ax.imshow(mask, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1.4, alpha=0.9, interpolation="nearest")
     return "blocked mask"
 
 
-def plot_paths(ds: Dataset, paths: Sequence[Sequence[int]], path: Path, *, title: str = "",
-               successes: Sequence[bool] | None = None) -> Path:
+def plot_paths(
+    ds: Dataset, paths: Sequence[Sequence[int]], path: Path, *, title: str = "", successes: Sequence[bool] | None = None
+) -> Path:
     """Navigation paths (cell-index sequences) over the path-gain coverage map of ``ds``."""
     g = ds.grid_info
-    extent = (g.x0_m - g.cell_m / 2, g.x0_m + (g.nx - 0.5) * g.cell_m,
-              g.y0_m - g.cell_m / 2, g.y0_m + (g.ny - 0.5) * g.cell_m)
+    extent = (
+        g.x0_m - g.cell_m / 2,
+        g.x0_m + (g.nx - 0.5) * g.cell_m,
+        g.y0_m - g.cell_m / 2,
+        g.y0_m + (g.ny - 0.5) * g.cell_m,
+    )
     aspect = (extent[3] - extent[2]) / max(1e-9, extent[1] - extent[0])
     fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * aspect + 1.2)))
     gain = ds.grid(["path_gain_db"])[..., 0]
@@ -94,8 +98,15 @@ def plot_paths(ds: Dataset, paths: Sequence[Sequence[int]], path: Path, *, title
     return _save(fig, path)
 
 
-def plot_matrix(matrix: np.ndarray, rows: Sequence[str], cols: Sequence[str], path: Path, *,
-                title: str = "success rate", fmt: str = "{:.2f}") -> Path:
+def plot_matrix(
+    matrix: np.ndarray,
+    rows: Sequence[str],
+    cols: Sequence[str],
+    path: Path,
+    *,
+    title: str = "success rate",
+    fmt: str = "{:.2f}",
+) -> Path:
     """A train x evaluation heatmap (e.g. the cities' cross-quadrant matrix)."""
     m = np.asarray(matrix, np.float64)
     fig, ax = plt.subplots(figsize=(1.4 * len(cols) + 2.5, 1.1 * len(rows) + 1.8))
@@ -114,7 +125,8 @@ def plot_matrix(matrix: np.ndarray, rows: Sequence[str], cols: Sequence[str], pa
 
 
 def plot_adapt_curves(curves: dict[str, Sequence[dict]], path: Path, *, title: str = "") -> Path:
-    """Success (solid) and SPL (dashed) against training seconds, one colour per run (fine-tune, plain fine-tune, scratch)."""
+    """Success (solid) and SPL (dashed) against training seconds, one colour per run (fine-tune, plain fine-tune,
+    scratch)."""
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     for k, (run, rows) in enumerate(curves.items()):
         t = [r["train_s"] for r in rows]
@@ -135,8 +147,16 @@ def plot_adapt_seeds(runs: dict[str, Sequence[Sequence[dict]]], path: Path, *, t
     for ax, lo in zip(axes, (0.0, 0.9), strict=True):
         for k, (run, seeds) in enumerate(runs.items()):
             for j, rows in enumerate(seeds):
-                ax.plot([r["train_s"] for r in rows], [r["success_rate"] for r in rows], "-o", ms=2.5, lw=1.1,
-                        color=f"C{k}", alpha=0.85, label=f"{run} ({len(seeds)} seeds)" if j == 0 else None)
+                ax.plot(
+                    [r["train_s"] for r in rows],
+                    [r["success_rate"] for r in rows],
+                    "-o",
+                    ms=2.5,
+                    lw=1.1,
+                    color=f"C{k}",
+                    alpha=0.85,
+                    label=f"{run} ({len(seeds)} seeds)" if j == 0 else None,
+                )
         ax.axhline(0.99, color="grey", lw=0.8, ls=":")
         ax.set(xlabel="training seconds", ylim=(lo, 1.005 if lo else 1.02))
         ax.grid(alpha=0.3)

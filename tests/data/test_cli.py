@@ -78,8 +78,9 @@ def test_build_calls_the_pipeline_with_the_parsed_config(root, capsys, monkeypat
 
 
 def test_python_dash_m_reports_typed_errors_without_a_traceback(root):
-    proc = subprocess.run([sys.executable, "-m", "dtradar_data", "info", "cubical/blueprint"],
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "dtradar_data", "info", "cubical/blueprint"], capture_output=True, text=True, timeout=60
+    )
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.startswith("error: unknown dataset") and "Traceback" not in proc.stderr
 
@@ -91,4 +92,3 @@ def test_help_lists_every_subcommand(root, capsys):
     out = capsys.readouterr().out
     for name in ("build", "list", "info", "verify", "cards", "publish", "pull"):
         assert name in out
-

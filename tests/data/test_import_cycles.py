@@ -56,8 +56,10 @@ def test_the_cycle_finder_finds_a_cycle_and_only_the_cycle():
 
 def test_no_import_cycle_between_dtradar_data_modules():
     graph = grimp.build_graph("dtradar_data", cache_dir=None)
-    edges = {m: {i for i in graph.find_modules_directly_imported_by(m) if i.startswith("dtradar_data")}
-             for m in graph.modules}
+    edges = {
+        m: {i for i in graph.find_modules_directly_imported_by(m) if i.startswith("dtradar_data")}
+        for m in graph.modules
+    }
     found = cycles(edges)
     chains = [graph.find_shortest_chain(importer=c[0], imported=c[1]) for c in found]
     assert not found, f"import cycles: {found}; e.g. {chains}"

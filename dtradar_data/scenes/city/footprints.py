@@ -31,8 +31,17 @@ from dtradar_data.core.errors import (
     unknown_name,
 )
 
-__all__ = ["LonLatBox", "Feature", "CityFootprints", "FootprintsUnavailableError", "FootprintsEmptyError", "Ring",
-           "CITY_BOXES", "KINDS", "MATERIALS"]
+__all__ = [
+    "LonLatBox",
+    "Feature",
+    "CityFootprints",
+    "FootprintsUnavailableError",
+    "FootprintsEmptyError",
+    "Ring",
+    "CITY_BOXES",
+    "KINDS",
+    "MATERIALS",
+]
 
 KINDS = ("building", "parking", "road")
 MATERIALS = ("brick", "marble", "concrete", "glass")  # the ITU names (as Sionna spells them) a footprint may carry
@@ -50,13 +59,16 @@ class LonLatBox:
     def __post_init__(self) -> None:
         values = (self.west, self.south, self.east, self.north)
         if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
-            raise InvalidCoordinatesError(f"box {values} has a non-numeric or non-finite coordinate",
-                                          hint="give west, south, east, north as finite degrees")
+            raise InvalidCoordinatesError(
+                f"box {values} has a non-numeric or non-finite coordinate",
+                hint="give west, south, east, north as finite degrees",
+            )
         if not (-180 <= self.west < self.east <= 180 and -90 <= self.south < self.north <= 90):
             raise InvalidCoordinatesError(
                 f"box west={self.west} south={self.south} east={self.east} north={self.north} is not a lon/lat box",
                 hint="need -180 <= west < east <= 180 and -90 <= south < north <= 90 (degrees); "
-                     "LonLatBox.from_corners takes (lat, lon) pairs")
+                "LonLatBox.from_corners takes (lat, lon) pairs",
+            )
 
     @classmethod
     def from_corners(cls, nw: tuple[float, float], se: tuple[float, float]) -> LonLatBox:
@@ -105,20 +117,35 @@ class Feature:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "kind": self.kind, "name": self.name, "source_id": self.source_id,
-            "exterior": [list(p) for p in self.exterior], "holes": [[list(p) for p in h] for h in self.holes],
-            "height_m": self.height_m, "height_source": self.height_source, "material": self.material,
-            "material_source": self.material_source, "subtype": self.subtype, "label": self.label,
+            "kind": self.kind,
+            "name": self.name,
+            "source_id": self.source_id,
+            "exterior": [list(p) for p in self.exterior],
+            "holes": [[list(p) for p in h] for h in self.holes],
+            "height_m": self.height_m,
+            "height_source": self.height_source,
+            "material": self.material,
+            "material_source": self.material_source,
+            "subtype": self.subtype,
+            "label": self.label,
         }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Feature:
         ring = lambda r: tuple((float(x), float(y)) for x, y in r)  # noqa: E731
-        return cls(kind=d["kind"], name=d["name"], source_id=d["source_id"], exterior=ring(d["exterior"]),
-                   holes=tuple(ring(h) for h in d.get("holes", ())), height_m=float(d.get("height_m", 0.0)),
-                   height_source=d.get("height_source", ""), material=d.get("material", "concrete"),
-                   material_source=d.get("material_source", ""), subtype=d.get("subtype", ""),
-                   label=d.get("label", ""))
+        return cls(
+            kind=d["kind"],
+            name=d["name"],
+            source_id=d["source_id"],
+            exterior=ring(d["exterior"]),
+            holes=tuple(ring(h) for h in d.get("holes", ())),
+            height_m=float(d.get("height_m", 0.0)),
+            height_source=d.get("height_source", ""),
+            material=d.get("material", "concrete"),
+            material_source=d.get("material_source", ""),
+            subtype=d.get("subtype", ""),
+            label=d.get("label", ""),
+        )
 
     def polygon(self) -> Polygon:
         """The footprint as a shapely polygon (local metres)."""
@@ -147,15 +174,29 @@ class CityFootprints:
         return {k: sum(f.kind == k for f in self.features) for k in KINDS}
 
     def to_dict(self) -> dict[str, Any]:
-        return {"features": [f.to_dict() for f in self.features], "box": self.box.to_dict(), "crs": self.crs,
-                "source": self.source, "licence": self.licence, "attribution": self.attribution,
-                "retrieved_utc": self.retrieved_utc, "report": self.report}
+        return {
+            "features": [f.to_dict() for f in self.features],
+            "box": self.box.to_dict(),
+            "crs": self.crs,
+            "source": self.source,
+            "licence": self.licence,
+            "attribution": self.attribution,
+            "retrieved_utc": self.retrieved_utc,
+            "report": self.report,
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> CityFootprints:
-        return cls(features=tuple(Feature.from_dict(f) for f in d["features"]), box=LonLatBox(**d["box"]),
-                   crs=d["crs"], source=d["source"], licence=d["licence"], attribution=d["attribution"],
-                   retrieved_utc=d.get("retrieved_utc"), report=dict(d.get("report", {})))
+        return cls(
+            features=tuple(Feature.from_dict(f) for f in d["features"]),
+            box=LonLatBox(**d["box"]),
+            crs=d["crs"],
+            source=d["source"],
+            licence=d["licence"],
+            attribution=d["attribution"],
+            retrieved_utc=d.get("retrieved_utc"),
+            report=dict(d.get("report", {})),
+        )
 
     def content_hash(self) -> str:
         """sha256 of the geometry, heights and materials (not of source wording or the report): for scene hashes."""

@@ -35,18 +35,23 @@ def check_crs(crs: str, box: LonLatBox) -> CRS:
     try:
         parsed = CRS.from_user_input(crs)
     except CRSError as e:
-        raise SceneFileError(f"crs {crs!r} is not a coordinate reference system pyproj knows ({e})",
-                             hint=f"use the UTM zone of the box, here {utm_crs_for(box)}") from None
+        raise SceneFileError(
+            f"crs {crs!r} is not a coordinate reference system pyproj knows ({e})",
+            hint=f"use the UTM zone of the box, here {utm_crs_for(box)}",
+        ) from None
     unit = parsed.axis_info[0].unit_name if parsed.axis_info else ""
     if not parsed.is_projected or unit not in ("metre", "meter"):
-        raise SceneFileError(f"crs {crs!r} is not a projected CRS in metres",
-                             hint=f"use the UTM zone of the box, here {utm_crs_for(box)}")
+        raise SceneFileError(
+            f"crs {crs!r} is not a projected CRS in metres",
+            hint=f"use the UTM zone of the box, here {utm_crs_for(box)}",
+        )
     area = parsed.area_of_use
     lon, lat = box.centre
     if area is not None and not (area.west <= lon <= area.east and area.south <= lat <= area.north):
         raise InvalidCoordinatesError(
             f"the box centre (lon {lon:.5f}, lat {lat:.5f}) lies outside the area of use of {crs} ({area.name})",
-            hint=f"use the UTM zone of the box, here {utm_crs_for(box)}")
+            hint=f"use the UTM zone of the box, here {utm_crs_for(box)}",
+        )
     return parsed
 
 

@@ -35,8 +35,14 @@ from dtradar_data.scenes.city.footprints import KINDS, CityFootprints, Feature, 
 from dtradar_data.scenes.city.frame import local_extent, local_transform
 from dtradar_data.scenes.city.tags import building_height, building_material, classify, road_width, tag_text
 
-__all__ = ["footprints_from_geojson", "read_geojson", "MIN_AREA_M2", "COORD_PRECISION_M", "ROAD_QUAD_SEGS",
-           "USER_FILE_LICENCE"]
+__all__ = [
+    "footprints_from_geojson",
+    "read_geojson",
+    "MIN_AREA_M2",
+    "COORD_PRECISION_M",
+    "ROAD_QUAD_SEGS",
+    "USER_FILE_LICENCE",
+]
 
 # --- geometry -------------------------------------------------------------------------------------------------------
 MIN_AREA_M2 = 4.0  # parts smaller than 2 m x 2 m are slivers: digitising noise or clipping leftovers, not structures
@@ -46,6 +52,7 @@ USER_FILE_LICENCE = "unknown (user-supplied file: check the licence of its sourc
 
 
 # --- geometry processing --------------------------------------------------------------------------------------------
+
 
 def _source_key(source_id: str) -> tuple:
     """Sort key: OSM ids ("node/7", "way/9", "way/10") by type then number, any other id (Overture) as text after."""
@@ -76,11 +83,23 @@ def _source_id(feature: Mapping[str, Any], props: Mapping[str, Any], index: int)
 
 def _new_report() -> dict[str, Any]:
     return {
-        "input_features": 0, "kept": dict.fromkeys(KINDS, 0), "repaired": 0,
-        "clipped": dict.fromkeys(KINDS, 0), "dropped_outside": dict.fromkeys(KINDS, 0),
-        "split": 0, "dropped_parts": 0, "holes_filled": 0, "skipped": {}, "skipped_ids": {},
-        "height_sources": {}, "height_unparsed": {}, "height_clamped": 0,
-        "material_sources": {}, "materials": {}, "material_tags_unmapped": {}, "road_width_sources": {},
+        "input_features": 0,
+        "kept": dict.fromkeys(KINDS, 0),
+        "repaired": 0,
+        "clipped": dict.fromkeys(KINDS, 0),
+        "dropped_outside": dict.fromkeys(KINDS, 0),
+        "split": 0,
+        "dropped_parts": 0,
+        "holes_filled": 0,
+        "skipped": {},
+        "skipped_ids": {},
+        "height_sources": {},
+        "height_unparsed": {},
+        "height_clamped": 0,
+        "material_sources": {},
+        "materials": {},
+        "material_tags_unmapped": {},
+        "road_width_sources": {},
         "min_area_m2": MIN_AREA_M2,
     }
 
@@ -96,9 +115,17 @@ def _bump(counter: dict, key: str) -> None:
     counter[key] = counter.get(key, 0) + 1
 
 
-def footprints_from_geojson(doc: Mapping[str, Any], box: LonLatBox, crs: str, *, source: str, licence: str,
-                            attribution: str, retrieved_utc: str | None = None,
-                            origin: str = "GeoJSON document") -> CityFootprints:
+def footprints_from_geojson(
+    doc: Mapping[str, Any],
+    box: LonLatBox,
+    crs: str,
+    *,
+    source: str,
+    licence: str,
+    attribution: str,
+    retrieved_utc: str | None = None,
+    origin: str = "GeoJSON document",
+) -> CityFootprints:
     """Process a parsed GeoJSON FeatureCollection (EPSG:4326) into :class:`CityFootprints`.
 
     ``origin`` names the document in error messages. The report counts: ``input_features``; ``kept`` per kind
@@ -208,26 +235,49 @@ def footprints_from_geojson(doc: Mapping[str, Any], box: LonLatBox, crs: str, *,
                 _bump(report["height_sources"], height_source)
                 _bump(report["material_sources"], material_source)
                 _bump(report["materials"], material)
-            features.append(Feature(
-                kind=kind, name=f"{kind}_{number:0{width}d}", source_id=sid, exterior=_ring(part.exterior.coords),
-                holes=tuple(_ring(h.coords) for h in part.interiors), height_m=height, height_source=height_source,
-                material=material, material_source=material_source, subtype=subtype, label=label))
+            features.append(
+                Feature(
+                    kind=kind,
+                    name=f"{kind}_{number:0{width}d}",
+                    source_id=sid,
+                    exterior=_ring(part.exterior.coords),
+                    holes=tuple(_ring(h.coords) for h in part.interiors),
+                    height_m=height,
+                    height_source=height_source,
+                    material=material,
+                    material_source=material_source,
+                    subtype=subtype,
+                    label=label,
+                )
+            )
         report["kept"][kind] = len(out[kind])
-    return CityFootprints(features=tuple(features), box=box, crs=crs, source=source, licence=licence,
-                          attribution=attribution, retrieved_utc=retrieved_utc, report=report)
+    return CityFootprints(
+        features=tuple(features),
+        box=box,
+        crs=crs,
+        source=source,
+        licence=licence,
+        attribution=attribution,
+        retrieved_utc=retrieved_utc,
+        report=report,
+    )
 
 
 def _feature_list(doc: Any, origin: str) -> list:
     if not isinstance(doc, Mapping) or doc.get("type") not in ("FeatureCollection", "Feature"):
-        raise SceneFileError(f"{origin}: not a GeoJSON FeatureCollection",
-                             hint='give a GeoJSON file whose top level is {"type": "FeatureCollection", '
-                                  '"features": [...]} (EPSG:4326 lon/lat)')
+        raise SceneFileError(
+            f"{origin}: not a GeoJSON FeatureCollection",
+            hint='give a GeoJSON file whose top level is {"type": "FeatureCollection", '
+            '"features": [...]} (EPSG:4326 lon/lat)',
+        )
     if doc["type"] == "Feature":
         return [doc]
     features = doc.get("features")
     if not isinstance(features, list):
-        raise SceneFileError(f"{origin}: the FeatureCollection has no 'features' list",
-                             hint="add a 'features' array of GeoJSON Feature objects")
+        raise SceneFileError(
+            f"{origin}: the FeatureCollection has no 'features' list",
+            hint="add a 'features' array of GeoJSON Feature objects",
+        )
     return features
 
 
@@ -236,48 +286,68 @@ def _check_geojson_crs(doc: Mapping[str, Any], origin: str) -> None:
     crs = doc.get("crs")
     name = crs.get("properties", {}).get("name", "") if isinstance(crs, Mapping) else ""
     if name and not re.search(r"(CRS84|EPSG:{1,2}4326)$", str(name)):
-        raise SceneFileError(f"{origin}: declares crs {name!r}; footprints must be lon/lat (EPSG:4326)",
-                             hint=f"reproject it, e.g. ogr2ogr -t_srs EPSG:4326 out.geojson {origin}")
+        raise SceneFileError(
+            f"{origin}: declares crs {name!r}; footprints must be lon/lat (EPSG:4326)",
+            hint=f"reproject it, e.g. ogr2ogr -t_srs EPSG:4326 out.geojson {origin}",
+        )
 
 
 def _empty_error(origin: str, box: LonLatBox, report: dict, bounds: list) -> FootprintsEmptyError:
     where = f"box west {box.west} south {box.south} east {box.east} north {box.north}"
     if bounds and report["skipped"].get("not_lonlat", 0) == 0:
         arr = np.array(bounds)
-        span = (f"; its footprints span lon {arr[:, 0].min():.5f}..{arr[:, 2].max():.5f}, "
-                f"lat {arr[:, 1].min():.5f}..{arr[:, 3].max():.5f}")
+        span = (
+            f"; its footprints span lon {arr[:, 0].min():.5f}..{arr[:, 2].max():.5f}, "
+            f"lat {arr[:, 1].min():.5f}..{arr[:, 3].max():.5f}"
+        )
     else:
         span = ""
     skipped = ", ".join(f"{k}: {v}" for k, v in sorted(report["skipped"].items()))
-    hint = ("make sure the file covers the box and is in EPSG:4326 lon/lat, and that its features carry building=*, "
-            "amenity=parking or highway=* (or Overture building fields)")
+    hint = (
+        "make sure the file covers the box and is in EPSG:4326 lon/lat, and that its features carry building=*, "
+        "amenity=parking or highway=* (or Overture building fields)"
+    )
     if report["skipped"].get("not_lonlat"):
         hint = "its coordinates are not lon/lat degrees: reproject it, e.g. ogr2ogr -t_srs EPSG:4326 out.geojson in"
     return FootprintsEmptyError(
         f"{origin}: no building, parking or road footprint inside the {where} "
-        f"({report['input_features']} features read{span}{'; skipped ' + skipped if skipped else ''})", hint=hint)
+        f"({report['input_features']} features read{span}{'; skipped ' + skipped if skipped else ''})",
+        hint=hint,
+    )
 
 
 # --- the file reader --------------------------------------------------------------------------------------------------
 
+
 def _read_json_file(path: Path) -> Any:
     if not path.is_file():
-        raise SceneFileError(f"{path}: no such footprint file",
-                             hint="check the path (make dataset SCENE=<city> OSM=path/to/file.osm or .geojson)")
+        raise SceneFileError(
+            f"{path}: no such footprint file",
+            hint="check the path (make dataset SCENE=<city> OSM=path/to/file.osm or .geojson)",
+        )
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
-        raise SceneFileError(f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})",
-                             hint="give a GeoJSON FeatureCollection in EPSG:4326 (e.g. exported from "
-                                  "overpass-turbo or QGIS)") from None
+        raise SceneFileError(
+            f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})",
+            hint="give a GeoJSON FeatureCollection in EPSG:4326 (e.g. exported from overpass-turbo or QGIS)",
+        ) from None
     except (OSError, UnicodeDecodeError) as e:
-        raise SceneFileError(f"{path}: cannot be read ({e})",
-                             hint="check the file's permissions and that it is UTF-8 GeoJSON") from None
+        raise SceneFileError(
+            f"{path}: cannot be read ({e})", hint="check the file's permissions and that it is UTF-8 GeoJSON"
+        ) from None
 
 
-def read_geojson(path: str | Path, box: LonLatBox, crs: str, *, source: str | None = None,
-                 licence: str | None = None, attribution: str | None = None,
-                 retrieved_utc: str | None = None) -> CityFootprints:
+def read_geojson(
+    path: str | Path,
+    box: LonLatBox,
+    crs: str,
+    *,
+    source: str | None = None,
+    licence: str | None = None,
+    attribution: str | None = None,
+    retrieved_utc: str | None = None,
+) -> CityFootprints:
     """Footprints from a GeoJSON FeatureCollection of (Multi)Polygons and highway LineStrings in EPSG:4326.
 
     Understands OSM-style properties (``building``, ``height``, ``building:levels``, ``building:material``,
@@ -290,8 +360,19 @@ def read_geojson(path: str | Path, box: LonLatBox, crs: str, *, source: str | No
     meta = doc.get("metadata", {}) if isinstance(doc, Mapping) else {}
     meta = meta if isinstance(meta, Mapping) else {}
     if isinstance(doc, Mapping):
-        licence = licence or tag_text(doc.get("licence") or doc.get("license") or meta.get("licence")
-                                   or meta.get("license")) or USER_FILE_LICENCE
+        licence = (
+            licence
+            or tag_text(doc.get("licence") or doc.get("license") or meta.get("licence") or meta.get("license"))
+            or USER_FILE_LICENCE
+        )
         attribution = attribution or tag_text(doc.get("attribution") or meta.get("attribution")) or "unknown"
-    return footprints_from_geojson(doc, box, crs, source=source or f"user file {path}", licence=licence or "",
-                                   attribution=attribution or "", retrieved_utc=retrieved_utc, origin=str(path))
+    return footprints_from_geojson(
+        doc,
+        box,
+        crs,
+        source=source or f"user file {path}",
+        licence=licence or "",
+        attribution=attribution or "",
+        retrieved_utc=retrieved_utc,
+        origin=str(path),
+    )

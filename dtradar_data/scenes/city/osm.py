@@ -48,9 +48,21 @@ from dtradar_data.scenes.city.footprints import (
 )
 from dtradar_data.scenes.city.geojson import footprints_from_geojson
 
-__all__ = ["OSM_TAGS", "OSM_LICENCE", "OSM_ATTRIBUTION", "ENV_OFFLINE", "ENV_OVERPASS_URL", "DEFAULT_OVERPASS_URL",
-           "read_osm_xml", "download_osm", "default_cache_dir", "cache_paths", "is_offline", "resolve_overpass_url",
-           "gdf_to_geojson"]
+__all__ = [
+    "OSM_TAGS",
+    "OSM_LICENCE",
+    "OSM_ATTRIBUTION",
+    "ENV_OFFLINE",
+    "ENV_OVERPASS_URL",
+    "DEFAULT_OVERPASS_URL",
+    "read_osm_xml",
+    "download_osm",
+    "default_cache_dir",
+    "cache_paths",
+    "is_offline",
+    "resolve_overpass_url",
+    "gdf_to_geojson",
+]
 
 OSM_TAGS: dict[str, bool | str] = {"building": True, "amenity": "parking", "highway": True}
 OSM_LICENCE = "ODbL-1.0"
@@ -66,12 +78,14 @@ def _import_osmnx() -> Any:
     try:
         import osmnx
     except ImportError as e:
-        raise MissingDependencyError(f"reading OpenStreetMap data needs osmnx, which is not importable ({e})",
-                                     hint='pip install "osmnx>=2.0"') from None
+        raise MissingDependencyError(
+            f"reading OpenStreetMap data needs osmnx, which is not importable ({e})", hint='pip install "osmnx>=2.0"'
+        ) from None
     if int(osmnx.__version__.split(".")[0]) < 2:
         # osmnx 1.x takes bbox as (north, south, east, west): silently wrong boxes, so refuse it
-        raise MissingDependencyError(f"osmnx {osmnx.__version__} is too old (2.0 or newer is needed)",
-                                     hint='pip install -U "osmnx>=2.0"')
+        raise MissingDependencyError(
+            f"osmnx {osmnx.__version__} is too old (2.0 or newer is needed)", hint='pip install -U "osmnx>=2.0"'
+        )
     return osmnx
 
 
@@ -82,6 +96,7 @@ def _osmnx_errors() -> tuple[type, type]:
 
 
 # --- conversion -----------------------------------------------------------------------------------------------------
+
 
 def _json_value(value: Any) -> Any:
     """A GeoDataFrame cell as a JSON value, or None for missing (NaN/None)."""
@@ -116,39 +131,54 @@ def gdf_to_geojson(gdf: Any, **metadata: Any) -> dict[str, Any]:
             if value is not None:
                 props[str(column)] = value
         geom = row["geometry"]
-        features.append({"type": "Feature", "id": sid, "properties": props,
-                         "geometry": None if geom is None or geom.is_empty else mapping(geom)})
+        features.append(
+            {
+                "type": "Feature",
+                "id": sid,
+                "properties": props,
+                "geometry": None if geom is None or geom.is_empty else mapping(geom),
+            }
+        )
     return {"type": "FeatureCollection", "metadata": metadata, "features": features}
 
 
 # --- local XML ------------------------------------------------------------------------------------------------------
+
 
 def read_osm_xml(path: str | Path, box: LonLatBox, crs: str) -> CityFootprints:
     """Footprints from a local OpenStreetMap XML file (``osmnx.features_from_xml``), e.g. an openstreetmap.org
     "Export" or a JOSM / overpass-turbo download. Licence: ODbL (the file is assumed to be OpenStreetMap data)."""
     path = Path(path).expanduser()
     if not path.is_file():
-        raise SceneFileError(f"{path}: no such OpenStreetMap file",
-                             hint="check the path (make dataset SCENE=<city> OSM=path/to/file.osm)")
+        raise SceneFileError(
+            f"{path}: no such OpenStreetMap file",
+            hint="check the path (make dataset SCENE=<city> OSM=path/to/file.osm)",
+        )
     ox = _import_osmnx()
     insufficient, _ = _osmnx_errors()
     try:
         gdf = ox.features_from_xml(path, tags=OSM_TAGS)
     except insufficient:
-        raise FootprintsEmptyError(f"{path}: no building, amenity=parking or highway element in the file",
-                                   hint="export the area with those features (openstreetmap.org > Export)") from None
+        raise FootprintsEmptyError(
+            f"{path}: no building, amenity=parking or highway element in the file",
+            hint="export the area with those features (openstreetmap.org > Export)",
+        ) from None
     except (ParseError, xml.sax.SAXException, UnicodeDecodeError, KeyError, ValueError) as e:
-        raise SceneFileError(f"{path}: not a readable OpenStreetMap XML file ({type(e).__name__}: {e})",
-                             hint="give an .osm XML export (openstreetmap.org > Export, JOSM, overpass-turbo "
-                                  "'raw OSM data'), or a GeoJSON file") from None
+        raise SceneFileError(
+            f"{path}: not a readable OpenStreetMap XML file ({type(e).__name__}: {e})",
+            hint="give an .osm XML export (openstreetmap.org > Export, JOSM, overpass-turbo "
+            "'raw OSM data'), or a GeoJSON file",
+        ) from None
     except OSError as e:
         raise SceneFileError(f"{path}: cannot be read ({e})", hint="check the file's permissions") from None
     doc = gdf_to_geojson(gdf, source=str(path))
-    return footprints_from_geojson(doc, box, crs, source=f"user file {path}", licence=OSM_LICENCE,
-                                   attribution=OSM_ATTRIBUTION, origin=str(path))
+    return footprints_from_geojson(
+        doc, box, crs, source=f"user file {path}", licence=OSM_LICENCE, attribution=OSM_ATTRIBUTION, origin=str(path)
+    )
 
 
 # --- download and cache ---------------------------------------------------------------------------------------------
+
 
 def is_offline(offline: bool | None = None) -> bool:
     """``offline`` if given, else whether ``$DTRADAR_OFFLINE`` is set to 1/true/yes/on."""
@@ -190,19 +220,29 @@ def _read_cache(geojson_path: Path, meta_path: Path) -> tuple[dict, dict] | None
         raw = geojson_path.read_bytes()
         doc = json.loads(raw)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise CorruptDatasetError(f"cached OpenStreetMap download {geojson_path} cannot be read ({e})",
-                                  hint=fix) from None
+        raise CorruptDatasetError(
+            f"cached OpenStreetMap download {geojson_path} cannot be read ({e})", hint=fix
+        ) from None
     if not isinstance(meta, dict) or meta.get("geojson_sha256") != hashlib.sha256(raw).hexdigest():
-        raise CorruptDatasetError(f"cached OpenStreetMap download {geojson_path} does not match its sidecar "
-                                  f"{meta_path} (content hash differs)", hint=fix)
+        raise CorruptDatasetError(
+            f"cached OpenStreetMap download {geojson_path} does not match its sidecar "
+            f"{meta_path} (content hash differs)",
+            hint=fix,
+        )
     return doc, meta
 
 
 def _footprints_from_cache(doc: dict, meta: dict, geojson_path: Path, box: LonLatBox, crs: str) -> CityFootprints:
     return footprints_from_geojson(
-        doc, box, crs, source=f"OpenStreetMap Overpass download ({meta.get('overpass_url', 'unknown server')})",
-        licence=OSM_LICENCE, attribution=OSM_ATTRIBUTION, retrieved_utc=meta.get("retrieved_utc"),
-        origin=f"cached OpenStreetMap download {geojson_path}")
+        doc,
+        box,
+        crs,
+        source=f"OpenStreetMap Overpass download ({meta.get('overpass_url', 'unknown server')})",
+        licence=OSM_LICENCE,
+        attribution=OSM_ATTRIBUTION,
+        retrieved_utc=meta.get("retrieved_utc"),
+        origin=f"cached OpenStreetMap download {geojson_path}",
+    )
 
 
 def _scene_name(box: LonLatBox, scene: str | None) -> str:
@@ -211,17 +251,21 @@ def _scene_name(box: LonLatBox, scene: str | None) -> str:
     return next((name for name, (b, _) in CITY_BOXES.items() if b == box), "<city>")
 
 
-def _unavailable(box: LonLatBox, cache_dir: Path, url: str, reason: str,
-                 scene: str | None) -> FootprintsUnavailableError:
+def _unavailable(
+    box: LonLatBox, cache_dir: Path, url: str, reason: str, scene: str | None
+) -> FootprintsUnavailableError:
     name = _scene_name(box, scene)
     return FootprintsUnavailableError(
         f"OpenStreetMap footprints for the box west {box.west} south {box.south} east {box.east} north {box.north} "
         f"are not available: there is no cached download in {cache_dir}, and {reason}",
-        hint=(f"either (1) download them: this needs an internet connection to an Overpass API server "
-              f"(now {url}; point ${ENV_OVERPASS_URL} or osmnx.settings.overpass_url at another one, and unset "
-              f"${ENV_OFFLINE}); the download is cached in {cache_dir} for later offline builds; or (2) use a file: "
-              f"make dataset SCENE={name} OSM=path/to/{name.strip('<>')}.osm (an OpenStreetMap XML export, e.g. "
-              f"openstreetmap.org > Export) or OSM=path/to/{name.strip('<>')}.geojson (EPSG:4326)"))
+        hint=(
+            f"either (1) download them: this needs an internet connection to an Overpass API server "
+            f"(now {url}; point ${ENV_OVERPASS_URL} or osmnx.settings.overpass_url at another one, and unset "
+            f"${ENV_OFFLINE}); the download is cached in {cache_dir} for later offline builds; or (2) use a file: "
+            f"make dataset SCENE={name} OSM=path/to/{name.strip('<>')}.osm (an OpenStreetMap XML export, e.g. "
+            f"openstreetmap.org > Export) or OSM=path/to/{name.strip('<>')}.geojson (EPSG:4326)"
+        ),
+    )
 
 
 @contextlib.contextmanager
@@ -244,8 +288,12 @@ def _check_server(url: str, timeout_s: float, requests_kwargs: Mapping[str, Any]
     import requests
 
     try:
-        response = requests.get(f"{url}/status", timeout=min(timeout_s, STATUS_TIMEOUT_S),
-                                headers={"User-Agent": "dtradar (osmnx)"}, **requests_kwargs)
+        response = requests.get(
+            f"{url}/status",
+            timeout=min(timeout_s, STATUS_TIMEOUT_S),
+            headers={"User-Agent": "dtradar (osmnx)"},
+            **requests_kwargs,
+        )
     except requests.RequestException as e:
         return f"the Overpass server {url} could not be reached ({type(e).__name__}: {e})", False
     # osmnx reads the 5th line of /status ("2 slots available now.", "Slot available after: ..."); a server without
@@ -255,9 +303,17 @@ def _check_server(url: str, timeout_s: float, requests_kwargs: Mapping[str, Any]
     return None, first.isdigit() or first in ("Slot", "Currently")
 
 
-def download_osm(box: LonLatBox, crs: str, cache_dir: str | Path | None = None, *, offline: bool | None = None,
-                 overpass_url: str | None = None, timeout_s: float = 180, refresh: bool = False,
-                 scene: str | None = None) -> CityFootprints:
+def download_osm(
+    box: LonLatBox,
+    crs: str,
+    cache_dir: str | Path | None = None,
+    *,
+    offline: bool | None = None,
+    overpass_url: str | None = None,
+    timeout_s: float = 180,
+    refresh: bool = False,
+    scene: str | None = None,
+) -> CityFootprints:
     """Footprints of ``box`` from OpenStreetMap: the cached download in ``cache_dir`` if there is one, else a new
     Overpass download (then cached). ``cache_dir`` defaults to ``<data root>/osm``.
 
@@ -291,17 +347,34 @@ def download_osm(box: LonLatBox, crs: str, cache_dir: str | Path | None = None, 
         raise FootprintsEmptyError(
             f"the Overpass server {url} returned no building, amenity=parking or highway feature for the box "
             f"west {box.west} south {box.south} east {box.east} north {box.north}",
-            hint="check the box (LonLatBox.from_corners takes (lat, lon) pairs)") from None
+            hint="check the box (LonLatBox.from_corners takes (lat, lon) pairs)",
+        ) from None
     except (requests.RequestException, status_error) as e:
-        raise _unavailable(box, cache_dir, url, f"the download from {url} failed ({type(e).__name__}: {e})",
-                           scene) from None
+        raise _unavailable(
+            box, cache_dir, url, f"the download from {url} failed ({type(e).__name__}: {e})", scene
+        ) from None
     retrieved = dt.datetime.now(dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-    doc = gdf_to_geojson(gdf, source="OpenStreetMap via the Overpass API", overpass_url=url,
-                         retrieved_utc=retrieved, licence=OSM_LICENCE, attribution=OSM_ATTRIBUTION)
+    doc = gdf_to_geojson(
+        gdf,
+        source="OpenStreetMap via the Overpass API",
+        overpass_url=url,
+        retrieved_utc=retrieved,
+        licence=OSM_LICENCE,
+        attribution=OSM_ATTRIBUTION,
+    )
     raw = json.dumps(doc, sort_keys=True).encode()
-    meta = {"format": CACHE_FORMAT, "retrieved_utc": retrieved, "overpass_url": url, "bbox_wsen": list(box.bbox),
-            "tags": OSM_TAGS, "osmnx_version": ox.__version__, "feature_count": len(doc["features"]),
-            "licence": OSM_LICENCE, "attribution": OSM_ATTRIBUTION, "geojson_sha256": hashlib.sha256(raw).hexdigest()}
+    meta = {
+        "format": CACHE_FORMAT,
+        "retrieved_utc": retrieved,
+        "overpass_url": url,
+        "bbox_wsen": list(box.bbox),
+        "tags": OSM_TAGS,
+        "osmnx_version": ox.__version__,
+        "feature_count": len(doc["features"]),
+        "licence": OSM_LICENCE,
+        "attribution": OSM_ATTRIBUTION,
+        "geojson_sha256": hashlib.sha256(raw).hexdigest(),
+    }
     cache_dir.mkdir(parents=True, exist_ok=True)
     write_atomic(geojson_path, raw)
     write_atomic(meta_path, json.dumps(meta, indent=2, sort_keys=True).encode())  # last: marks the entry complete

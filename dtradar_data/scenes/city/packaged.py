@@ -12,8 +12,16 @@ from dtradar_data.core.errors import unknown_name
 from dtradar_data.scenes.city.footprints import CityFootprints, LonLatBox
 from dtradar_data.scenes.city.geojson import USER_FILE_LICENCE, read_geojson
 
-__all__ = ["packaged_path", "packaged_files", "read_packaged", "DALLAS_FILE", "DALLAS_NOTICE_FILE", "DALLAS_LICENCE",
-           "DALLAS_ATTRIBUTION", "CITY_DEFAULT_SOURCES"]
+__all__ = [
+    "packaged_path",
+    "packaged_files",
+    "read_packaged",
+    "DALLAS_FILE",
+    "DALLAS_NOTICE_FILE",
+    "DALLAS_LICENCE",
+    "DALLAS_ATTRIBUTION",
+    "CITY_DEFAULT_SOURCES",
+]
 
 DALLAS_FILE = "dallas_downtown_buildings_overture.geojson"
 DALLAS_NOTICE_FILE = "NOTICE_dallas_downtown_buildings_overture.txt"
@@ -34,8 +42,11 @@ def packaged_path(name: str) -> Traversable:
 
 def packaged_files() -> list[str]:
     """Names of the packaged footprint files (usable as ``"packaged:<name>"``)."""
-    return sorted(p.name for p in (resources.files("dtradar_data.scenes.city") / "data").iterdir()
-                  if p.name.endswith((".geojson", ".json")))
+    return sorted(
+        p.name
+        for p in (resources.files("dtradar_data.scenes.city") / "data").iterdir()
+        if p.name.endswith((".geojson", ".json"))
+    )
 
 
 def read_packaged(name: str, box: LonLatBox, crs: str) -> CityFootprints:

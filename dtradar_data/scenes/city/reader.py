@@ -80,10 +80,14 @@ def _lat_lon(value: Any) -> tuple[float, float]:
 
 def _vec(n: int):
     def check(value: Any) -> tuple[float, ...]:
-        if not (isinstance(value, list) and len(value) == n and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        if not (
+            isinstance(value, list)
+            and len(value) == n
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        ):
             raise ValueError(f"must be a list of {n} numbers, got {value!r}")
         return tuple(float(v) for v in value)
+
     return check
 
 
@@ -204,8 +208,9 @@ def read_city_file(path: str | Path) -> CityDocument:
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as e:
-        raise SceneFileError(f"{path}: cannot read city scene file ({getattr(e, 'strerror', None) or e})",
-                             hint="check the path") from e
+        raise SceneFileError(
+            f"{path}: cannot read city scene file ({getattr(e, 'strerror', None) or e})", hint="check the path"
+        ) from e
     except tomllib.TOMLDecodeError as e:
         raise SceneFileError(f"{path}: not valid TOML: {e}", hint="fix the syntax at the reported line") from e
     return parse_city(data, origin=str(path))
@@ -224,11 +229,15 @@ def parse_city(data: dict[str, Any], *, origin: str = "<city>") -> CityDocument:
         if e["type"] == "extra_forbidden":
             allowed = _allowed_keys(loc[:-1])
             close = did_you_mean(field, allowed)
-            raise SceneFileError(f"{origin}: {where}: unknown key {field!r}" + (f"; {close}" if close else "") + more,
-                                 hint="allowed keys: " + ", ".join(allowed)) from exc
+            raise SceneFileError(
+                f"{origin}: {where}: unknown key {field!r}" + (f"; {close}" if close else "") + more,
+                hint="allowed keys: " + ", ".join(allowed),
+            ) from exc
         if e["type"] == "missing":
-            raise SceneFileError(f"{origin}: {where}: missing {'section' if len(loc) == 1 else 'field'} {field!r}"
-                                 + more, hint="see dtradar_data/scenes/city/dallas.toml for the expected form") from exc
+            raise SceneFileError(
+                f"{origin}: {where}: missing {'section' if len(loc) == 1 else 'field'} {field!r}" + more,
+                hint="see dtradar_data/scenes/city/dallas.toml for the expected form",
+            ) from exc
         msg = e["msg"].removeprefix("Value error, ")
         hint = e.get("ctx", {}).get("hint") or "see dtradar_data/scenes/city/dallas.toml for the expected form"
         raise SceneFileError(f"{origin}: {where}: {field}: {msg}" + more, hint=hint) from exc
@@ -241,8 +250,9 @@ def _allowed_keys(loc: list[str]) -> list[str]:
         if field is None:
             break
         ann = field.annotation
-        model = next((a for a in getattr(ann, "__args__", (ann,)) if isinstance(a, type) and
-                      issubclass(a, BaseModel)), ann)
+        model = next(
+            (a for a in getattr(ann, "__args__", (ann,)) if isinstance(a, type) and issubclass(a, BaseModel)), ann
+        )
     return sorted(getattr(model, "model_fields", {}))
 
 
@@ -254,24 +264,28 @@ def _footprints(source: str, box: LonLatBox, crs: str, data_root: str, scene: st
 
 def city_footprints(doc: CityDocument, source: str | None = None) -> CityFootprints:
     """The city's footprints from ``source`` (default: the file's ``[city] footprints``)."""
-    return _footprints(str(source or doc.city.footprints), doc.box, doc.city.crs, str(layout.data_root()),
-                       doc.scene.name)
+    return _footprints(
+        str(source or doc.city.footprints), doc.box, doc.city.crs, str(layout.data_root()), doc.scene.name
+    )
 
 
 def quadrant_grid(quadrant: str, hx: float, hy: float, cell_m: float) -> Grid:
     """The quadrant's grid: whole cells from the box centre outwards (quadrant grids meet at the centre)."""
     nx, ny = math.floor(hx / cell_m + 1e-9), math.floor(hy / cell_m + 1e-9)
     if nx < 1 or ny < 1:
-        raise SceneFileError(f"cell_m={cell_m} is larger than the quadrant ({2 * hx:.0f} x {2 * hy:.0f} m city)",
-                             hint="use a smaller --cell-m")
+        raise SceneFileError(
+            f"cell_m={cell_m} is larger than the quadrant ({2 * hx:.0f} x {2 * hy:.0f} m city)",
+            hint="use a smaller --cell-m",
+        )
     sx, sy = QUADRANT_SIGNS[quadrant]
     x0 = cell_m / 2 if sx > 0 else -nx * cell_m + cell_m / 2
     y0 = cell_m / 2 if sy > 0 else -ny * cell_m + cell_m / 2
     return Grid(round(x0, 6), round(y0, 6), float(cell_m), nx, ny)
 
 
-def city_spec(doc: CityDocument, quadrant: str, variant: str, *, footprints: str | None = None,
-              cell_m: float | None = None) -> SceneSpec:
+def city_spec(
+    doc: CityDocument, quadrant: str, variant: str, *, footprints: str | None = None, cell_m: float | None = None
+) -> SceneSpec:
     """One quadrant of a city as a scene: ground plane, buildings, lots and roads, the quadrant's grid and TX."""
     scene = f"{doc.scene.name}-{quadrant}"
     if quadrant not in doc.quadrants:
@@ -279,8 +293,10 @@ def city_spec(doc: CityDocument, quadrant: str, variant: str, *, footprints: str
     dyn = doc.dynamic
     if variant == "dynamic" and (dyn is None or dyn.quadrant != quadrant):
         has = f"{doc.scene.name}-{dyn.quadrant}/dynamic" if dyn else "none"
-        raise UnknownNameError(f"{scene} has no dynamic twin (the dynamic twin of {doc.scene.name} is {has})",
-                               hint=f"use {scene}/blueprint" + (f" or {has}" if dyn else ""))
+        raise UnknownNameError(
+            f"{scene} has no dynamic twin (the dynamic twin of {doc.scene.name} is {has})",
+            hint=f"use {scene}/blueprint" + (f" or {has}" if dyn else ""),
+        )
     fp = city_footprints(doc, footprints)
     hx, hy = local_extent(doc.box, doc.city.crs)
     area = quadrant_rect(quadrant, hx, hy)
@@ -288,55 +304,105 @@ def city_spec(doc: CityDocument, quadrant: str, variant: str, *, footprints: str
     grid = quadrant_grid(quadrant, hx, hy, cell_m or doc.grid.cell_m)
 
     paper = doc.quadrants[quadrant].tx_m
-    tx_xy = place_transmitter(paper[:2], [b for b in buildings if b.intersects(area.buffer(50))], area,
-                              doc.tx.clearance_m)
+    tx_xy = place_transmitter(
+        paper[:2], [b for b in buildings if b.intersects(area.buffer(50))], area, doc.tx.clearance_m
+    )
     gx0, gy0, gx1, gy1 = grid.bounds()
-    tx = TxSpec(position_m=(tx_xy[0], tx_xy[1], paper[2]),
-                look_at_m=(round((gx0 + gx1) / 2, 3), round((gy0 + gy1) / 2, 3), doc.robot.rx_height_m),
-                num_rows=doc.tx.num_rows, num_cols=doc.tx.num_cols, pattern=doc.tx.pattern,
-                polarization=doc.tx.polarization, power_dbm=doc.tx.power_dbm)
+    tx = TxSpec(
+        position_m=(tx_xy[0], tx_xy[1], paper[2]),
+        look_at_m=(round((gx0 + gx1) / 2, 3), round((gy0 + gy1) / 2, 3), doc.robot.rx_height_m),
+        num_rows=doc.tx.num_rows,
+        num_cols=doc.tx.num_cols,
+        pattern=doc.tx.pattern,
+        polarization=doc.tx.polarization,
+        power_dbm=doc.tx.power_dbm,
+    )
 
-    ground = Box(name="ground", kind="floor", material=doc.city.ground_material, x_m=0.0, y_m=0.0,
-                 width_m=round(2 * hx, 3), length_m=round(2 * hy, 3), height_m=GROUND_THICKNESS_M,
-                 z_m=-GROUND_THICKNESS_M)
+    ground = Box(
+        name="ground",
+        kind="floor",
+        material=doc.city.ground_material,
+        x_m=0.0,
+        y_m=0.0,
+        width_m=round(2 * hx, 3),
+        length_m=round(2 * hy, 3),
+        height_m=GROUND_THICKNESS_M,
+        z_m=-GROUND_THICKNESS_M,
+    )
     prisms = []
     for f in fp.features:
         if f.kind == "building":
             prisms.append(Prism(f.name, "building", f.material, f.exterior, f.height_m, f.holes))
         else:  # parking lots and roads: flat surfaces of their own material, below the robot's clearance
-            prisms.append(Prism(f.name, f.kind, doc.city.surface_material, f.exterior, doc.city.surface_height_m,
-                                f.holes))
+            prisms.append(
+                Prism(f.name, f.kind, doc.city.surface_material, f.exterior, doc.city.surface_height_m, f.holes)
+            )
     objects = [ground]
     provenance: dict[str, Any] = {
-        "city": doc.scene.name, "quadrant": quadrant, "quadrant_rect_m": list(area.bounds),
-        "footprints": {"source": fp.source, "licence": fp.licence, "attribution": fp.attribution,
-                       "retrieved_utc": fp.retrieved_utc, "crs": fp.crs, "box": fp.box.to_dict(),
-                       "counts": fp.counts(), "content_hash": fp.content_hash(), "report": fp.report},
-        "tx": {"paper_m": list(paper), "placed_m": list(tx.position_m),
-               "moved_m": round(math.dist(paper[:2], tx_xy), 3), "clearance_m": doc.tx.clearance_m},
+        "city": doc.scene.name,
+        "quadrant": quadrant,
+        "quadrant_rect_m": list(area.bounds),
+        "footprints": {
+            "source": fp.source,
+            "licence": fp.licence,
+            "attribution": fp.attribution,
+            "retrieved_utc": fp.retrieved_utc,
+            "crs": fp.crs,
+            "box": fp.box.to_dict(),
+            "counts": fp.counts(),
+            "content_hash": fp.content_hash(),
+            "report": fp.report,
+        },
+        "tx": {
+            "paper_m": list(paper),
+            "placed_m": list(tx.position_m),
+            "moved_m": round(math.dist(paper[:2], tx_xy), 3),
+            "clearance_m": doc.tx.clearance_m,
+        },
     }
     description = doc.scene.description
     if variant == "dynamic":
-        roads = ([Road(r.name, r.from_m, r.to_m) for r in dyn.roads] if dyn.roads != "auto"
-                 else find_roads([b for b in buildings if b.intersects(area)], area))
+        roads = (
+            [Road(r.name, r.from_m, r.to_m) for r in dyn.roads]
+            if dyn.roads != "auto"
+            else find_roads([b for b in buildings if b.intersects(area)], area)
+        )
         vehicles = place_vehicles(roads, {"bus": dyn.buses, "car": dyn.cars}, dyn.seed, buildings, area)
         objects += vehicles
-        provenance["dynamic"] = {"seed": dyn.seed, "roads": [r.to_dict() for r in roads],
-                                 "roads_from": "auto" if dyn.roads == "auto" else "scene file",
-                                 "vehicles": {"car": dyn.cars, "bus": dyn.buses}}
-        description += (f" Dynamic twin: {dyn.cars} cars (Sionna's low-poly car mesh) and {dyn.buses} buses (metal "
-                        f"boxes) on {len(roads)} roads, placed with seed {dyn.seed}.")
+        provenance["dynamic"] = {
+            "seed": dyn.seed,
+            "roads": [r.to_dict() for r in roads],
+            "roads_from": "auto" if dyn.roads == "auto" else "scene file",
+            "vehicles": {"car": dyn.cars, "bus": dyn.buses},
+        }
+        description += (
+            f" Dynamic twin: {dyn.cars} cars (Sionna's low-poly car mesh) and {dyn.buses} buses (metal "
+            f"boxes) on {len(roads)} roads, placed with seed {dyn.seed}."
+        )
     q = quadrant.upper()
-    return SceneSpec(scene=scene, variant=variant, title=f"{doc.scene.title} {q} ({variant})",
-                     description=description, source=f"{fp.source}; scene file {doc.scene.name}.toml",
-                     licence=fp.licence, attribution=fp.attribution, grid=grid, tx=tx,
-                     rx_height_m=doc.robot.rx_height_m, robot_height_m=doc.robot.robot_height_m,
-                     objects=tuple(objects), room=None, prisms=tuple(prisms), provenance=provenance,
-                     rt_defaults=doc.rt.model_dump(exclude_none=True))
+    return SceneSpec(
+        scene=scene,
+        variant=variant,
+        title=f"{doc.scene.title} {q} ({variant})",
+        description=description,
+        source=f"{fp.source}; scene file {doc.scene.name}.toml",
+        licence=fp.licence,
+        attribution=fp.attribution,
+        grid=grid,
+        tx=tx,
+        rx_height_m=doc.robot.rx_height_m,
+        robot_height_m=doc.robot.robot_height_m,
+        objects=tuple(objects),
+        room=None,
+        prisms=tuple(prisms),
+        provenance=provenance,
+        rt_defaults=doc.rt.model_dump(exclude_none=True),
+    )
 
 
-def load_city_spec(scene: str, variant: str, *, footprints: str | None = None,
-                   cell_m: float | None = None) -> SceneSpec:
+def load_city_spec(
+    scene: str, variant: str, *, footprints: str | None = None, cell_m: float | None = None
+) -> SceneSpec:
     """A built-in city quadrant by dataset scene name (``"dallas-q3"``)."""
     parts = split_quadrant_scene(scene)
     if parts is None:

@@ -21,8 +21,15 @@ _GEOJSON_SUFFIXES = (".geojson", ".json")
 _OSM_SUFFIXES = (".osm", ".xml", ".osm.gz", ".osm.bz2", ".xml.gz", ".xml.bz2")
 
 
-def load_footprints(source: str | Path, box: LonLatBox, crs: str, *, cache_dir: str | Path | None = None,
-                    offline: bool | None = None, scene: str | None = None) -> CityFootprints:
+def load_footprints(
+    source: str | Path,
+    box: LonLatBox,
+    crs: str,
+    *,
+    cache_dir: str | Path | None = None,
+    offline: bool | None = None,
+    scene: str | None = None,
+) -> CityFootprints:
     """Footprints from ``source``: ``"packaged:<file name>"``, ``"osm"`` (download or cache), or a file path.
 
     ``cache_dir`` (OpenStreetMap downloads) defaults to ``<data root>/osm``; ``offline`` defaults to
@@ -31,7 +38,7 @@ def load_footprints(source: str | Path, box: LonLatBox, crs: str, *, cache_dir: 
     check_crs(crs, box)
     text = str(source)
     if isinstance(source, str) and text.startswith("packaged:"):
-        return read_packaged(text[len("packaged:"):], box, crs)
+        return read_packaged(text[len("packaged:") :], box, crs)
     if isinstance(source, str) and text == "osm":
         return download_osm(box, crs, cache_dir, offline=offline, scene=scene)
     path = Path(text).expanduser()
@@ -40,12 +47,14 @@ def load_footprints(source: str | Path, box: LonLatBox, crs: str, *, cache_dir: 
         raise SceneFileError(
             f"{path}: unsupported footprint file type {path.suffix or '(no extension)'!r}",
             hint="give a GeoJSON file (.geojson/.json, EPSG:4326) or an OpenStreetMap XML file (.osm/.xml), "
-                 "'osm' to download from OpenStreetMap, or 'packaged:<name>' for one of: "
-                 + ", ".join(packaged_files()))
+            "'osm' to download from OpenStreetMap, or 'packaged:<name>' for one of: " + ", ".join(packaged_files()),
+        )
     if not path.is_file():
-        raise SceneFileError(f"{path}: no such footprint file",
-                             hint="check the path (make dataset SCENE=<city> OSM=path/to/file.osm or .geojson), "
-                                  "or use 'osm' to download from OpenStreetMap")
+        raise SceneFileError(
+            f"{path}: no such footprint file",
+            hint="check the path (make dataset SCENE=<city> OSM=path/to/file.osm or .geojson), "
+            "or use 'osm' to download from OpenStreetMap",
+        )
     if lower.endswith(_GEOJSON_SUFFIXES):
         return read_geojson(path, box, crs)
     return read_osm_xml(path, box, crs)

@@ -56,16 +56,19 @@ class Road:
         return {"name": self.name, "from_m": list(self.start), "to_m": list(self.end)}
 
 
-def place_transmitter(paper_xy: tuple[float, float], buildings: list[Polygon], area: Polygon,
-                      clearance_m: float) -> tuple[float, float]:
+def place_transmitter(
+    paper_xy: tuple[float, float], buildings: list[Polygon], area: Polygon, clearance_m: float
+) -> tuple[float, float]:
     """The point of ``area`` nearest ``paper_xy`` that is at least ``clearance_m`` from every building."""
     # a buffer is a polygon inside the true offset curve: pad it by a centimetre so the clearance holds exactly
     free = area.difference(unary_union(buildings).buffer(clearance_m + 0.01, quad_segs=16)) if buildings else area
     # the street network, not a courtyard: the largest open region of the quadrant
     free = max(getattr(free, "geoms", [free]), key=lambda g: g.area)
     if free.is_empty:
-        raise SceneFileError(f"no point of the quadrant is {clearance_m} m from every building",
-                             hint="lower [tx] clearance_m in the city scene file")
+        raise SceneFileError(
+            f"no point of the quadrant is {clearance_m} m from every building",
+            hint="lower [tx] clearance_m in the city scene file",
+        )
     p = Point(paper_xy)
     if free.covers(p):
         return float(paper_xy[0]), float(paper_xy[1])
@@ -84,8 +87,15 @@ def street_direction_deg(buildings: list[Polygon]) -> float:
     return float(np.argmax(weights)) / 2 + 0.25 if weights.any() else 0.0
 
 
-def find_roads(buildings: list[Polygon], area: Polygon, *, n: int = 2, clearance_m: float = 7.0,
-               min_length_m: float = 60.0, step_m: float = 1.0) -> list[Road]:
+def find_roads(
+    buildings: list[Polygon],
+    area: Polygon,
+    *,
+    n: int = 2,
+    clearance_m: float = 7.0,
+    min_length_m: float = 60.0,
+    step_m: float = 1.0,
+) -> list[Road]:
     """The ``n`` longest straight corridors through ``area`` at least ``clearance_m`` from every building, along
     either street direction; each is returned as the centreline of its run of free parallel lines."""
     blocked = unary_union(buildings).buffer(clearance_m) if buildings else Polygon()
@@ -120,8 +130,10 @@ def find_roads(buildings: list[Polygon], area: Polygon, *, n: int = 2, clearance
         (x0, y0), (x1, y1) = mid.coords[0], mid.coords[-1]
         roads.append(Road(f"street_{chr(ord('a') + i)}", (round(x0, 2), round(y0, 2)), (round(x1, 2), round(y1, 2))))
     if len(roads) < n:
-        raise SceneFileError(f"found {len(roads)} of {n} free straight roads in the quadrant",
-                             hint="list the roads in the city scene file: roads = [{name, from_m, to_m}, ...]")
+        raise SceneFileError(
+            f"found {len(roads)} of {n} free straight roads in the quadrant",
+            hint="list the roads in the city scene file: roads = [{name, from_m, to_m}, ...]",
+        )
     return roads
 
 
@@ -132,8 +144,9 @@ def vehicle_footprint(x: float, y: float, length: float, width: float, heading_d
     return Polygon([(x + c * u - s * v, y + s * u + c * v) for u, v in corners])
 
 
-def place_vehicles(roads: list[Road], counts: dict[str, int], seed: int, buildings: list[Polygon],
-                   area: Polygon) -> list[Box]:
+def place_vehicles(
+    roads: list[Road], counts: dict[str, int], seed: int, buildings: list[Polygon], area: Polygon
+) -> list[Box]:
     """``counts`` vehicles per kind (buses first, they need the most room) on random lanes and positions of
     ``roads``; each is a :class:`Box` named ``<kind>_NN`` with its heading along the lane's direction of travel."""
     rng = np.random.default_rng(seed)
@@ -161,14 +174,27 @@ def place_vehicles(roads: list[Road], counts: dict[str, int], seed: int, buildin
                 if any(fp.distance(other) < VEHICLE_GAP_M for other in placed):
                     continue
                 placed.append(fp)
-                boxes.append(Box(name=f"{kind}_{k + 1:02d}", kind=kind, material=material, x_m=round(x, 3),
-                                 y_m=round(y, 3), width_m=length, length_m=width, height_m=height,
-                                 yaw_deg=round(heading % 360.0, 3), mesh=mesh))
+                boxes.append(
+                    Box(
+                        name=f"{kind}_{k + 1:02d}",
+                        kind=kind,
+                        material=material,
+                        x_m=round(x, 3),
+                        y_m=round(y, 3),
+                        width_m=length,
+                        length_m=width,
+                        height_m=height,
+                        yaw_deg=round(heading % 360.0, 3),
+                        mesh=mesh,
+                    )
+                )
                 break
             else:
-                raise SceneFileError(f"could not place {kind} {k + 1} of {counts[kind]} on the roads "
-                                     f"({', '.join(r.name for r in roads)}) after {MAX_TRIES} tries",
-                                     hint="lengthen the roads or lower the vehicle counts in [dynamic]")
+                raise SceneFileError(
+                    f"could not place {kind} {k + 1} of {counts[kind]} on the roads "
+                    f"({', '.join(r.name for r in roads)}) after {MAX_TRIES} tries",
+                    hint="lengthen the roads or lower the vehicle counts in [dynamic]",
+                )
     return boxes
 
 
@@ -181,5 +207,14 @@ def quadrant_rect(quadrant: str, hx: float, hy: float) -> Polygon:
 
 QUADRANT_SIGNS: dict[str, tuple[int, int]] = {"q1": (-1, -1), "q2": (-1, 1), "q3": (1, 1), "q4": (1, -1)}
 
-__all__ = ["Road", "VEHICLES", "find_roads", "place_transmitter", "place_vehicles", "quadrant_rect",
-           "street_direction_deg", "vehicle_footprint", "QUADRANT_SIGNS"]
+__all__ = [
+    "Road",
+    "VEHICLES",
+    "find_roads",
+    "place_transmitter",
+    "place_vehicles",
+    "quadrant_rect",
+    "street_direction_deg",
+    "vehicle_footprint",
+    "QUADRANT_SIGNS",
+]

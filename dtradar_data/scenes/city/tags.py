@@ -13,10 +13,26 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["tag_text", "parse_length_m", "building_height", "building_material", "road_width", "classify",
-           "LEVEL_HEIGHT_M", "DEFAULT_HEIGHT_M", "HEIGHT_RANGE_M", "TAG_MATERIALS", "MATERIAL_TAG_KEYS",
-           "MATERIAL_HEIGHT_RULE", "LANE_WIDTH_M", "ROAD_WIDTH_M", "DEFAULT_ROAD_WIDTH_M", "ROAD_WIDTH_RANGE_M",
-           "NON_SURFACE_HIGHWAYS", "OVERTURE_KEYS"]
+__all__ = [
+    "tag_text",
+    "parse_length_m",
+    "building_height",
+    "building_material",
+    "road_width",
+    "classify",
+    "LEVEL_HEIGHT_M",
+    "DEFAULT_HEIGHT_M",
+    "HEIGHT_RANGE_M",
+    "TAG_MATERIALS",
+    "MATERIAL_TAG_KEYS",
+    "MATERIAL_HEIGHT_RULE",
+    "LANE_WIDTH_M",
+    "ROAD_WIDTH_M",
+    "DEFAULT_ROAD_WIDTH_M",
+    "ROAD_WIDTH_RANGE_M",
+    "NON_SURFACE_HIGHWAYS",
+    "OVERTURE_KEYS",
+]
 
 # --- heights --------------------------------------------------------------------------------------------------------
 LEVEL_HEIGHT_M = 3.5  # metres per storey for building:levels / num_floors (a common OSM 3D convention: 3-4 m)
@@ -31,12 +47,33 @@ HEIGHT_RANGE_M = (2.5, 600.0)  # clamp: below a shed's height, or above any exis
 # stucco) -> concrete. Values not listed here (wood, timber, vinyl, ...) fall back to the height rule below and are
 # counted in report["material_tags_unmapped"].
 TAG_MATERIALS: dict[str, str] = {
-    "brick": "brick", "bricks": "brick", "clay": "brick", "masonry": "brick", "adobe": "brick",
-    "stone": "marble", "sandstone": "marble", "limestone": "marble", "granite": "marble", "marble": "marble",
-    "glass": "glass", "mirror": "glass", "glass_curtain_wall": "glass", "curtain_wall": "glass",
-    "metal": "glass", "steel": "glass", "aluminium": "glass", "aluminum": "glass", "metal_plates": "glass",
-    "concrete": "concrete", "reinforced_concrete": "concrete", "cement_block": "concrete", "cement": "concrete",
-    "concrete_block": "concrete", "precast_concrete": "concrete", "plaster": "concrete", "stucco": "concrete",
+    "brick": "brick",
+    "bricks": "brick",
+    "clay": "brick",
+    "masonry": "brick",
+    "adobe": "brick",
+    "stone": "marble",
+    "sandstone": "marble",
+    "limestone": "marble",
+    "granite": "marble",
+    "marble": "marble",
+    "glass": "glass",
+    "mirror": "glass",
+    "glass_curtain_wall": "glass",
+    "curtain_wall": "glass",
+    "metal": "glass",
+    "steel": "glass",
+    "aluminium": "glass",
+    "aluminum": "glass",
+    "metal_plates": "glass",
+    "concrete": "concrete",
+    "reinforced_concrete": "concrete",
+    "cement_block": "concrete",
+    "cement": "concrete",
+    "concrete_block": "concrete",
+    "precast_concrete": "concrete",
+    "plaster": "concrete",
+    "stucco": "concrete",
 }
 MATERIAL_TAG_KEYS = ("building:material", "building:facade:material")
 # No material tag: a deterministic rule on height (first threshold the height reaches). Towers of 60 m and more
@@ -51,11 +88,33 @@ LANE_WIDTH_M = 3.5  # lanes x 3.5 m when a way has `lanes` but no `width`
 # Carriageway widths by highway type when neither `width` nor `lanes` is tagged: typical US urban values (two lanes
 # of 3.5 m for ordinary streets, more for arterials, a few metres for service roads and paths).
 ROAD_WIDTH_M: dict[str, float] = {
-    "motorway": 14.0, "trunk": 14.0, "primary": 10.5, "secondary": 7.0, "tertiary": 7.0,
-    "motorway_link": 4.5, "trunk_link": 4.5, "primary_link": 4.5, "secondary_link": 4.5, "tertiary_link": 4.5,
-    "unclassified": 6.0, "residential": 6.0, "living_street": 5.0, "road": 6.0, "busway": 7.0, "bus_guideway": 7.0,
-    "service": 4.0, "track": 3.0, "pedestrian": 5.0, "footway": 2.0, "sidewalk": 2.0, "cycleway": 2.0,
-    "path": 1.5, "bridleway": 2.0, "steps": 2.0, "construction": 6.0, "raceway": 8.0,
+    "motorway": 14.0,
+    "trunk": 14.0,
+    "primary": 10.5,
+    "secondary": 7.0,
+    "tertiary": 7.0,
+    "motorway_link": 4.5,
+    "trunk_link": 4.5,
+    "primary_link": 4.5,
+    "secondary_link": 4.5,
+    "tertiary_link": 4.5,
+    "unclassified": 6.0,
+    "residential": 6.0,
+    "living_street": 5.0,
+    "road": 6.0,
+    "busway": 7.0,
+    "bus_guideway": 7.0,
+    "service": 4.0,
+    "track": 3.0,
+    "pedestrian": 5.0,
+    "footway": 2.0,
+    "sidewalk": 2.0,
+    "cycleway": 2.0,
+    "path": 1.5,
+    "bridleway": 2.0,
+    "steps": 2.0,
+    "construction": 6.0,
+    "raceway": 8.0,
 }
 DEFAULT_ROAD_WIDTH_M = 5.0  # any other highway type
 ROAD_WIDTH_RANGE_M = (1.0, 60.0)
@@ -117,8 +176,12 @@ def building_height(props: Mapping[str, Any], report: dict | None = None) -> tup
     A value that is present but not understood (or not positive) falls through to the next source and is counted in
     ``report["height_unparsed"]``; clamping is counted in ``report["height_clamped"]``.
     """
-    candidates = (("height", parse_length_m, 1.0), ("building:levels", _parse_count, LEVEL_HEIGHT_M),
-                  ("overture_height", parse_length_m, 1.0), ("num_floors", _parse_count, LEVEL_HEIGHT_M))
+    candidates = (
+        ("height", parse_length_m, 1.0),
+        ("building:levels", _parse_count, LEVEL_HEIGHT_M),
+        ("overture_height", parse_length_m, 1.0),
+        ("num_floors", _parse_count, LEVEL_HEIGHT_M),
+    )
     height, source = DEFAULT_HEIGHT_M, "default"
     for key, parse, factor in candidates:
         if tag_text(props.get(key)) is None:
@@ -137,8 +200,11 @@ def building_height(props: Mapping[str, Any], report: dict | None = None) -> tup
 
 
 def _is_parking_garage(props: Mapping[str, Any]) -> bool:
-    return (tag_text(props.get("building")) == "parking" or tag_text(props.get("building_class")) == "parking"
-            or (tag_text(props.get("amenity")) == "parking" and tag_text(props.get("parking")) == "multi-storey"))
+    return (
+        tag_text(props.get("building")) == "parking"
+        or tag_text(props.get("building_class")) == "parking"
+        or (tag_text(props.get("amenity")) == "parking" and tag_text(props.get("parking")) == "multi-storey")
+    )
 
 
 def building_material(props: Mapping[str, Any], height_m: float, report: dict | None = None) -> tuple[str, str]:

@@ -160,9 +160,14 @@ class RoomDocument(SceneFileModel):
 
 _OBJECT_KEYS = tuple(ObjectModel.model_fields)
 _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
-_SECTION_HINTS = {"scene": "name, title, description, source, licence, attribution", "room": "width_m, ...",
-                  "grid": "cell_m, nx, ny", "tx": "position_m", "robot": "rx_height_m, robot_height_m",
-                  "objects": "[[objects]] blocks"}
+_SECTION_HINTS = {
+    "scene": "name, title, description, source, licence, attribution",
+    "room": "width_m, ...",
+    "grid": "cell_m, nx, ny",
+    "tx": "position_m",
+    "robot": "rx_height_m, robot_height_m",
+    "objects": "[[objects]] blocks",
+}
 
 
 # ------------------------------------------------------------------------------------------- entry points
@@ -172,13 +177,16 @@ def load_room_file(path: str | Path, variant: str) -> SceneSpec:
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
-        raise SceneFileError(f"{path}: cannot read scene file ({getattr(e, 'strerror', None) or e})",
-                             hint="check the path, or use a built-in scene name (`python -m dtradar_data list`)") from e
+        raise SceneFileError(
+            f"{path}: cannot read scene file ({getattr(e, 'strerror', None) or e})",
+            hint="check the path, or use a built-in scene name (`python -m dtradar_data list`)",
+        ) from e
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise SceneFileError(f"{path}: not valid TOML: {e}",
-                             hint="fix the syntax at the reported line (https://toml.io)") from e
+        raise SceneFileError(
+            f"{path}: not valid TOML: {e}", hint="fix the syntax at the reported line (https://toml.io)"
+        ) from e
     return parse_room(data, variant, origin=str(path))
 
 
@@ -225,25 +233,41 @@ class _Reader:
         if e["type"] == "extra_forbidden":
             parent = self.allowed_keys(loc[:-1])
             close = did_you_mean(str(field), parent)
-            raise self.fail(where, f"unknown key {field!r}" + (f"; {close}" if close else "") + more,
-                            "allowed keys: " + ", ".join(sorted(parent)))
+            raise self.fail(
+                where,
+                f"unknown key {field!r}" + (f"; {close}" if close else "") + more,
+                "allowed keys: " + ", ".join(sorted(parent)),
+            )
         if e["type"] == "missing":
             if len(loc) == 1:
-                raise self.fail(where, f"missing section [{field}]" + more,
-                                f"add a [{field}] table ({_SECTION_HINTS.get(field, 'see cubicle.toml')})")
+                raise self.fail(
+                    where,
+                    f"missing section [{field}]" + more,
+                    f"add a [{field}] table ({_SECTION_HINTS.get(field, 'see cubicle.toml')})",
+                )
             raise self.fail(where, f"missing field {field!r}" + more, f"add `{field} = ...` to {where}")
         if e["type"] == "dtradar":
             raise self.fail(where, f"{field} {e['ctx']['problem']}" + more, e["ctx"]["hint"])
         if e["type"] in ("model_type", "dict_type"):
             raise self.fail(where, f"{field or 'this'} must be a table" + more, "write key = value lines under it")
         if e["type"] == "list_type":
-            raise self.fail(where, f"{field} must be an array" + more,
-                            f"write each entry as a [[{'.'.join(str(p) for p in loc)}]] block or a [list]")
+            raise self.fail(
+                where,
+                f"{field} must be an array" + more,
+                f"write each entry as a [[{'.'.join(str(p) for p in loc)}]] block or a [list]",
+            )
         raise self.fail(where, f"{field}: {e['msg']}" + more, "see cubicle.toml for the expected form")
 
     def allowed_keys(self, loc: tuple) -> tuple[str, ...]:
-        model = {(): RoomDocument, ("scene",): SceneMeta, ("room",): RoomModel, ("grid",): GridModel,
-                 ("tx",): TxModel, ("robot",): RobotModel, ("dynamic",): DynamicModel}.get(tuple(loc[:1]))
+        model = {
+            (): RoomDocument,
+            ("scene",): SceneMeta,
+            ("room",): RoomModel,
+            ("grid",): GridModel,
+            ("tx",): TxModel,
+            ("robot",): RobotModel,
+            ("dynamic",): DynamicModel,
+        }.get(tuple(loc[:1]))
         if loc and loc[0] in ("objects", "add") or (len(loc) > 1 and loc[:2] == ("dynamic", "add")):
             return _OBJECT_KEYS
         if len(loc) > 1 and loc[0] == "kinds":
@@ -267,8 +291,11 @@ class _Reader:
         for key in ("rx_height_m", "robot_height_m"):
             h = getattr(doc.robot, key)
             if h >= room.height_m:
-                raise self.fail("[robot]", f"{key} = {h} is not below the ceiling ({room.height_m} m)",
-                                f"choose {key} between 0 and room.height_m")
+                raise self.fail(
+                    "[robot]",
+                    f"{key} = {h} is not below the ceiling ({room.height_m} m)",
+                    f"choose {key} between 0 and room.height_m",
+                )
         kinds = {k: v.model_dump(exclude_none=True) for k, v in doc.kinds.items()}
         for k in kinds:
             if k in ("floor", "ceiling"):
@@ -277,25 +304,41 @@ class _Reader:
         description = doc.scene.description
         if variant == "dynamic":
             if doc.dynamic is None:
-                raise self.fail("top level", "missing section [dynamic]",
-                                "add a [dynamic] table listing the changes of the dynamic twin")
+                raise self.fail(
+                    "top level",
+                    "missing section [dynamic]",
+                    "add a [dynamic] table listing the changes of the dynamic twin",
+                )
             objects = self.dynamic(doc.dynamic, objects, kinds)
             description += "\n\nDynamic twin (blueprint + changes): " + doc.dynamic.description
         boxes = structure + objects
         seen: set[str] = set()
         for b in boxes:
             if b.name in seen:
-                raise self.fail(f"object {b.name!r}", "duplicate name",
-                                "give every object a unique name (walls/floor/ceiling names are reserved)")
+                raise self.fail(
+                    f"object {b.name!r}",
+                    "duplicate name",
+                    "give every object a unique name (walls/floor/ceiling names are reserved)",
+                )
             seen.add(b.name)
         for b in objects:
             self.check_inside(b, room)
         meta = doc.scene
-        return SceneSpec(scene=meta.name, variant=variant,
-                         title=meta.title + (" (dynamic twin)" if variant == "dynamic" else " (blueprint)"),
-                         description=description, source=meta.source, licence=meta.licence,
-                         attribution=meta.attribution, grid=grid, tx=tx, rx_height_m=doc.robot.rx_height_m,
-                         robot_height_m=doc.robot.robot_height_m, objects=tuple(boxes), room=room)
+        return SceneSpec(
+            scene=meta.name,
+            variant=variant,
+            title=meta.title + (" (dynamic twin)" if variant == "dynamic" else " (blueprint)"),
+            description=description,
+            source=meta.source,
+            licence=meta.licence,
+            attribution=meta.attribution,
+            grid=grid,
+            tx=tx,
+            rx_height_m=doc.robot.rx_height_m,
+            robot_height_m=doc.robot.robot_height_m,
+            objects=tuple(boxes),
+            room=room,
+        )
 
     def room(self, r: RoomModel) -> tuple[Room, list[Box]]:
         W, L, H, wt, ft = r.width_m, r.length_m, r.height_m, r.wall_thickness_m, r.floor_thickness_m
@@ -303,38 +346,62 @@ class _Reader:
         ox, oy = W + 2 * wt, L + 2 * wt
         boxes = [Box("floor", "floor", r.floor_material, W / 2, L / 2, ox, oy, ft, z_m=-ft)]
         if (r.ceiling_material is None) != (r.ceiling_thickness_m is None):
-            raise self.fail("[room]", "ceiling_material and ceiling_thickness_m go together",
-                            "give both (closed room) or neither (open-top room)")
+            raise self.fail(
+                "[room]",
+                "ceiling_material and ceiling_thickness_m go together",
+                "give both (closed room) or neither (open-top room)",
+            )
         if r.ceiling_material is not None:
-            boxes.append(Box("ceiling", "ceiling", r.ceiling_material, W / 2, L / 2, ox, oy, r.ceiling_thickness_m,
-                             z_m=H))
-        boxes += [Box("wall_south", "wall", r.wall_material, W / 2, -wt / 2, ox, wt, H),
-                  Box("wall_north", "wall", r.wall_material, W / 2, L + wt / 2, ox, wt, H),
-                  Box("wall_west", "wall", r.wall_material, -wt / 2, L / 2, wt, L, H),
-                  Box("wall_east", "wall", r.wall_material, W + wt / 2, L / 2, wt, L, H)]
+            boxes.append(
+                Box("ceiling", "ceiling", r.ceiling_material, W / 2, L / 2, ox, oy, r.ceiling_thickness_m, z_m=H)
+            )
+        boxes += [
+            Box("wall_south", "wall", r.wall_material, W / 2, -wt / 2, ox, wt, H),
+            Box("wall_north", "wall", r.wall_material, W / 2, L + wt / 2, ox, wt, H),
+            Box("wall_west", "wall", r.wall_material, -wt / 2, L / 2, wt, L, H),
+            Box("wall_east", "wall", r.wall_material, W + wt / 2, L / 2, wt, L, H),
+        ]
         return Room(W, L, H), boxes
 
     def grid(self, g: GridModel, room: Room) -> Grid:
         cell = g.cell_m
-        grid = Grid(x0_m=cell / 2 if g.x0_m is None else g.x0_m, y0_m=cell / 2 if g.y0_m is None else g.y0_m,
-                    cell_m=cell, nx=g.nx, ny=g.ny)
+        grid = Grid(
+            x0_m=cell / 2 if g.x0_m is None else g.x0_m,
+            y0_m=cell / 2 if g.y0_m is None else g.y0_m,
+            cell_m=cell,
+            nx=g.nx,
+            ny=g.ny,
+        )
         xmin, ymin, xmax, ymax = grid.bounds()
         if xmin < -_EPS or ymin < -_EPS or xmax > room.width_m + _EPS or ymax > room.length_m + _EPS:
-            raise self.fail("[grid]", f"grid [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}] m is not inside the room "
-                                      f"[0, {room.width_m:g}] x [0, {room.length_m:g}] m",
-                            "shrink nx/ny or cell_m, or move x0_m/y0_m (cell centres of the first cell)")
+            raise self.fail(
+                "[grid]",
+                f"grid [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}] m is not inside the room "
+                f"[0, {room.width_m:g}] x [0, {room.length_m:g}] m",
+                "shrink nx/ny or cell_m, or move x0_m/y0_m (cell centres of the first cell)",
+            )
         return grid
 
     def tx(self, t: TxModel, room: Room) -> TxSpec:
         pos = t.position_m
         if not (0 < pos[0] < room.width_m and 0 < pos[1] < room.length_m and 0 < pos[2] < room.height_m):
-            raise self.fail("[tx]", f"position_m {list(pos)} is outside the room "
-                                    f"(0..{room.width_m:g}, 0..{room.length_m:g}, 0..{room.height_m:g} m)",
-                            "put the transmitter inside the room, e.g. just below the ceiling")
+            raise self.fail(
+                "[tx]",
+                f"position_m {list(pos)} is outside the room "
+                f"(0..{room.width_m:g}, 0..{room.length_m:g}, 0..{room.height_m:g} m)",
+                "put the transmitter inside the room, e.g. just below the ceiling",
+            )
         if t.look_at_m is not None and np.allclose(t.look_at_m, pos):
             raise self.fail("[tx]", "look_at_m equals position_m", "point the array at another point, e.g. the floor")
-        return TxSpec(position_m=pos, look_at_m=t.look_at_m, num_rows=t.num_rows, num_cols=t.num_cols,
-                      pattern=t.pattern, polarization=t.polarization, power_dbm=t.power_dbm)
+        return TxSpec(
+            position_m=pos,
+            look_at_m=t.look_at_m,
+            num_rows=t.num_rows,
+            num_cols=t.num_cols,
+            pattern=t.pattern,
+            polarization=t.polarization,
+            power_dbm=t.power_dbm,
+        )
 
     def obj(self, raw: Any, loc: tuple, kinds: dict[str, dict[str, Any]]) -> Box:
         where = self.where(loc)
@@ -347,15 +414,28 @@ class _Reader:
         for key in _SIZE_KEYS:
             if key not in merged and set(raw) <= set(_OBJECT_KEYS) and {"name", "kind", "x_m", "y_m"} <= set(raw):
                 known = did_you_mean(str(kind), kinds)
-                raise self.fail(where, f"missing field {key!r} (and no [kinds.{kind}] default)"
-                                + (f"; kind {known}" if known and kind not in kinds else ""),
-                                f"add `{key} = ...` to the object or to a [kinds.{kind}] table")
+                raise self.fail(
+                    where,
+                    f"missing field {key!r} (and no [kinds.{kind}] default)"
+                    + (f"; kind {known}" if known and kind not in kinds else ""),
+                    f"add `{key} = ...` to the object or to a [kinds.{kind}] table",
+                )
         try:
             o = ObjectModel.model_validate(merged)
         except ValidationError as exc:
             self.raise_first(exc, loc)
-        return Box(name=o.name, kind=o.kind, material=o.material, x_m=o.x_m, y_m=o.y_m, width_m=o.width_m,
-                   length_m=o.length_m, height_m=o.height_m, z_m=o.z_m, yaw_deg=o.yaw_deg)
+        return Box(
+            name=o.name,
+            kind=o.kind,
+            material=o.material,
+            x_m=o.x_m,
+            y_m=o.y_m,
+            width_m=o.width_m,
+            length_m=o.length_m,
+            height_m=o.height_m,
+            z_m=o.z_m,
+            yaw_deg=o.yaw_deg,
+        )
 
     def dynamic(self, d: DynamicModel, objects: list[Box], kinds: dict[str, dict[str, Any]]) -> list[Box]:
         """Apply the [dynamic] changes in a fixed order: remove, move (in place), add (appended)."""
@@ -371,26 +451,39 @@ class _Reader:
                 raise self._unknown_object(where, m.name, by_name)
             changes = m.model_dump(exclude_none=True, exclude={"name"})
             if not changes:
-                raise self.fail(where, f"move of {m.name!r} changes nothing",
-                                "give at least one of x_m, y_m, z_m, yaw_deg")
+                raise self.fail(
+                    where, f"move of {m.name!r} changes nothing", "give at least one of x_m, y_m, z_m, yaw_deg"
+                )
             out[by_name[m.name]] = replace(out[by_name[m.name]], **changes)
         added = [self.obj(a, ("add", i), kinds) for i, a in enumerate(d.add)]
         return [b for b in out if b is not None] + added
 
     def _unknown_object(self, where: str, name: str, by_name: dict) -> SceneFileError:
         close = did_you_mean(name, by_name)
-        return self.fail(where, f"no blueprint object named {name!r}" + (f"; {close}" if close else ""),
-                         "name an object from [[objects]]")
+        return self.fail(
+            where,
+            f"no blueprint object named {name!r}" + (f"; {close}" if close else ""),
+            "name an object from [[objects]]",
+        )
 
     def check_inside(self, b: Box, room: Room) -> None:
         c = b.corners()
-        if (c[:, 0].min() < -_EPS or c[:, 1].min() < -_EPS or c[:, 0].max() > room.width_m + _EPS
-                or c[:, 1].max() > room.length_m + _EPS):
-            raise self.fail(f"object {b.name!r}",
-                            f"footprint x {c[:, 0].min():.3f}..{c[:, 0].max():.3f}, y {c[:, 1].min():.3f}.."
-                            f"{c[:, 1].max():.3f} m is outside the room "
-                            f"[0, {room.width_m:g}] x [0, {room.length_m:g}] m",
-                            "move it (x_m, y_m), shrink it, or change yaw_deg so it fits inside the walls")
+        if (
+            c[:, 0].min() < -_EPS
+            or c[:, 1].min() < -_EPS
+            or c[:, 0].max() > room.width_m + _EPS
+            or c[:, 1].max() > room.length_m + _EPS
+        ):
+            raise self.fail(
+                f"object {b.name!r}",
+                f"footprint x {c[:, 0].min():.3f}..{c[:, 0].max():.3f}, y {c[:, 1].min():.3f}.."
+                f"{c[:, 1].max():.3f} m is outside the room "
+                f"[0, {room.width_m:g}] x [0, {room.length_m:g}] m",
+                "move it (x_m, y_m), shrink it, or change yaw_deg so it fits inside the walls",
+            )
         if b.z_m < -_EPS or b.top_m > room.height_m + _EPS:
-            raise self.fail(f"object {b.name!r}", f"spans z {b.z_m:g}..{b.top_m:g} m, outside the room's "
-                                                  f"0..{room.height_m:g} m", "fix z_m or height_m")
+            raise self.fail(
+                f"object {b.name!r}",
+                f"spans z {b.z_m:g}..{b.top_m:g} m, outside the room's 0..{room.height_m:g} m",
+                "fix z_m or height_m",
+            )

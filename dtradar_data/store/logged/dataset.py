@@ -55,5 +55,7 @@ class LoggedDataset:
 
     def __repr__(self) -> str:
         s = self.meta.get("stats") or {}
-        return (f"LoggedDataset({self.name!r}, version={self.version!r}, tag={self.tag!r}, steps={len(self)}, "
-                f"episodes={s.get('episodes')}, parent={self.meta.get('parent')!r})")
+        return (
+            f"LoggedDataset({self.name!r}, version={self.version!r}, tag={self.tag!r}, steps={len(self)}, "
+            f"episodes={s.get('episodes')}, parent={self.meta.get('parent')!r})"
+        )

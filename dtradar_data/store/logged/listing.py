@@ -71,6 +71,16 @@ def list_logged() -> list[LoggedEntry]:
             except CorruptDatasetError:
                 meta = {}
             s = meta.get("stats") or {}
-            out.append(LoggedEntry(lid.name, v, refs.tag_of(v), s.get("steps"), s.get("episodes"),
-                                   s.get("success_rate"), meta.get("parent", lid.parent), bdir / v))
+            out.append(
+                LoggedEntry(
+                    lid.name,
+                    v,
+                    refs.tag_of(v),
+                    s.get("steps"),
+                    s.get("episodes"),
+                    s.get("success_rate"),
+                    meta.get("parent", lid.parent),
+                    bdir / v,
+                )
+            )
     return out

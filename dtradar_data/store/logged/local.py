@@ -29,8 +29,21 @@ from dtradar_data.store.logged.table import TRANSITIONS_FILE, TRANSITIONS_FORMAT
 from dtradar_data.store.logged.versions import logged_version
 from dtradar_data.store.versions import Refs, read_refs, resolve_revision, write_refs
 
-__all__ = ["LOGGED_DIR", "META_KEY", "logged_root", "logged_dir", "refs_path", "local_versions", "write_logged",
-           "check_version_dir", "install_logged", "read_meta", "resolve_logged", "read_transitions", "load_logged"]
+__all__ = [
+    "LOGGED_DIR",
+    "META_KEY",
+    "logged_root",
+    "logged_dir",
+    "refs_path",
+    "local_versions",
+    "write_logged",
+    "check_version_dir",
+    "install_logged",
+    "read_meta",
+    "resolve_logged",
+    "read_transitions",
+    "load_logged",
+]
 
 LOGGED_DIR = "logged"
 META_KEY = b"dtradar.logged"
@@ -58,8 +71,9 @@ def local_versions(lid: LoggedId) -> list[str]:
     return sorted(found, key=lambda v: (order.get(v, len(order)), v))
 
 
-def write_logged(name: str | LoggedId, inputs: dict[str, Any], table: pa.Table,
-                 meta: dict[str, Any]) -> tuple[str, Path]:
+def write_logged(
+    name: str | LoggedId, inputs: dict[str, Any], table: pa.Table, meta: dict[str, Any]
+) -> tuple[str, Path]:
     """Store a logged version atomically (reused when it exists) and tag it; returns ``(version, directory)``.
 
     ``meta`` is stored in ``meta.json`` with the name, version, inputs, table stats, file hashes and creation time
@@ -78,17 +92,32 @@ def write_logged(name: str | LoggedId, inputs: dict[str, Any], table: pa.Table,
             P.work_root().mkdir(parents=True, exist_ok=True)
             stage = Path(tempfile.mkdtemp(prefix="logged-", dir=P.work_root()))
             try:
-                full = {**json_safe(meta), "name": lid.name, "version": version, "format": TRANSITIONS_FORMAT,
-                        "inputs": json_safe(inputs), "parent": inputs["parent"],
-                        "parent_version": inputs["parent_version"], "behaviour": inputs["behaviour"],
-                        "steps": inputs["steps"], "seed": inputs["seed"], "settings": inputs["settings"],
-                        "library_versions": inputs["library_versions"],
-                        "stats": {**episode_stats(table, (inputs.get("settings") or {}).get("max_steps")),
-                                  **json_safe(meta.get("stats") or {})},
-                        "created_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")}
+                full = {
+                    **json_safe(meta),
+                    "name": lid.name,
+                    "version": version,
+                    "format": TRANSITIONS_FORMAT,
+                    "inputs": json_safe(inputs),
+                    "parent": inputs["parent"],
+                    "parent_version": inputs["parent_version"],
+                    "behaviour": inputs["behaviour"],
+                    "steps": inputs["steps"],
+                    "seed": inputs["seed"],
+                    "settings": inputs["settings"],
+                    "library_versions": inputs["library_versions"],
+                    "stats": {
+                        **episode_stats(table, (inputs.get("settings") or {}).get("max_steps")),
+                        **json_safe(meta.get("stats") or {}),
+                    },
+                    "created_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+                }
                 schema_meta = {META_KEY: json.dumps({"name": lid.name, "version": version}).encode()}
-                pq.write_table(table.replace_schema_metadata(schema_meta), stage / TRANSITIONS_FILE,
-                               compression="zstd", write_page_checksum=True)
+                pq.write_table(
+                    table.replace_schema_metadata(schema_meta),
+                    stage / TRANSITIONS_FILE,
+                    compression="zstd",
+                    write_page_checksum=True,
+                )
                 f = stage / TRANSITIONS_FILE
                 full["files"] = {TRANSITIONS_FILE: {"sha256": sha256_file(f), "bytes": f.stat().st_size}}
                 tag = refs.tag_of(version) or refs.next_tag()
@@ -111,13 +140,16 @@ def check_version_dir(vdir: Path) -> tuple[str, dict[str, Any]]:
     meta = read_meta(vdir)
     version = meta.get("version")
     if not isinstance(meta.get("inputs"), dict) or logged_version(meta["inputs"]) != version:
-        raise CorruptDatasetError(f"{vdir / P.META_FILE}: version {version!r} is not the hash of its logging inputs",
-                                  hint="the record was edited or damaged; log or pull the dataset again")
+        raise CorruptDatasetError(
+            f"{vdir / P.META_FILE}: version {version!r} is not the hash of its logging inputs",
+            hint="the record was edited or damaged; log or pull the dataset again",
+        )
     f = vdir / TRANSITIONS_FILE
     rec = (meta.get("files") or {}).get(TRANSITIONS_FILE) or {}
     if not f.is_file() or sha256_file(f) != rec.get("sha256"):
-        raise CorruptDatasetError(f"{f} is missing or its sha256 differs from meta.json",
-                                  hint="log or pull the dataset again")
+        raise CorruptDatasetError(
+            f"{f} is missing or its sha256 differs from meta.json", hint="log or pull the dataset again"
+        )
     read_transitions(f)
     return version, meta
 
@@ -128,8 +160,9 @@ def install_logged(name: str | LoggedId, staged: Path, *, preferred_tag: str | N
     lid = parse_logged_id(name).with_revision(None)
     version, meta = check_version_dir(staged)
     if meta.get("name") != lid.name:
-        raise CorruptDatasetError(f"{staged} holds {meta.get('name')!r}, not {lid.name!r}",
-                                  hint="pull it under its own name")
+        raise CorruptDatasetError(
+            f"{staged} holds {meta.get('name')!r}, not {lid.name!r}", hint="pull it under its own name"
+        )
     ddir = logged_dir(lid)
     ddir.mkdir(parents=True, exist_ok=True)
     with FileLock(ddir / ".lock"):
@@ -140,8 +173,11 @@ def install_logged(name: str | LoggedId, staged: Path, *, preferred_tag: str | N
             shutil.move(str(staged), vdir)
         refs = read_refs(refs_path(lid))
         if refs.tag_of(version) is None:
-            tag = preferred_tag if preferred_tag and is_tag(preferred_tag) and preferred_tag not in refs.tags \
+            tag = (
+                preferred_tag
+                if preferred_tag and is_tag(preferred_tag) and preferred_tag not in refs.tags
                 else refs.next_tag()
+            )
             write_refs(refs_path(lid), Refs({**refs.tags, tag: version}, version))
     return vdir
 
@@ -150,12 +186,15 @@ def read_meta(vdir: Path) -> dict[str, Any]:
     try:
         meta = json.loads((vdir / P.META_FILE).read_text())
         if not isinstance(meta, dict) or meta.get("format") != TRANSITIONS_FORMAT:
-            raise ValueError(f"format {meta.get('format') if isinstance(meta, dict) else None!r}, expected "
-                             f"{TRANSITIONS_FORMAT}")
+            raise ValueError(
+                f"format {meta.get('format') if isinstance(meta, dict) else None!r}, expected {TRANSITIONS_FORMAT}"
+            )
         return meta
     except (OSError, ValueError) as exc:
-        raise CorruptDatasetError(f"{vdir / P.META_FILE} is not a logged-dataset record ({exc})",
-                                  hint="log the dataset again (`python -m dtradar_rl log ...`)") from exc
+        raise CorruptDatasetError(
+            f"{vdir / P.META_FILE} is not a logged-dataset record ({exc})",
+            hint="log the dataset again (`python -m dtradar_rl log ...`)",
+        ) from exc
 
 
 def resolve_logged(name: str | LoggedId, revision: str | None = None) -> tuple[LoggedId, str, Path]:
@@ -163,9 +202,11 @@ def resolve_logged(name: str | LoggedId, revision: str | None = None) -> tuple[L
     revision = revision or lid.revision
     versions = local_versions(lid)
     if not versions:
-        raise DatasetNotFoundError(f"logged dataset {lid.name} is not in {logged_root()}",
-                                   hint=f"log it: `python -m dtradar_rl log --scene {lid.scene} --variant "
-                                        f"{lid.variant} --behaviour {lid.behaviour}` (or `make logged`)")
+        raise DatasetNotFoundError(
+            f"logged dataset {lid.name} is not in {logged_root()}",
+            hint=f"log it: `python -m dtradar_rl log --scene {lid.scene} --variant "
+            f"{lid.variant} --behaviour {lid.behaviour}` (or `make logged`)",
+        )
     version = resolve_revision(read_refs(refs_path(lid)), versions, revision, lid.name)
     return lid, version, logged_dir(lid) / version
 
@@ -174,8 +215,9 @@ def read_transitions(path: Path) -> pa.Table:
     try:
         table = pq.read_table(path)
     except (OSError, pa.ArrowException) as exc:
-        raise CorruptDatasetError(f"{path} cannot be read as Parquet ({exc})",
-                                  hint="log the dataset again or re-pull it") from exc
+        raise CorruptDatasetError(
+            f"{path} cannot be read as Parquet ({exc})", hint="log the dataset again or re-pull it"
+        ) from exc
     check_transitions(table.replace_schema_metadata(None), str(path))
     return table.replace_schema_metadata(None)
 
@@ -190,8 +232,9 @@ def load_logged(name: str | LoggedId, revision: str | None = None, *, verify: bo
     if not f.is_file():
         raise CorruptDatasetError(f"{f} is missing", hint="log the dataset again")
     if verify and sha256_file(f) != rec.get("sha256"):
-        raise CorruptDatasetError(f"{f}: sha256 differs from meta.json (changed or damaged)",
-                                  hint=f"log it again, or remove {vdir}")
+        raise CorruptDatasetError(
+            f"{f}: sha256 differs from meta.json (changed or damaged)", hint=f"log it again, or remove {vdir}"
+        )
     table = read_transitions(f)
     tag = read_refs(refs_path(lid)).tag_of(version)
     meta["tag"] = tag

@@ -23,13 +23,28 @@ __all__ = ["LOGGED_LIBRARIES", "logging_inputs", "logged_version", "table_digest
 LOGGED_LIBRARIES: tuple[str, ...] = ("dtradar", "numpy", "pyarrow", "torch")
 
 
-def logging_inputs(*, parent: str, parent_version: str, behaviour: dict[str, Any], steps: int, seed: int,
-                   settings: dict[str, Any], libraries: dict[str, str] | None = None) -> dict[str, Any]:
+def logging_inputs(
+    *,
+    parent: str,
+    parent_version: str,
+    behaviour: dict[str, Any],
+    steps: int,
+    seed: int,
+    settings: dict[str, Any],
+    libraries: dict[str, str] | None = None,
+) -> dict[str, Any]:
     """What a logged version hashes: parent (name and content version), behaviour and all its parameters, steps,
     seed, the environment settings (robots, observation preset, reward, step limit), format and libraries."""
-    return {"parent": parent, "parent_version": parent_version, "behaviour": behaviour, "steps": int(steps),
-            "seed": int(seed), "settings": settings, "format": TRANSITIONS_FORMAT,
-            "library_versions": library_versions(LOGGED_LIBRARIES) if libraries is None else dict(libraries)}
+    return {
+        "parent": parent,
+        "parent_version": parent_version,
+        "behaviour": behaviour,
+        "steps": int(steps),
+        "seed": int(seed),
+        "settings": settings,
+        "format": TRANSITIONS_FORMAT,
+        "library_versions": library_versions(LOGGED_LIBRARIES) if libraries is None else dict(libraries),
+    }
 
 
 def logged_version(inputs: dict[str, Any]) -> str:

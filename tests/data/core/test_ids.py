@@ -18,12 +18,15 @@ from dtradar_data.store.catalog import as_id, known_scenes
 KNOWN = ["cubicle", "meeting", "dallas-q3"]
 
 
-@pytest.mark.parametrize("text, expected", [
-    ("cubicle/blueprint", DatasetId("cubicle", "blueprint")),
-    ("meeting/dynamic@v12", DatasetId("meeting", "dynamic", "v12")),
-    ("dallas-q3/dynamic@0123abc", DatasetId("dallas-q3", "dynamic", "0123abc")),
-    ("cubicle/blueprint@0123456789abcdef", DatasetId("cubicle", "blueprint", "0123456789abcdef")),
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("cubicle/blueprint", DatasetId("cubicle", "blueprint")),
+        ("meeting/dynamic@v12", DatasetId("meeting", "dynamic", "v12")),
+        ("dallas-q3/dynamic@0123abc", DatasetId("dallas-q3", "dynamic", "0123abc")),
+        ("cubicle/blueprint@0123456789abcdef", DatasetId("cubicle", "blueprint", "0123456789abcdef")),
+    ],
+)
 def test_parse_and_format_are_inverse(text, expected):
     parsed = parse_id(text, known=KNOWN)
     assert parsed == expected
@@ -47,8 +50,19 @@ def test_a_bare_scene_name_suggests_both_variants():
         parse_id("cubicle", known=KNOWN)
 
 
-@pytest.mark.parametrize("bad", ["cubicle/blueprint@", "cubicle/blueprint@latest", "cubicle/blueprint@abc",
-                                 "cubicle/blueprint@V1", "a/b/c", "/blueprint", "Cubicle/blueprint", ""])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "cubicle/blueprint@",
+        "cubicle/blueprint@latest",
+        "cubicle/blueprint@abc",
+        "cubicle/blueprint@V1",
+        "a/b/c",
+        "/blueprint",
+        "Cubicle/blueprint",
+        "",
+    ],
+)
 def test_malformed_ids_are_rejected_with_the_grammar(bad):
     with pytest.raises(UnknownNameError) as err:
         parse_id(bad, known=KNOWN)
@@ -67,16 +81,26 @@ def test_scenes_stored_in_the_data_root_are_known(tmp_path, monkeypatch):
     assert as_id("imported/blueprint").scene == "imported"
 
 
-@pytest.mark.parametrize("text", ["cubicle/blueprint/noisy-shortest", "cubicle/dynamic/mixture@v3",
-                                  "dallas-q3/blueprint/random@0123abcd"])
+@pytest.mark.parametrize(
+    "text", ["cubicle/blueprint/noisy-shortest", "cubicle/dynamic/mixture@v3", "dallas-q3/blueprint/random@0123abcd"]
+)
 def test_logged_ids_are_the_second_form_of_the_same_grammar(text):
     lid = parse_logged_id(text)
     assert isinstance(lid, LoggedId) and format_logged_id(lid) == text == str(lid)
     assert is_logged_name(text) and not is_logged_name(lid.parent) and parse_id(lid.parent).name == lid.parent
 
 
-@pytest.mark.parametrize("bad", ["cubicle/blueprint/x@", "cubicle/blueprint/x@latest", "cubicle/blueprint/x@abc",
-                                 "cubicle/planned/x", "cubicle/blueprint/X", "cubicle/blueprint"])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "cubicle/blueprint/x@",
+        "cubicle/blueprint/x@latest",
+        "cubicle/blueprint/x@abc",
+        "cubicle/planned/x",
+        "cubicle/blueprint/X",
+        "cubicle/blueprint",
+    ],
+)
 def test_both_forms_reject_the_same_revisions_and_names(bad):
     with pytest.raises(UnknownNameError):
         parse_logged_id(bad)

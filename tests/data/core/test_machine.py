@@ -16,7 +16,12 @@ def test_the_machine_is_described_as_json_and_in_one_line():
 
 
 def test_the_line_says_what_is_known_and_no_more():
-    m = {"cpu": "Some CPU", "cores": 16, "usable_cores": 4, "load_average": [1.31, 1.06, 0.9],
-         "memory_bytes": 8 * 2**30}
+    m = {
+        "cpu": "Some CPU",
+        "cores": 16,
+        "usable_cores": 4,
+        "load_average": [1.31, 1.06, 0.9],
+        "memory_bytes": 8 * 2**30,
+    }
     assert describe(m) == "Some CPU, 4 of 16 cores, 8.0 GiB, load 1.3 / 1.1 / 0.9"
     assert describe({"cpu": "Some CPU", "cores": 2}) == "Some CPU, 2 cores"

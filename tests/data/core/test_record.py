@@ -5,13 +5,23 @@ import pytest
 from dtradar_data.core.errors import CorruptDatasetError
 from dtradar_data.core.record import RECORD_FORMAT, VersionRecord
 
-BASE = {"name": "cubicle/blueprint", "scene": "cubicle", "variant": "blueprint", "version": "0123456789abcdef",
-        "schema_version": 1}
+BASE = {
+    "name": "cubicle/blueprint",
+    "scene": "cubicle",
+    "variant": "blueprint",
+    "version": "0123456789abcdef",
+    "schema_version": 1,
+}
 
 
 def test_a_record_round_trips_through_its_json_and_keeps_unknown_keys():
-    meta = {**BASE, "record_format": RECORD_FORMAT, "title": "Cubicle", "footprints": {"buildings": 64},
-            "files": {"cells.parquet": {"sha256": "ab" * 32, "bytes": 10}}}
+    meta = {
+        **BASE,
+        "record_format": RECORD_FORMAT,
+        "title": "Cubicle",
+        "footprints": {"buildings": 64},
+        "files": {"cells.parquet": {"sha256": "ab" * 32, "bytes": 10}},
+    }
     rec = VersionRecord.from_meta(meta)
     assert rec.title == "Cubicle" and rec.files["cells.parquet"].bytes == 10
     assert VersionRecord.from_meta(rec.to_meta()) == rec

@@ -13,11 +13,14 @@ GOLDEN = resources.files("dtradar_data.core") / "golden"
 @pytest.mark.parametrize("kind, current", [("cells", schema.CELL_SCHEMA), ("paths", schema.PATH_SCHEMA)])
 def test_the_current_schema_equals_the_golden_file_of_its_version(kind, current):
     golden = GOLDEN / f"{kind}_v{schema.SCHEMA_VERSION}.json"
-    assert golden.is_file(), (f"no golden file for schema v{schema.SCHEMA_VERSION}: a schema change needs a version "
-                              f"bump and a new dtradar_data/golden/{kind}_v{{N}}.json")
+    assert golden.is_file(), (
+        f"no golden file for schema v{schema.SCHEMA_VERSION}: a schema change needs a version "
+        f"bump and a new dtradar_data/golden/{kind}_v{{N}}.json"
+    )
     assert schema.schema_to_json(current) == golden.read_text(), (
         f"the {kind} schema changed without bumping SCHEMA_VERSION (now {schema.SCHEMA_VERSION}): bump it and add "
-        f"a new golden file rather than editing {golden.name}")
+        f"a new golden file rather than editing {golden.name}"
+    )
 
 
 def test_golden_files_record_the_version_they_belong_to():

@@ -19,10 +19,21 @@ HOLE = ((12.0, 2.0), (12.0, 4.0), (14.0, 4.0), (14.0, 2.0))  # clockwise
 
 
 def city(prisms=(), objects=(), cell_m=2.0, nx=8, ny=3):
-    return SceneSpec(scene="tiny-city", variant="blueprint", title="t", description="d", source="s", licence="l",
-                     attribution="a", grid=Grid(cell_m / 2, cell_m / 2, cell_m, nx, ny),
-                     tx=TxSpec(position_m=(8.0, 3.0, 18.0)), rx_height_m=1.5, robot_height_m=1.5,
-                     objects=tuple(objects), prisms=tuple(prisms))
+    return SceneSpec(
+        scene="tiny-city",
+        variant="blueprint",
+        title="t",
+        description="d",
+        source="s",
+        licence="l",
+        attribution="a",
+        grid=Grid(cell_m / 2, cell_m / 2, cell_m, nx, ny),
+        tx=TxSpec(position_m=(8.0, 3.0, 18.0)),
+        rx_height_m=1.5,
+        robot_height_m=1.5,
+        objects=tuple(objects),
+        prisms=tuple(prisms),
+    )
 
 
 def test_an_extruded_concave_footprint_is_a_closed_mesh_of_its_area_and_height():
@@ -52,8 +63,18 @@ def test_a_building_blocks_the_cells_it_covers_at_least_half_and_surfaces_never_
 
 
 def test_a_car_is_sionnas_low_poly_mesh_scaled_into_its_box():
-    car = Box("car_01", "car", "metal", x_m=10.0, y_m=5.0, width_m=4.4, length_m=1.8, height_m=1.5, yaw_deg=90.0,
-              mesh="sionna:low_poly_car")
+    car = Box(
+        "car_01",
+        "car",
+        "metal",
+        x_m=10.0,
+        y_m=5.0,
+        width_m=4.4,
+        length_m=1.8,
+        height_m=1.5,
+        yaw_deg=90.0,
+        mesh="sionna:low_poly_car",
+    )
     mesh = box_mesh(car)
     assert mesh.is_watertight
     np.testing.assert_allclose(mesh.bounds, [[10 - 0.9, 5 - 2.2, 0.0], [10 + 0.9, 5 + 2.2, 1.5]], atol=1e-6)
@@ -70,10 +91,16 @@ def test_an_unknown_bundled_mesh_suggests_the_known_ones():
 
 
 def test_a_city_writes_one_mesh_per_material_including_buildings_and_vehicles(tmp_path):
-    spec = city([Prism("b", "building", "brick", L_SHAPE, 30.0), Prism("g", "building", "glass", COURTYARD, 60.0,
-                                                                         holes=(HOLE,))],
-                [Box("ground", "floor", "concrete", 8, 3, 20, 10, 0.2, z_m=-0.2),
-                 Box("car_01", "car", "metal", 8, 8, 4.4, 1.8, 1.5, mesh="sionna:low_poly_car")])
+    spec = city(
+        [
+            Prism("b", "building", "brick", L_SHAPE, 30.0),
+            Prism("g", "building", "glass", COURTYARD, 60.0, holes=(HOLE,)),
+        ],
+        [
+            Box("ground", "floor", "concrete", 8, 3, 20, 10, 0.2, z_m=-0.2),
+            Box("car_01", "car", "metal", 8, 8, 4.4, 1.8, 1.5, mesh="sionna:low_poly_car"),
+        ],
+    )
     assert sorted(material_meshes(spec)) == ["brick", "concrete", "glass", "metal"]
     xml = write_mitsuba_scene(spec, tmp_path)
     shapes = ET.parse(xml).getroot().findall("shape")

@@ -55,8 +55,9 @@ robot_height_m = 1.0
 
 def _room_with(*objects: dict):
     data = tomllib.loads(ROOM)
-    data["objects"] = [{"kind": "thing", "material": "wood", "width_m": 0.5, "length_m": 0.5, "height_m": 0.9,
-                        **o} for o in objects]
+    data["objects"] = [
+        {"kind": "thing", "material": "wood", "width_m": 0.5, "length_m": 0.5, "height_m": 0.9, **o} for o in objects
+    ]
     return parse_scene(data, "blueprint", origin="test")
 
 
@@ -166,8 +167,8 @@ def test_a_rotated_box_blocks_every_cell_its_footprint_touches():
 
 def test_only_objects_within_the_robots_height_block():
     spec = _room_with(
-        {"name": "tv", "x_m": 1.25, "y_m": 1.25, "z_m": 1.3, "height_m": 0.8},   # above the 1.0 m robot
-        {"name": "rug", "x_m": 2.25, "y_m": 2.25, "height_m": 0.02},             # below the 0.05 m clearance
+        {"name": "tv", "x_m": 1.25, "y_m": 1.25, "z_m": 1.3, "height_m": 0.8},  # above the 1.0 m robot
+        {"name": "rug", "x_m": 2.25, "y_m": 2.25, "height_m": 0.02},  # below the 0.05 m clearance
         {"name": "laptop", "x_m": 3.25, "y_m": 3.25, "z_m": 0.75, "height_m": 0.02},  # on a (missing) table
     )
     assert np.argwhere(occupancy(spec)).tolist() == [[6, 6]]
@@ -207,9 +208,7 @@ def test_free_cells_form_one_connected_region_mostly(scene, variant):
 
 
 def test_free_components_are_labelled_largest_first():
-    blocked = np.array([[0, 1, 0, 0],
-                        [0, 1, 0, 0],
-                        [1, 1, 1, 1]], dtype=bool)
+    blocked = np.array([[0, 1, 0, 0], [0, 1, 0, 0], [1, 1, 1, 1]], dtype=bool)
     labels = free_components(blocked)
     assert labels.tolist() == [[2, 0, 1, 1], [2, 0, 1, 1], [0, 0, 0, 0]]
     assert largest_free_component(blocked).sum() == 4

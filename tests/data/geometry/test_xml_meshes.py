@@ -22,7 +22,7 @@ def test_occupancy_of_the_street_canyon_blocks_the_buildings_and_leaves_the_stre
     xs, ys = spec.grid.centres()
     street = np.abs(ys) < 7  # the street between the blocks runs along x, about y in [-8.6, 9.6]
     inside = (np.abs(ys) > 12) & (np.abs(ys) < 35)
-    cols = (np.abs(xs) < 14)  # the middle blocks span about x in [-15, 16]
+    cols = np.abs(xs) < 14  # the middle blocks span about x in [-15, 16]
     assert not blocked[street].any()  # the floor never blocks
     assert blocked[np.ix_(inside, cols)].all()
     assert 0.3 < blocked.mean() < 0.7
@@ -32,13 +32,13 @@ def test_occupancy_of_the_street_canyon_blocks_the_buildings_and_leaves_the_stre
 def test_a_sloped_ground_carries_the_receivers_and_transforms_are_applied(tmp_path):
     # A 40 m square ground tilted 10 degrees about y, and a 4 m cube standing on it: Mitsuba primitives, no meshes.
     xml = tmp_path / "slope.xml"
-    xml.write_text('''<scene version="2.1.0">
+    xml.write_text("""<scene version="2.1.0">
   <bsdf type="itu-radio-material" id="itu_concrete"><string name="type" value="concrete"/></bsdf>
   <shape type="rectangle" id="ground"><transform name="to_world"><scale value="20"/><rotate y="1" angle="-10"/>
   </transform><ref id="itu_concrete"/></shape>
   <shape type="cube" id="block"><transform name="to_world"><scale value="2"/><translate x="5" y="0" z="2.5"/>
   </transform><ref id="itu_concrete"/></shape>
-</scene>''')
+</scene>""")
     spec = load_scene_spec(xml, "blueprint", grid=(-19, -20, 4, 10, 11), tx=(0, 0, 20))
     assert spec.base.ground == ("ground",)
     z = ground_height(spec, [-10.0, 0.0, 10.0], [0.0, 0.0, 0.0])

@@ -71,9 +71,15 @@ def test_a_second_build_process_started_mid_trace_waits_and_reuses_the_one_versi
     signals = tmp_path / "signals"
     signals.mkdir()
     t0 = time.monotonic()
-    procs = {role: subprocess.Popen([sys.executable, "-c", BUILDER, role, str(signals)], stdout=subprocess.PIPE,
-                                    stderr=subprocess.PIPE, text=True)
-             for role in ("first", "second")}
+    procs = {
+        role: subprocess.Popen(
+            [sys.executable, "-c", BUILDER, role, str(signals)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for role in ("first", "second")
+    }
     out = {}
     try:
         for role, proc in procs.items():

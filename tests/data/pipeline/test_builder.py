@@ -16,8 +16,12 @@ def config():
     from dtradar_data.pipeline.builder import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
-    return BuildConfig(scene="cubicle", rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),
-                       coverage_samples=20_000, progress=False)
+    return BuildConfig(
+        scene="cubicle",
+        rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),
+        coverage_samples=20_000,
+        progress=False,
+    )
 
 
 @pytest.fixture
@@ -48,8 +52,9 @@ def test_a_built_dataset_loads_by_name_with_every_column_and_a_coverage_map(root
     assert not (root / "work" / "cubicle" / "blueprint" / ds.version).exists(), "work files are cleaned up"
 
 
-def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_new_one(root, config, small_cubicle,
-                                                                                       capsys):
+def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_new_one(
+    root, config, small_cubicle, capsys
+):
     import dtradar_data
     from dtradar_data.pipeline.builder import build_one
 
@@ -73,7 +78,8 @@ def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, 
     with pytest.raises(RuntimeError, match="disk full"):
         builder.build_one(small_cubicle, config)
     assert not (root / "datasets" / "cubicle" / "blueprint").exists() or not any(
-        p.is_dir() for p in (root / "datasets" / "cubicle" / "blueprint").iterdir())
+        p.is_dir() for p in (root / "datasets" / "cubicle" / "blueprint").iterdir()
+    )
     # the traced batches survive, so the next attempt does not trace again
     work = list((root / "work" / "cubicle" / "blueprint").glob("*/batch_*.npz"))
     assert work, "finished batches are kept for the retry"
@@ -139,8 +145,9 @@ def test_a_users_scene_file_builds_by_path_and_loads_by_its_name(root, tmp_path,
     assert "A user's own 2 m x 1.5 m room" in (ds.path / "README.md").read_text()
 
 
-def test_two_builds_of_one_version_at_once_both_finish_with_one_version_traced_once(root, config, small_cubicle,
-                                                                                  monkeypatch):
+def test_two_builds_of_one_version_at_once_both_finish_with_one_version_traced_once(
+    root, config, small_cubicle, monkeypatch
+):
     import threading
 
     from dtradar_data.pipeline import builder

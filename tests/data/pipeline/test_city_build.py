@@ -10,8 +10,14 @@ def test_a_dallas_quadrant_builds_and_loads_by_name_with_its_city_card_and_overv
     from dtradar_data.pipeline.builder import BuildConfig, build
     from dtradar_data.rt.settings import RTSettings
 
-    cfg = BuildConfig(scene="dallas-q3", variant="blueprint", cell_m=20.0, coverage_samples=50_000, progress=False,
-                      rt=RTSettings(max_depth=1, samples_per_src=1_000, device="cpu"))
+    cfg = BuildConfig(
+        scene="dallas-q3",
+        variant="blueprint",
+        cell_m=20.0,
+        coverage_samples=50_000,
+        progress=False,
+        rt=RTSettings(max_depth=1, samples_per_src=1_000, device="cpu"),
+    )
     (ds,) = build(cfg)
     loaded = dtradar_data.load("dallas-q3/blueprint")
     assert loaded.version == ds.version and ds.grid_info.nx == 10 and ds.grid_info.ny == 13

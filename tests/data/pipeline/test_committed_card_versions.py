@@ -25,5 +25,13 @@ def test_building_a_scene_gives_the_version_of_its_committed_card(card_dir):
 
 def test_there_is_a_committed_card_for_each_indoor_twin_and_each_dallas_dataset():
     assert {f"{p.parent.name}/{p.name}" for p in COMMITTED} >= {
-        "cubicle/blueprint", "cubicle/dynamic", "meeting/blueprint", "meeting/dynamic", "dallas-q1/blueprint",
-        "dallas-q2/blueprint", "dallas-q3/blueprint", "dallas-q4/blueprint", "dallas-q3/dynamic"}
+        "cubicle/blueprint",
+        "cubicle/dynamic",
+        "meeting/blueprint",
+        "meeting/dynamic",
+        "dallas-q1/blueprint",
+        "dallas-q2/blueprint",
+        "dallas-q3/blueprint",
+        "dallas-q4/blueprint",
+        "dallas-q3/dynamic",
+    }

@@ -26,8 +26,13 @@ def config():
     from dtradar_data.pipeline.builder import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
-    return BuildConfig(scene="cubicle", coverage_map=False, progress=False, differential=True,
-                       rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"))
+    return BuildConfig(
+        scene="cubicle",
+        coverage_map=False,
+        progress=False,
+        differential=True,
+        rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),
+    )
 
 
 def test_the_differential_build_of_an_unchanged_twin_equals_its_parent(root, small, config):

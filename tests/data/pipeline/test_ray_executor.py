@@ -35,8 +35,12 @@ def small_cubicle():
 
 
 def config(samples: int = 2_000):
-    return BuildConfig(scene="cubicle", coverage_map=False, progress=False,
-                       rt=RTSettings(max_depth=1, samples_per_src=samples, batch_size=5, device="cpu"))
+    return BuildConfig(
+        scene="cubicle",
+        coverage_map=False,
+        progress=False,
+        rt=RTSettings(max_depth=1, samples_per_src=samples, batch_size=5, device="cpu"),
+    )
 
 
 def test_a_ray_build_stores_the_same_table_and_version_as_a_serial_build(root, monkeypatch, small_cubicle, local_ray):

@@ -10,9 +10,14 @@ def test_a_bundled_sionna_scene_builds_a_small_grid_and_loads_by_its_dataset_nam
     from dtradar_data.pipeline.builder import BuildConfig, build
     from dtradar_data.rt.settings import RTSettings
 
-    cfg = BuildConfig(scene="sionna:simple_street_canyon", grid=(-30.0, -20.0, 5.0, 6, 9), tx=(0.0, 0.0, 20.0),
-                      coverage_samples=20_000, progress=False,
-                      rt=RTSettings(max_depth=1, samples_per_src=1_000, device="cpu"))
+    cfg = BuildConfig(
+        scene="sionna:simple_street_canyon",
+        grid=(-30.0, -20.0, 5.0, 6, 9),
+        tx=(0.0, 0.0, 20.0),
+        coverage_samples=20_000,
+        progress=False,
+        rt=RTSettings(max_depth=1, samples_per_src=1_000, device="cpu"),
+    )
     (ds,) = build(cfg)
     loaded = dtradar_data.load("sionna-simple_street_canyon/blueprint")
     assert loaded.version == ds.version and (ds.grid_info.nx, ds.grid_info.ny) == (6, 9)

@@ -17,26 +17,61 @@ from dtradar_data.store import local as store
 
 REPO_CARDS = Path(__file__).resolve().parents[3] / "cards"
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
-RT = {"frequency_hz": 2.4e9, "max_depth": 5, "samples_per_src": 100000, "seed": 42, "los": True,
-      "reduction": "strongest path by |a|^2 averaged over port pairs"}
+RT = {
+    "frequency_hz": 2.4e9,
+    "max_depth": 5,
+    "samples_per_src": 100000,
+    "seed": 42,
+    "los": True,
+    "reduction": "strongest path by |a|^2 averaged over port pairs",
+}
 
 
 def put(version=V0, rt=RT, licence="CC-BY-4.0", with_paths=True, png=None):
     ds = synthetic_dataset(6, 4, name="cubicle/blueprint")
-    spec = {"title": "Cubicle lab", "description": "A research lab with cubicles.", "licence": licence,
-            "source": "hand-modelled", "attribution": "dtradar contributors",
-            "objects": [{"kind": "chair", "material": "wood"}] * 3 + [{"kind": "wall", "material": "brick"}]}
-    meta = {**ds.meta, "scene_spec": spec, "rt": rt, "licence": licence, "attribution": spec["attribution"],
-            "library_versions": {"sionna-rt": "2.2.0"}, "scene_hash": "abc", "rx_height_m": 1.0}
+    spec = {
+        "title": "Cubicle lab",
+        "description": "A research lab with cubicles.",
+        "licence": licence,
+        "source": "hand-modelled",
+        "attribution": "dtradar contributors",
+        "objects": [{"kind": "chair", "material": "wood"}] * 3 + [{"kind": "wall", "material": "brick"}],
+    }
+    meta = {
+        **ds.meta,
+        "scene_spec": spec,
+        "rt": rt,
+        "licence": licence,
+        "attribution": spec["attribution"],
+        "library_versions": {"sionna-rt": "2.2.0"},
+        "scene_hash": "abc",
+        "rx_height_m": 1.0,
+    }
     paths = None
     if with_paths:
         n = ds.table.num_rows
         z = pa.array(np.zeros(n, np.float32))
-        paths = pa.Table.from_arrays([ds.table.column("ix"), ds.table.column("iy"), pa.array(np.zeros(n, np.int16)),
-                                      z, z, z, z, z, z, z, z, pa.array(np.zeros(n, np.int8)), pa.array([""] * n)],
-                                     schema=PATH_SCHEMA)
-    return store.write_version("cubicle/blueprint", version, ds.table, meta, paths=paths,
-                               extra_files={"coverage.png": png} if png else None)
+        paths = pa.Table.from_arrays(
+            [
+                ds.table.column("ix"),
+                ds.table.column("iy"),
+                pa.array(np.zeros(n, np.int16)),
+                z,
+                z,
+                z,
+                z,
+                z,
+                z,
+                z,
+                z,
+                pa.array(np.zeros(n, np.int8)),
+                pa.array([""] * n),
+            ],
+            schema=PATH_SCHEMA,
+        )
+    return store.write_version(
+        "cubicle/blueprint", version, ds.table, meta, paths=paths, extra_files={"coverage.png": png} if png else None
+    )
 
 
 def test_the_card_yaml_parses_and_configs_point_at_files_that_exist(root):
@@ -48,8 +83,13 @@ def test_the_card_yaml_parses_and_configs_point_at_files_that_exist(root):
     for config in data["configs"]:
         for entry in config["data_files"]:
             assert (vdir / entry["path"]).is_file(), entry
-    assert data["dtradar"] == {"name": "cubicle/blueprint", "version": V0, "tag": "v0", "schema_version": 1,
-                               "hub_repo": "dtradar/dtradar-cubicle-blueprint"}
+    assert data["dtradar"] == {
+        "name": "cubicle/blueprint",
+        "version": V0,
+        "tag": "v0",
+        "schema_version": 1,
+        "hub_repo": "dtradar/dtradar-cubicle-blueprint",
+    }
 
 
 def test_without_a_path_table_the_card_has_no_paths_config(root):
@@ -138,7 +178,15 @@ def test_size_categories_follow_the_hub_buckets(n, label):
     assert card.size_category(n) == label
 
 
-@pytest.mark.parametrize("text, hub", [("ODbL-1.0", "odbl"), ("Open Database License", "odbl"),
-                                       ("CC-BY-4.0", "cc-by-4.0"), ("proprietary", "other"), (None, "other")])
+@pytest.mark.parametrize(
+    "text, hub",
+    [
+        ("ODbL-1.0", "odbl"),
+        ("Open Database License", "odbl"),
+        ("CC-BY-4.0", "cc-by-4.0"),
+        ("proprietary", "other"),
+        (None, "other"),
+    ],
+)
 def test_licences_map_to_hub_identifiers(text, hub):
     assert card.license_id(text) == hub

@@ -31,16 +31,20 @@ def root(root, tmp_path, monkeypatch):
 
 def put(version=V0, **meta):
     ds = synthetic_dataset(5, 3, name="cubicle/blueprint")
-    return store.write_version("cubicle/blueprint", version, ds.table,
-                               {**ds.meta, "rt": {"max_depth": 5}, "licence": "CC-BY-4.0", **meta})
+    return store.write_version(
+        "cubicle/blueprint", version, ds.table, {**ds.meta, "rt": {"max_depth": 5}, "licence": "CC-BY-4.0", **meta}
+    )
 
 
 def tree(path: Path) -> dict[str, str]:
     """Every file under ``path`` with its content hash: "the store is unchanged" means this is equal."""
     if not path.exists():
         return {}
-    return {str(p.relative_to(path)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(path.rglob("*")) if p.is_file() and p.name != ".lock"}
+    return {
+        str(p.relative_to(path)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(path.rglob("*"))
+        if p.is_file() and p.name != ".lock"
+    }
 
 
 class FakeApi:
@@ -148,8 +152,13 @@ def test_publishing_to_an_unreachable_hub_with_a_token_gives_a_clear_error(root,
 
 def test_the_cli_pull_fails_offline_with_one_line_and_status_2(root):
     env = {**os.environ, "HF_HUB_OFFLINE": "1"}
-    proc = subprocess.run([sys.executable, "-m", "dtradar_data", "pull", "meeting/dynamic@v0"], env=env,
-                          capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [sys.executable, "-m", "dtradar_data", "pull", "meeting/dynamic@v0"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 2 and proc.stderr.startswith("error: cannot pull") and "Traceback" not in proc.stderr
     assert not (root / "datasets" / "meeting").exists()
 

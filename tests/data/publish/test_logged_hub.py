@@ -21,15 +21,31 @@ def columns(n=4, dim=3):
     """One terminated episode of ``n`` steps."""
     rng = np.random.default_rng(0)
     o = rng.normal(size=(n + 1, dim)).astype(np.float32)
-    return dict(episode=np.zeros(n), step=np.arange(n), obs=o[:-1], action=np.zeros(n), reward=np.ones(n),
-                next_obs=o[1:], terminated=np.arange(n) == n - 1, truncated=np.zeros(n, bool), robot=np.zeros(n),
-                cell=np.arange(n), target=np.full(n, 9))
+    return dict(
+        episode=np.zeros(n),
+        step=np.arange(n),
+        obs=o[:-1],
+        action=np.zeros(n),
+        reward=np.ones(n),
+        next_obs=o[1:],
+        terminated=np.arange(n) == n - 1,
+        truncated=np.zeros(n, bool),
+        robot=np.zeros(n),
+        cell=np.arange(n),
+        target=np.full(n, 9),
+    )
 
 
 def inputs():
-    return T.logging_inputs(parent="tiny/blueprint", parent_version="abc", behaviour={"kind": "noisy-shortest"},
-                            steps=4, seed=0, settings={"num_envs": 1, "obs": "goal", "reward": "geodesic",
-                                                       "max_steps": 4}, libraries={"numpy": "x"})
+    return T.logging_inputs(
+        parent="tiny/blueprint",
+        parent_version="abc",
+        behaviour={"kind": "noisy-shortest"},
+        steps=4,
+        seed=0,
+        settings={"num_envs": 1, "obs": "goal", "reward": "geodesic", "max_steps": 4},
+        libraries={"numpy": "x"},
+    )
 
 
 @pytest.fixture()

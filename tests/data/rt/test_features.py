@@ -20,8 +20,18 @@ def make_batch():
     inter = np.zeros((2, 3, 3), np.uint32)
     inter[0, 0, 1] = 1  # receiver 0, path 1: one specular reflection
     inter[:, 2, 1] = [1, 2]  # receiver 2, path 1: specular then diffuse
-    return PathBatch(valid=valid, a=a, gain=gain, tau=tau, theta_t=ang, phi_t=ang + 1, theta_r=ang + 2,
-                     phi_r=ang + 3, interactions=inter, frequency_hz=F)
+    return PathBatch(
+        valid=valid,
+        a=a,
+        gain=gain,
+        tau=tau,
+        theta_t=ang,
+        phi_t=ang + 1,
+        theta_r=ang + 2,
+        phi_r=ang + 3,
+        interactions=inter,
+        frequency_hz=F,
+    )
 
 
 def test_the_strongest_path_is_chosen_by_power_not_by_order():

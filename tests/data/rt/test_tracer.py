@@ -17,19 +17,40 @@ TX = (0.3, -0.2, 3.0)  # off the floor mesh diagonal x = y: a reflection point e
 
 
 def tiny_spec() -> SceneSpec:
-    floor = Box(name="floor", kind="floor", material="concrete", x_m=0.0, y_m=0.0, width_m=20.0, length_m=20.0,
-                height_m=0.1, z_m=-0.1)
-    return SceneSpec(scene="tiny", variant="blueprint", title="tiny", description="a floor slab", source="test",
-                     licence="CC0-1.0", attribution="test", grid=Grid(x0_m=1.0, y0_m=1.0, cell_m=1.0, nx=3, ny=2),
-                     tx=TxSpec(position_m=TX, num_rows=1, num_cols=1, pattern="iso", polarization="V"),
-                     rx_height_m=1.0, robot_height_m=1.0, objects=(floor,))
+    floor = Box(
+        name="floor",
+        kind="floor",
+        material="concrete",
+        x_m=0.0,
+        y_m=0.0,
+        width_m=20.0,
+        length_m=20.0,
+        height_m=0.1,
+        z_m=-0.1,
+    )
+    return SceneSpec(
+        scene="tiny",
+        variant="blueprint",
+        title="tiny",
+        description="a floor slab",
+        source="test",
+        licence="CC0-1.0",
+        attribution="test",
+        grid=Grid(x0_m=1.0, y0_m=1.0, cell_m=1.0, nx=3, ny=2),
+        tx=TxSpec(position_m=TX, num_rows=1, num_cols=1, pattern="iso", polarization="V"),
+        rx_height_m=1.0,
+        robot_height_m=1.0,
+        objects=(floor,),
+    )
 
 
 @pytest.fixture(scope="module")
 def iso_settings():
     from dtradar_data.rt.settings import RTSettings
 
-    return RTSettings(rx_pattern="iso", rx_polarization="V", max_depth=2, samples_per_src=200_000, device="cpu", batch_size=4)
+    return RTSettings(
+        rx_pattern="iso", rx_polarization="V", max_depth=2, samples_per_src=200_000, device="cpu", batch_size=4
+    )
 
 
 @pytest.fixture(scope="module")

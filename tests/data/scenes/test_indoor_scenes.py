@@ -23,13 +23,29 @@ PAPER_COUNTS = {
     ("cubicle", "blueprint"): {"chair": 11, "cubicle": 7, "table": 1},
     ("cubicle", "dynamic"): {"chair": 12, "cubicle": 7, "table": 1, "person": 2},
     ("meeting", "blueprint"): {"chair": 10, "table": 4, "board": 1, "rack": 2, "tv": 1, "monitor": 2},
-    ("meeting", "dynamic"): {"chair": 12, "table": 4, "board": 1, "rack": 2, "tv": 1, "monitor": 2, "laptop": 2,
-                             "boxes": 1},
+    ("meeting", "dynamic"): {
+        "chair": 12,
+        "table": 4,
+        "board": 1,
+        "rack": 2,
+        "tv": 1,
+        "monitor": 2,
+        "laptop": 2,
+        "boxes": 1,
+    },
 }
 PAPER_MATERIALS = {
     "cubicle": {"chair": "wood", "cubicle": "metal", "wall": "brick", "floor": "concrete"},
-    "meeting": {"chair": "wood", "table": "wood", "board": "wood", "rack": "wood", "tv": "metal", "monitor": "metal",
-                "wall": "brick", "floor": "concrete"},
+    "meeting": {
+        "chair": "wood",
+        "table": "wood",
+        "board": "wood",
+        "rack": "wood",
+        "tv": "metal",
+        "monitor": "metal",
+        "wall": "brick",
+        "floor": "concrete",
+    },
 }
 PAPER_GRIDS = {"cubicle": (18, 42), "meeting": (40, 38)}  # (ny, nx): paper's 42 x 18 and 38 x 40
 # Objects re-oriented in each dynamic twin (paper: 3 chairs in the lab, 2 in the meeting room).
@@ -212,7 +228,7 @@ BAD_CASES = [
     ("height_m = 0.75", "height_m = 0.75\nz_m = 2.0", ["table_01", "outside the room's 0..2.5 m"]),
     ("y_m = 2.0", "y_m = 2.0\ncolour = 'red'", ["table_01", "unknown key 'colour'"]),
     ("y_m = 2.0", "y_m = 2.0\nyaw = 3.0", ["did you mean 'yaw_deg'"]),
-    ('x_m = 1.0\ny_m = 1.0', 'x_m = 1.0', ["chair_01", "missing field 'y_m'"]),
+    ("x_m = 1.0\ny_m = 1.0", "x_m = 1.0", ["chair_01", "missing field 'y_m'"]),
     ("nx = 8", "nx = 9", ["[grid]", "not inside the room"]),
     ("position_m = [2.0, 1.5, 2.4]", "position_m = [2.0, 1.5, 2.6]", ["[tx]", "outside the room"]),
     ('wall_material = "brick"', 'wall_material = "bricks"', ["[room]", "did you mean 'brick'"]),

@@ -9,8 +9,7 @@ from dtradar_data.core.errors import SceneFileError, UnknownNameError
 from dtradar_data.scenes import available_scenes, build_targets, load_scene_spec
 from dtradar_data.scenes.xml_scene import sionna_scene_names, sionna_xml
 
-SIONNA = ["sionna:etoile", "sionna:florence", "sionna:munich", "sionna:san_francisco",
-          "sionna:simple_street_canyon"]
+SIONNA = ["sionna:etoile", "sionna:florence", "sionna:munich", "sionna:san_francisco", "sionna:simple_street_canyon"]
 
 
 def canyon_copy(tmp_path: Path) -> Path:
@@ -33,8 +32,9 @@ def test_the_five_sionna_scenes_are_listed_and_resolve_to_their_bundled_xml():
 
 
 def test_a_sionna_scene_named_with_a_dash_is_the_same_scene():
-    assert load_scene_spec("sionna-munich", "blueprint").digest() == load_scene_spec("sionna:munich",
-                                                                                     "blueprint").digest()
+    assert (
+        load_scene_spec("sionna-munich", "blueprint").digest() == load_scene_spec("sionna:munich", "blueprint").digest()
+    )
 
 
 def test_grid_tx_and_cell_size_options_replace_the_defaults():
@@ -72,7 +72,7 @@ def test_the_digest_changes_when_the_xml_or_one_of_its_meshes_changes(tmp_path):
 def test_a_user_xml_loads_from_a_small_scene_file_with_a_relative_path(tmp_path):
     xml = canyon_copy(tmp_path)
     toml = tmp_path / "canyon.toml"
-    toml.write_text(f'''format = 1
+    toml.write_text(f"""format = 1
 [scene]
 name = "my-canyon"
 title = "My canyon"
@@ -86,7 +86,7 @@ nx = 11
 ny = 3
 [tx]
 position_m = [0.0, 0.0, 20.0]
-''')
+""")
     spec = load_scene_spec(toml, "blueprint")
     assert spec.name == "my-canyon/blueprint" and spec.base.xml == xml.name and spec.base.ground == ("mesh-floor",)
     assert build_targets(toml) == [(toml, "blueprint")]
@@ -102,8 +102,10 @@ def test_a_missing_xml_is_a_scene_file_error(tmp_path):
     with pytest.raises(SceneFileError, match="no such scene file"):
         load_scene_spec(tmp_path / "nowhere.xml", "blueprint", grid=(0, 0, 1, 2, 2), tx=(0, 0, 5))
     toml = tmp_path / "s.toml"
-    toml.write_text('format = 1\n[scene]\nname = "s"\ntitle = "S"\n[xml]\npath = "gone.xml"\n'
-                    '[grid]\nx0_m = 0\ny0_m = 0\ncell_m = 1\nnx = 2\nny = 2\n[tx]\nposition_m = [0, 0, 5]\n')
+    toml.write_text(
+        'format = 1\n[scene]\nname = "s"\ntitle = "S"\n[xml]\npath = "gone.xml"\n'
+        "[grid]\nx0_m = 0\ny0_m = 0\ncell_m = 1\nnx = 2\nny = 2\n[tx]\nposition_m = [0, 0, 5]\n"
+    )
     with pytest.raises(SceneFileError, match=r"\[xml\] path: 'gone.xml' does not exist"):
         load_scene_spec(toml, "blueprint")
 

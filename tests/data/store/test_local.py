@@ -39,12 +39,24 @@ def paths_table(cells: pa.Table) -> pa.Table:
     free = cells.filter(pa.compute.invert(cells.column("blocked")))
     n = free.num_rows
     f32 = lambda v: pa.array(np.full(n, v, np.float32))  # noqa: E731
-    return pa.Table.from_pydict({
-        "ix": free.column("ix"), "iy": free.column("iy"), "path": pa.array(np.zeros(n, np.int16)),
-        "a_re": free.column("a_re"), "a_im": free.column("a_im"), "power_db": free.column("path_gain_db"),
-        "tau_s": free.column("tau_s"), "aod_zen_rad": f32(1.0), "aod_az_rad": f32(0.5), "aoa_zen_rad": f32(2.0),
-        "aoa_az_rad": f32(-0.5), "depth": pa.array(np.zeros(n, np.int8)), "interactions": pa.array([""] * n),
-    }, schema=PATH_SCHEMA)
+    return pa.Table.from_pydict(
+        {
+            "ix": free.column("ix"),
+            "iy": free.column("iy"),
+            "path": pa.array(np.zeros(n, np.int16)),
+            "a_re": free.column("a_re"),
+            "a_im": free.column("a_im"),
+            "power_db": free.column("path_gain_db"),
+            "tau_s": free.column("tau_s"),
+            "aod_zen_rad": f32(1.0),
+            "aod_az_rad": f32(0.5),
+            "aoa_zen_rad": f32(2.0),
+            "aoa_az_rad": f32(-0.5),
+            "depth": pa.array(np.zeros(n, np.int8)),
+            "interactions": pa.array([""] * n),
+        },
+        schema=PATH_SCHEMA,
+    )
 
 
 def test_write_then_load_roundtrips_the_table_the_grid_and_the_mask(root):
@@ -85,8 +97,9 @@ def test_the_per_path_table_and_extra_files_are_stored_and_loaded_on_request(roo
     cells, meta = make()
     png = tmp_path / "cov.png"
     png.write_bytes(b"\x89PNG fake")
-    path = store.write_version("cubicle/blueprint", V0, cells, meta, paths=paths_table(cells),
-                               extra_files={"coverage.png": png})
+    path = store.write_version(
+        "cubicle/blueprint", V0, cells, meta, paths=paths_table(cells), extra_files={"coverage.png": png}
+    )
     assert (path / "coverage.png").read_bytes() == png.read_bytes()
     ds = store.load("cubicle/blueprint", paths=True)
     assert ds.paths_table.num_rows == 46
@@ -141,8 +154,9 @@ def test_a_failure_while_renaming_into_place_leaves_refs_and_versions_untouched(
     monkeypatch.setattr(store.os, "rename", no_rename)
     with pytest.raises(OSError, match="injected"):
         store.write_version("cubicle/blueprint", V1, cells, meta)
-    assert sorted(p.name for p in (root / "datasets/cubicle/blueprint").iterdir()
-                  if not p.name.startswith(".")) == sorted(["refs.json", V0])
+    assert sorted(
+        p.name for p in (root / "datasets/cubicle/blueprint").iterdir() if not p.name.startswith(".")
+    ) == sorted(["refs.json", V0])
     assert list((root / "work").iterdir()) == []
 
 

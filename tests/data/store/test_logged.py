@@ -29,20 +29,38 @@ def columns(n_episodes=3, length=4, dim=5, seed=0, last_truncated=True):
         ep.append(np.full(length, e))
         step.append(np.arange(length))
     n = n_episodes * length
-    return dict(episode=np.concatenate(ep), step=np.concatenate(step), obs=np.concatenate(obs),
-                action=rng.integers(0, 4, n), reward=rng.normal(size=n), next_obs=np.concatenate(nxt),
-                terminated=np.concatenate(term), truncated=np.concatenate(trunc), robot=np.zeros(n),
-                cell=np.arange(n), target=np.full(n, 7))
+    return dict(
+        episode=np.concatenate(ep),
+        step=np.concatenate(step),
+        obs=np.concatenate(obs),
+        action=rng.integers(0, 4, n),
+        reward=rng.normal(size=n),
+        next_obs=np.concatenate(nxt),
+        terminated=np.concatenate(term),
+        truncated=np.concatenate(trunc),
+        robot=np.zeros(n),
+        cell=np.arange(n),
+        target=np.full(n, 7),
+    )
 
 
 def inputs(seed=0, steps=12):
-    return T.logging_inputs(parent="tiny/blueprint", parent_version="abc", behaviour={"kind": "noisy-shortest",
-                            "shortest_prob": 0.5}, steps=steps, seed=seed, settings={"num_envs": 1, "obs": "goal",
-                            "reward": "geodesic", "max_steps": 4}, libraries={"numpy": "x"})
+    return T.logging_inputs(
+        parent="tiny/blueprint",
+        parent_version="abc",
+        behaviour={"kind": "noisy-shortest", "shortest_prob": 0.5},
+        steps=steps,
+        seed=seed,
+        settings={"num_envs": 1, "obs": "goal", "reward": "geodesic", "max_steps": 4},
+        libraries={"numpy": "x"},
+    )
 
 
-META = {"observations": {"preset": "goal", "names": ["a", "b", "c", "d", "e"]}, "behaviour_text": "test behaviour",
-        "normalizer": {"columns": ["x"], "mean": [0.0], "std": [1.0]}}
+META = {
+    "observations": {"preset": "goal", "names": ["a", "b", "c", "d", "e"]},
+    "behaviour_text": "test behaviour",
+    "normalizer": {"columns": ["x"], "mean": [0.0], "std": [1.0]},
+}
 
 
 def test_logged_ids_parse_and_format_are_inverse_and_malformed_ones_are_typed_errors():
@@ -90,8 +108,15 @@ def test_a_stored_version_loads_by_name_lists_verifies_and_its_card_says_what_it
     assert (s["episodes"], s["terminated"], s["truncated"], s["cut_by_end_of_log"]) == (3, 2, 1, 0)
     assert s["success_rate"] == pytest.approx(2 / 3)  # 4 steps = the step limit: a failure
     card = (vdir / "README.md").read_text()
-    for text in ("noisy-shortest", "behaviour success rate | 0.667", "truncated", "not** a terminal", "goal",
-                 "dtradar/tiny-blueprint-noisy-shortest-v0", "parent RT dataset | `tiny/blueprint`"):
+    for text in (
+        "noisy-shortest",
+        "behaviour success rate | 0.667",
+        "truncated",
+        "not** a terminal",
+        "goal",
+        "dtradar/tiny-blueprint-noisy-shortest-v0",
+        "parent RT dataset | `tiny/blueprint`",
+    ):
         assert text in card, text
     assert [e.name for e in T.list_logged()] == [NAME]
     assert T.verify_logged(NAME) == {version: []}

@@ -28,13 +28,16 @@ def test_the_same_inputs_give_the_same_version_whatever_the_key_order():
     assert len(a) == 16 and int(a, 16) >= 0
 
 
-@pytest.mark.parametrize("change", [
-    {"rt": {**RT, "max_depth": 6}},
-    {"rt": {**RT, "seed": 43}},
-    {"scene_spec": {**SPEC, "objects": [{"kind": "chair", "x_m": 1.5}]}},
-    {"schema_version": 2},
-    {"library_versions": {**LIBS, "sionna-rt": "2.3.0"}},
-])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"rt": {**RT, "max_depth": 6}},
+        {"rt": {**RT, "seed": 43}},
+        {"scene_spec": {**SPEC, "objects": [{"kind": "chair", "x_m": 1.5}]}},
+        {"schema_version": 2},
+        {"library_versions": {**LIBS, "sionna-rt": "2.3.0"}},
+    ],
+)
 def test_changing_any_input_changes_the_version(change):
     assert versions.version_id(inputs(**change)) != versions.version_id(inputs())
 

@@ -53,8 +53,9 @@ def kill_mid_write(path, first: int, kill_at: int, *, when: str) -> None:
     """Run a writer from step ``first``; SIGKILL it while it writes step ``kill_at``: ``when="midway"`` with the
     write's file open (the writer pauses there), ``when="start"`` 2 ms after it announces the write."""
     pause_at = kill_at if when == "midway" else -1
-    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path), str(first), str(pause_at)],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", WRITER, str(path), str(first), str(pause_at)], stdout=subprocess.PIPE, text=True
+    )
     try:
         for line in proc.stdout:
             if line.split() == [{"midway": "midway", "start": "writing"}[when], str(kill_at)]:

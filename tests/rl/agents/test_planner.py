@@ -13,8 +13,9 @@ def test_the_baseline_planner_reaches_every_reachable_target_when_its_map_is_the
     mdp = GridMDP.from_dataset(ds)
     cells = mdp.pair_cells()
     rng = np.random.default_rng(0)  # every target, from three random starts each
-    pairs = np.array([(s, t) for t in cells
-                      for s in rng.choice([c for c in cells if c != t and mdp.connected(c, t)], 3)])
+    pairs = np.array(
+        [(s, t) for t in cells for s in rng.choice([c for c in cells if c != t and mdp.connected(c, t)], 3)]
+    )
     roll = rollout(FingerprintPlanner(ds), ds, pairs)
     m = metrics_from_rollouts(roll)
     assert m.success_rate == 1.0 and m.spl == pytest.approx(1.0) and m.collisions == 0

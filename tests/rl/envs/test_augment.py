@@ -36,8 +36,9 @@ def twin_with(extra: np.ndarray):
     """The synthetic 42 x 18 twin with ``extra`` cells blocked too. Its radio features are free-space line of sight,
     independent of obstacles, so this is exactly the table a re-traced twin with those obstacles would have."""
     blocked = synthetic_blocked(42, 18, "blueprint") | extra.reshape(18, 42)
-    return synthetic_dataset(42, 18, blocked, cell_m=0.25, tx=(42 * 0.25 / 2, 18 * 0.25 / 2, 3.0),
-                             name="synthetic/augmented")
+    return synthetic_dataset(
+        42, 18, blocked, cell_m=0.25, tx=(42 * 0.25 / 2, 18 * 0.25 / 2, 3.0), name="synthetic/augmented"
+    )
 
 
 def aug_env(ds, n=64, **kw):
@@ -61,14 +62,25 @@ def _trace(env, steps=300, seed=1):
 def test_without_augmentation_the_env_is_bit_identical_to_before(synth):
     # Golden numbers recorded with the batched env as it was before augmentation existed (same torch RNG streams).
     plain = BatchedNavEnv.from_dataset(synth, 64, obs="neighbors", reward="geodesic", seed=7)
-    off = BatchedNavEnv.from_dataset(synth, 64, obs="neighbors", reward="geodesic", seed=7, aug_obstacles=0,
-                                     aug_obstacle_size=3, aug_potential="blueprint")
+    off = BatchedNavEnv.from_dataset(
+        synth,
+        64,
+        obs="neighbors",
+        reward="geodesic",
+        seed=7,
+        aug_obstacles=0,
+        aug_obstacle_size=3,
+        aug_potential="blueprint",
+    )
     assert not hasattr(off, "extra") and off.state_keys == ("cell", "target", "tpool", "steps")
     plain.reset(), off.reset()
     a, b = _trace(plain), _trace(off)
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
-    assert a[0][:3, :8].tolist() == [[259, 395, 174, 224, 510, 610, 386, 243], [260, 437, 173, 223, 552, 611, 428, 244],
-                                     [559, 367, 315, 393, 187, 236, 238, 41]]
+    assert a[0][:3, :8].tolist() == [
+        [259, 395, 174, 224, 510, 610, 386, 243],
+        [260, 437, 173, 223, 552, 611, 428, 244],
+        [559, 367, 315, 393, 187, 236, 238, 41],
+    ]
     assert int(a[0].sum()) == 14893568 and float(a[1].sum()) == -1951.0
 
 
@@ -76,11 +88,11 @@ def test_extra_obstacles_never_sit_on_the_start_or_target_and_leave_them_connect
     env = aug_env(synth, n=256)
     rows = torch.arange(env.num_envs)
     for _ in range(3):
-        assert env.extra.sum(1).float().mean() > 6                          # up to 2x2 cells per obstacle
+        assert env.extra.sum(1).float().mean() > 6  # up to 2x2 cells per obstacle
         assert not env.extra[rows, env.cell].any() and not env.extra[rows, env.target].any()
         assert (env.adist[rows, env.cell] > 0).all() and (env.adist[rows, env.target] == 0).all()
-        assert not (env.extra & ~env.free_mask).any()                        # only on free cells of the table
-        for i in range(0, env.num_envs, 97):                                 # connected on the augmented grid
+        assert not (env.extra & ~env.free_mask).any()  # only on free cells of the table
+        for i in range(0, env.num_envs, 97):  # connected on the augmented grid
             b = np.asarray(synth.blocked, bool).ravel() | env.extra[i].numpy()
             mdp = GridMDP.from_blocked(b.reshape(synth.blocked.shape))
             assert mdp.connected(int(env.cell[i]), int(env.target[i]))
@@ -90,7 +102,7 @@ def test_extra_obstacles_never_sit_on_the_start_or_target_and_leave_them_connect
 
 def test_moving_into_an_extra_obstacle_is_a_collision_and_the_robot_stays(synth):
     env = aug_env(synth, n=256)
-    into = env.extra.gather(1, env.next_cell[env.cell])                     # [N, 4]: move leads into an obstacle
+    into = env.extra.gather(1, env.next_cell[env.cell])  # [N, 4]: move leads into an obstacle
     robots, actions = torch.nonzero(into, as_tuple=True)
     assert robots.numel() > 0
     i, a = int(robots[0]), int(actions[0])
@@ -99,7 +111,7 @@ def test_moving_into_an_extra_obstacle_is_a_collision_and_the_robot_stays(synth)
     act[i] = a
     _, reward, terminated, _, info = env.step(act)
     assert bool(info["collision"][i]) and int(env.cell[i]) == int(before[i]) and not bool(terminated[i])
-    assert float(reward[i]) == -1.0                                          # collision penalty, no shaping change
+    assert float(reward[i]) == -1.0  # collision penalty, no shaping change
 
 
 def test_an_extra_obstacle_reads_like_a_blocked_neighbour_in_the_table(synth):
@@ -116,7 +128,7 @@ def test_an_extra_obstacle_reads_like_a_blocked_neighbour_in_the_table(synth):
     env = aug_env(synth, n=512)
     obs = env.observe()
     hidden = env.extra.gather(1, env.next_cell[env.cell])
-    cols = env._nbr_cols                                                     # [4, 9]: 8 radio features + flag
+    cols = env._nbr_cols  # [4, 9]: 8 radio features + flag
     assert hidden.any() and (obs[:, cols][hidden] == 0).all()
 
 
@@ -125,8 +137,9 @@ def test_augmented_env_equals_the_single_env_on_a_twin_with_those_cells_blocked(
     env = aug_env(synth, n=8, max_steps=40)
     singles = []
     for i in range(env.num_envs):
-        e = DtradarNavEnv(twin_with(env.extra[i].numpy()), obs="neighbors", reward="geodesic", normalizer=norm,
-                          max_steps=40)
+        e = DtradarNavEnv(
+            twin_with(env.extra[i].numpy()), obs="neighbors", reward="geodesic", normalizer=norm, max_steps=40
+        )
         e.reset(options={"start": env.mdp.xy(int(env.cell[i])), "target": env.mdp.xy(int(env.target[i]))})
         singles.append(e)
     rng = np.random.default_rng(0)
@@ -139,7 +152,7 @@ def test_augmented_env_equals_the_single_env_on_a_twin_with_those_cells_blocked(
                 continue
             o, r, te, tr, info = e.step(actions[i])
             np.testing.assert_array_equal(obs_b[i].numpy(), o)
-            assert rew_b[i].item() == pytest.approx(r, abs=1e-6)              # replanned geodesic potential
+            assert rew_b[i].item() == pytest.approx(r, abs=1e-6)  # replanned geodesic potential
             assert (bool(term_b[i]), bool(trunc_b[i]), bool(info_b["collision"][i])) == (te, tr, info["collision"])
             done[i] = te or tr
     assert done.all()
@@ -191,10 +204,24 @@ def test_the_robust_preset_validates_and_only_adds_augmentation_to_tuned():
 
 
 def test_resumed_augmented_training_equals_an_uninterrupted_run(tmp_path):
-    cfg = {"scene": "synthetic-12x8", "num_envs": 32, "hidden": (32,), "batch_size": 64, "learning_starts": 500,
-           "env_steps_per_update": 8, "target_update_every": 50, "buffer_size": 1_000, "eps_start": 0.3,
-           "eps_end": 0.3, "lr_end": -1.0, "threads": 1, "verbose": False, "checkpoint_every": 0,
-           "aug_obstacles": 2, "aug_obstacle_size": 2}
+    cfg = {
+        "scene": "synthetic-12x8",
+        "num_envs": 32,
+        "hidden": (32,),
+        "batch_size": 64,
+        "learning_starts": 500,
+        "env_steps_per_update": 8,
+        "target_update_every": 50,
+        "buffer_size": 1_000,
+        "eps_start": 0.3,
+        "eps_end": 0.3,
+        "lr_end": -1.0,
+        "threads": 1,
+        "verbose": False,
+        "checkpoint_every": 0,
+        "aug_obstacles": 2,
+        "aug_obstacle_size": 2,
+    }
     full = train(config_for("tuned", out=str(tmp_path / "full"), total_env_steps=3_200, **cfg))
     train(config_for("tuned", out=str(tmp_path / "res"), total_env_steps=1_600, **cfg))
     resumed = train(config_for("tuned", out=str(tmp_path / "res"), resume=True, total_env_steps=3_200, **cfg))

@@ -46,12 +46,12 @@ def test_features_are_z_scored_with_the_stored_statistics(small):
 
 def test_neighbor_flags_mark_blocked_and_off_grid_neighbours():
     b = np.zeros((3, 3), bool)
-    b[1, 2] = True                                                # X+ of the centre is blocked
+    b[1, 2] = True  # X+ of the centre is blocked
     ds = synthetic_dataset(3, 3, b)
     table = build_observations(ds, "neighbors", Normalizer.fit(ds))
     flags = [table.names.index(f"{a}:has_radio") for a in ("X-", "X+", "Y-", "Y+")]
-    assert table.cell_part[4, flags].tolist() == [1, 0, 1, 1]     # centre cell
-    assert table.cell_part[0, flags].tolist() == [0, 1, 0, 1]     # corner (0, 0): X- and Y- off the grid
+    assert table.cell_part[4, flags].tolist() == [1, 0, 1, 1]  # centre cell
+    assert table.cell_part[0, flags].tolist() == [0, 1, 0, 1]  # corner (0, 0): X- and Y- off the grid
 
 
 def test_unknown_observation_preset_suggests_the_closest(small):
@@ -96,8 +96,9 @@ def test_batched_env_equals_the_single_env_step_for_step(obs, reward):
     pairs = single.mdp.sample_pairs(n, rng)
     batched.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
     envs = [DtradarNavEnv(ds, obs=obs, reward=reward, normalizer=norm, max_steps=30) for _ in range(n)]
-    first = np.stack([e.reset(options={"start": single.mdp.xy(s), "target": single.mdp.xy(t)})[0]
-                      for e, (s, t) in zip(envs, pairs)])
+    first = np.stack(
+        [e.reset(options={"start": single.mdp.xy(s), "target": single.mdp.xy(t)})[0] for e, (s, t) in zip(envs, pairs)]
+    )
     np.testing.assert_allclose(batched.observe().numpy(), first, rtol=1e-6)
     done = np.zeros(n, bool)
     for _ in range(30):
@@ -111,7 +112,7 @@ def test_batched_env_equals_the_single_env_step_for_step(obs, reward):
             assert rew_b[i].item() == pytest.approx(r, rel=1e-5, abs=1e-5)
             assert (bool(term_b[i]), bool(trunc_b[i]), bool(info_b["collision"][i])) == (te, tr, info["collision"])
             done[i] = te or tr
-    assert done.all()                                             # truncated at 30 at the latest
+    assert done.all()  # truncated at 30 at the latest
 
 
 def test_batched_random_pairs_are_connected_and_distinct():

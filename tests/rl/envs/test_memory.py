@@ -16,13 +16,13 @@ def dyn():
 def test_memory_agents_in_the_batched_env_agree_step_for_step_with_the_gymnasium_env(dyn):
     norm, n, steps = Normalizer.fit(dyn), 12, 30
     batched = MemoryNavEnv.from_dataset(dyn, n, normalizer=norm, reward="geodesic", max_steps=steps, memory_radius=3)
-    envs = [MemoryGymEnv(dyn, reward="geodesic", normalizer=norm, max_steps=steps, memory_radius=3)
-            for _ in range(n)]
+    envs = [MemoryGymEnv(dyn, reward="geodesic", normalizer=norm, max_steps=steps, memory_radius=3) for _ in range(n)]
     rng = np.random.default_rng(0)
     pairs = envs[0].mdp.sample_pairs(n, rng)
     batched.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
-    first = np.stack([e.reset(options={"start": e.mdp.xy(s), "target": e.mdp.xy(t)})[0]
-                      for e, (s, t) in zip(envs, pairs)])
+    first = np.stack(
+        [e.reset(options={"start": e.mdp.xy(s), "target": e.mdp.xy(t)})[0] for e, (s, t) in zip(envs, pairs)]
+    )
     np.testing.assert_allclose(batched.observe().numpy(), first, rtol=1e-6)
     done = np.zeros(n, bool)
     for _ in range(steps):
@@ -44,12 +44,19 @@ def test_the_memory_window_keeps_an_obstacle_sensed_earlier_after_the_robot_move
     env = MemoryGymEnv(ds, memory_radius=3, max_steps=50)
     blocked = env.mdp.blocked
     # a wall cell with two free cells on one side: stand beside it, then step away from it
-    iy, ix, side_x = next((int(y), int(x), sx) for y, x in np.argwhere(blocked) for sx in (-1, 1)
-                          if 0 <= x + 2 * sx < env.mdp.nx and not blocked[y, x + sx] and not blocked[y, x + 2 * sx])
+    iy, ix, side_x = next(
+        (int(y), int(x), sx)
+        for y, x in np.argwhere(blocked)
+        for sx in (-1, 1)
+        if 0 <= x + 2 * sx < env.mdp.nx and not blocked[y, x + sx] and not blocked[y, x + 2 * sx]
+    )
     start, away = (ix + side_x, iy), (0 if side_x < 0 else 1)
-    target = next((x, y) for y in range(env.mdp.ny) for x in range(env.mdp.nx)
-                  if not blocked[y, x] and (x, y) != start and env.mdp.connected(env.mdp.cell(*start),
-                                                                                  env.mdp.cell(x, y)))
+    target = next(
+        (x, y)
+        for y in range(env.mdp.ny)
+        for x in range(env.mdp.nx)
+        if not blocked[y, x] and (x, y) != start and env.mdp.connected(env.mdp.cell(*start), env.mdp.cell(x, y))
+    )
     obs, _ = env.reset(options={"start": start, "target": target})
     obs, _, _, _, info = env.step(away)
     assert not info["collision"]
@@ -57,8 +64,8 @@ def test_the_memory_window_keeps_an_obstacle_sensed_earlier_after_the_robot_move
     r, side = lay.radius, 2 * lay.radius + 1
     (x, y), dx = info["cell"], ix - info["cell"][0]
     assert abs(dx) == 2 and y == iy
-    assert obs[base + r * side + dx + r] == 1.0                                  # sensed: the wall, now out of reach
-    assert obs[base + side * side + r * side + (start[0] - x) + r] == 1.0       # visited: where it stood
+    assert obs[base + r * side + dx + r] == 1.0  # sensed: the wall, now out of reach
+    assert obs[base + side * side + r * side + (start[0] - x) + r] == 1.0  # visited: where it stood
 
 
 def test_the_memory_preset_is_robust_plus_a_memory_window_and_needs_neighbour_observations():
@@ -74,8 +81,17 @@ def test_a_tiny_memory_agent_trains_saves_and_evaluates(tmp_path):
     from dtradar_rl.train.checkpoints import load_policy
     from dtradar_rl.train.dqn import train
 
-    cfg = config_for("memory", scene="synthetic-12x8", total_env_steps=1_000, num_envs=16, learning_starts=200,
-                     memory_radius=2, out=str(tmp_path), verbose=False, threads=1)
+    cfg = config_for(
+        "memory",
+        scene="synthetic-12x8",
+        total_env_steps=1_000,
+        num_envs=16,
+        learning_starts=200,
+        memory_radius=2,
+        out=str(tmp_path),
+        verbose=False,
+        threads=1,
+    )
     result = train(cfg)
     policy = load_policy(result.checkpoint)
     metrics, _ = evaluate(policy, load_dataset("synthetic-12x8/dynamic"), pairs=10)

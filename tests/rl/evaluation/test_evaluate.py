@@ -24,33 +24,86 @@ def test_spl_of_a_detour_is_the_length_ratio_and_of_a_failure_zero():
 
 
 def test_collisions_do_not_lengthen_the_travelled_path():
-    assert path_length([0, 1, 1, 1, 2]) == 2                     # two collisions in between
+    assert path_length([0, 1, 1, 1, 2]) == 2  # two collisions in between
     assert path_length([5]) == 0
 
 
 def test_markdown_table_lists_every_case():
-    md = markdown_table([{"case": "a -> b", "pairs": 3, "success_rate": 1.0, "spl": 0.9, "collisions": 0.0,
-                          "steps": 4.0, "shortest": 3.0, "latency_ms": None}])
+    md = markdown_table(
+        [
+            {
+                "case": "a -> b",
+                "pairs": 3,
+                "success_rate": 1.0,
+                "spl": 0.9,
+                "collisions": 0.0,
+                "steps": 4.0,
+                "shortest": 3.0,
+                "latency_ms": None,
+            }
+        ]
+    )
     assert md.splitlines()[0].startswith("| case | pairs | success | SPL")
     assert "| a -> b | 3 | 1.000 | 0.900 | 0.00 | 4.0 | 3.0 | - |" in md
 
 
 def test_cli_trains_then_evaluates_on_blueprint_and_dynamic(tmp_path, capsys):
     run = tmp_path / "dqn"
-    assert main(["train", "--scene", "synthetic-6x5", "--total-env-steps", "3000", "--num-envs", "16",
-                 "--hidden", "32", "32", "--learning-starts", "500", "--env-steps-per-update", "8",
-                 "--out", str(run), "--no-verbose", "--threads", "1"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--scene",
+                "synthetic-6x5",
+                "--total-env-steps",
+                "3000",
+                "--num-envs",
+                "16",
+                "--hidden",
+                "32",
+                "32",
+                "--learning-starts",
+                "500",
+                "--env-steps-per-update",
+                "8",
+                "--out",
+                str(run),
+                "--no-verbose",
+                "--threads",
+                "1",
+            ]
+        )
+        == 0
+    )
     assert (run / "model.pt").exists() and (run / "config.json").exists()
     out = tmp_path / "eval"
-    assert main(["eval", "--scene", "synthetic-6x5", "--checkpoint", str(run / "model.pt"), "--pairs", "20",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "--scene",
+                "synthetic-6x5",
+                "--checkpoint",
+                str(run / "model.pt"),
+                "--pairs",
+                "20",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "synthetic-6x5/blueprint -> synthetic-6x5/dynamic" in printed
     results = json.loads((out / "results.json").read_text())
     assert [(r["dataset"], r["shield"]) for r in results["results"]] == [
-        ("synthetic-6x5/blueprint", False), ("synthetic-6x5/blueprint", True),
-        ("synthetic-6x5/dynamic", False), ("synthetic-6x5/dynamic", True),
-        ("synthetic-6x5/blueprint", False), ("synthetic-6x5/dynamic", False)]   # + the classical baseline
+        ("synthetic-6x5/blueprint", False),
+        ("synthetic-6x5/blueprint", True),
+        ("synthetic-6x5/dynamic", False),
+        ("synthetic-6x5/dynamic", True),
+        ("synthetic-6x5/blueprint", False),
+        ("synthetic-6x5/dynamic", False),
+    ]  # + the classical baseline
     assert [r["case"].startswith("planner: ") for r in results["results"]] == [False] * 4 + [True] * 2
     for name in ("results.md", "config.json", "paths_blueprint.png", "paths_dynamic.png"):
         assert (out / name).exists(), name
@@ -63,19 +116,75 @@ def test_cli_reports_a_missing_checkpoint_with_a_fix(tmp_path, capsys):
 
 def test_cross_matrix_over_a_list_of_datasets(tmp_path):
     for s in ("synthetic-6x5", "synthetic-7x5"):
-        assert main(["train", "--scene", s, "--total-env-steps", "1000", "--num-envs", "16", "--hidden", "16",
-                     "--learning-starts", "500", "--out", str(tmp_path / s), "--no-verbose", "--threads", "1"]) == 0
-    assert main(["cross", "--scenes", "synthetic-6x5", "synthetic-7x5", "--checkpoint-pattern",
-                 str(tmp_path / "{scene}" / "model.pt"), "--pairs", "10", "--out", str(tmp_path / "x")]) == 0
+        assert (
+            main(
+                [
+                    "train",
+                    "--scene",
+                    s,
+                    "--total-env-steps",
+                    "1000",
+                    "--num-envs",
+                    "16",
+                    "--hidden",
+                    "16",
+                    "--learning-starts",
+                    "500",
+                    "--out",
+                    str(tmp_path / s),
+                    "--no-verbose",
+                    "--threads",
+                    "1",
+                ]
+            )
+            == 0
+        )
+    assert (
+        main(
+            [
+                "cross",
+                "--scenes",
+                "synthetic-6x5",
+                "synthetic-7x5",
+                "--checkpoint-pattern",
+                str(tmp_path / "{scene}" / "model.pt"),
+                "--pairs",
+                "10",
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
+        == 0
+    )
     m = json.loads((tmp_path / "x" / "cross.json").read_text())["config"]["matrix"]
     assert np.array(m["success"]).shape == (2, 2)
     assert (tmp_path / "x" / "cross_success.png").exists()
 
 
 def test_shield_never_moves_into_a_sensed_obstacle(tmp_path):
-    assert main(["train", "--scene", "synthetic-6x5", "--total-env-steps", "1000", "--num-envs", "16",
-                 "--hidden", "16", "--learning-starts", "500", "--out", str(tmp_path), "--no-verbose",
-                 "--threads", "1"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--scene",
+                "synthetic-6x5",
+                "--total-env-steps",
+                "1000",
+                "--num-envs",
+                "16",
+                "--hidden",
+                "16",
+                "--learning-starts",
+                "500",
+                "--out",
+                str(tmp_path),
+                "--no-verbose",
+                "--threads",
+                "1",
+            ]
+        )
+        == 0
+    )
     from dtradar_rl.evaluation.evaluate import evaluate
     from dtradar_rl.task.twins import load_dataset
     from dtradar_rl.train.checkpoints import load_policy
@@ -86,9 +195,31 @@ def test_shield_never_moves_into_a_sensed_obstacle(tmp_path):
 
 
 def test_shield_needs_the_neighbors_preset(tmp_path):
-    assert main(["train", "--scene", "synthetic-6x5", "--obs", "goal", "--total-env-steps", "600",
-                 "--num-envs", "16", "--hidden", "8", "--learning-starts", "500", "--out", str(tmp_path),
-                 "--no-verbose", "--threads", "1"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--scene",
+                "synthetic-6x5",
+                "--obs",
+                "goal",
+                "--total-env-steps",
+                "600",
+                "--num-envs",
+                "16",
+                "--hidden",
+                "8",
+                "--learning-starts",
+                "500",
+                "--out",
+                str(tmp_path),
+                "--no-verbose",
+                "--threads",
+                "1",
+            ]
+        )
+        == 0
+    )
     from dtradar_rl.train.checkpoints import load_policy
 
     with pytest.raises(DtradarError, match="neighbors"):

@@ -12,12 +12,22 @@ def test_mean_and_std_are_over_seeds():
 
 
 def test_a_tiny_benchmark_runs_end_to_end_in_seconds(root, tmp_path):
-    cfg = OfflineBenchConfig(scene="synthetic-8x6", behaviours=("random",), algorithms=("bc", "nfq"),
-                             seeds=(0, 1), steps=400, n_steps=10, num_envs=8, pairs=8, out=str(tmp_path / "bench"),
-                             verbose=False)
+    cfg = OfflineBenchConfig(
+        scene="synthetic-8x6",
+        behaviours=("random",),
+        algorithms=("bc", "nfq"),
+        seeds=(0, 1),
+        steps=400,
+        n_steps=10,
+        num_envs=8,
+        pairs=8,
+        out=str(tmp_path / "bench"),
+        verbose=False,
+    )
     result = run_bench(cfg)
-    assert {(e["behaviour"], e["algorithm"]) for e in result["summary"]} == \
-        {(b, a) for b in cfg.behaviours for a in cfg.algorithms}
+    assert {(e["behaviour"], e["algorithm"]) for e in result["summary"]} == {
+        (b, a) for b in cfg.behaviours for a in cfg.algorithms
+    }
     assert all(e["blueprint"]["success_rate"]["n"] == 2 and "dynamic" in e for e in result["summary"])
     saved = json.loads((tmp_path / "bench" / "bench.json").read_text())
     assert len(saved["runs"]) == 4 and saved["machine"]["start"]["cores"] >= 1

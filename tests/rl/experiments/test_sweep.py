@@ -27,23 +27,41 @@ def test_a_sweep_of_two_seeds_on_ray_returns_both_results(tmp_path):
 
 
 def test_the_serial_executor_runs_without_ray_from_the_command_line(tmp_path, capsys):
-    args = ["sweep", "--scenes", "synthetic-8x6", "--seeds", "3", "--executor", "serial", "--total-env-steps",
-            "2000", "--pairs", "10", "--variants", "blueprint", "--out", str(tmp_path)]
+    args = [
+        "sweep",
+        "--scenes",
+        "synthetic-8x6",
+        "--seeds",
+        "3",
+        "--executor",
+        "serial",
+        "--total-env-steps",
+        "2000",
+        "--pairs",
+        "10",
+        "--variants",
+        "blueprint",
+        "--out",
+        str(tmp_path),
+    ]
     assert main(args) == 0
     assert "synthetic-8x6/blueprint" in capsys.readouterr().out
     assert json.loads((tmp_path / "sweep.json").read_text())["runs"][0]["seed"] == 3
 
 
 def test_the_summary_is_the_mean_and_sample_spread_over_seeds():
-    runs = [{"scene": "s", "seed": k, "rows": [{"dataset": "s/blueprint", "success_rate": v, "spl": v, "collisions": 0}]}
-            for k, v in enumerate((0.5, 1.0))]
+    runs = [
+        {"scene": "s", "seed": k, "rows": [{"dataset": "s/blueprint", "success_rate": v, "spl": v, "collisions": 0}]}
+        for k, v in enumerate((0.5, 1.0))
+    ]
     (entry,) = summarise(runs)
     assert entry["success_rate"]["mean"] == pytest.approx(0.75)
     assert entry["success_rate"]["std"] == pytest.approx(0.3535534, rel=1e-5)
 
 
-@pytest.mark.parametrize("bad", [dict(seeds=()), dict(preset="fast"), dict(threads=0), dict(ray_address="auto",
-                                                                                             executor="serial")])
+@pytest.mark.parametrize(
+    "bad", [dict(seeds=()), dict(preset="fast"), dict(threads=0), dict(ray_address="auto", executor="serial")]
+)
 def test_bad_sweep_settings_are_refused_before_anything_runs(bad):
     with pytest.raises(ConfigError):
         SweepConfig(**{**dict(scenes=("synthetic",)), **bad}).validate()

@@ -29,36 +29,45 @@ def test_logged_episodes_are_contiguous_per_robot_and_end_in_exactly_one_termina
     r = roll(small, BehaviourSpec("noisy-shortest", shortest_prob=0.3), **LOG)
     c = r.columns
     n = len(c["action"])
-    assert n >= LOG["steps"] and n == r.stats["steps"]                          # nothing dropped
-    assert not np.any(c["terminated"] & c["truncated"])                         # never both on one step
-    assert c["terminated"][-1] or c["truncated"][-1]                            # nothing unfinished at the end
-    assert np.all(np.diff(c["robot"]) >= 0)                                     # robot by robot
-    assert r.stats["terminated"] > 0 and r.stats["truncated_step_limit"] > 0   # both kinds of ending occur
+    assert n >= LOG["steps"] and n == r.stats["steps"]  # nothing dropped
+    assert not np.any(c["terminated"] & c["truncated"])  # never both on one step
+    assert c["terminated"][-1] or c["truncated"][-1]  # nothing unfinished at the end
+    assert np.all(np.diff(c["robot"]) >= 0)  # robot by robot
+    assert r.stats["terminated"] > 0 and r.stats["truncated_step_limit"] > 0  # both kinds of ending occur
     mdp = GridMDP.from_dataset(small)
     table = build_observations(small, "neighbors", Normalizer.fit(small))
     np.testing.assert_array_equal(c["obs"], table.observe(c["cell"], c["target"]))
     for s, e in episodes_of(c):
         assert len(set(c["robot"][s:e])) == 1 and len(set(c["target"][s:e])) == 1
-        assert not (c["terminated"][s:e - 1] | c["truncated"][s:e - 1]).any()  # one flag, on the last step
+        assert not (c["terminated"][s : e - 1] | c["truncated"][s : e - 1]).any()  # one flag, on the last step
         # each step starts where the previous one led: the robot's stream is unbroken inside an episode
-        np.testing.assert_array_equal(c["cell"][s + 1:e], mdp.next_cell[c["cell"][s:e - 1], c["action"][s:e - 1]])
-        np.testing.assert_array_equal(c["obs"][s + 1:e], c["next_obs"][s:e - 1])
-        assert bool(c["terminated"][e - 1]) == (mdp.next_cell[c["cell"][e - 1], c["action"][e - 1]]
-                                                == c["target"][e - 1])
+        np.testing.assert_array_equal(c["cell"][s + 1 : e], mdp.next_cell[c["cell"][s : e - 1], c["action"][s : e - 1]])
+        np.testing.assert_array_equal(c["obs"][s + 1 : e], c["next_obs"][s : e - 1])
+        assert bool(c["terminated"][e - 1]) == (
+            mdp.next_cell[c["cell"][e - 1], c["action"][e - 1]] == c["target"][e - 1]
+        )
         np.testing.assert_array_equal(c["step"][s:e], np.arange(e - s))
 
 
 @pytest.mark.parametrize("reward", ["geodesic", "paper"])
 def test_logged_rewards_equal_the_env_reward_function(small, reward):
-    c = roll(small, BehaviourSpec("noisy-shortest", shortest_prob=0.3), **{**LOG, "steps": 1_500},
-             reward=reward).columns
+    c = roll(
+        small, BehaviourSpec("noisy-shortest", shortest_prob=0.3), **{**LOG, "steps": 1_500}, reward=reward
+    ).columns
     mdp = GridMDP.from_dataset(small)
     cell, a, t = c["cell"], c["action"], c["target"]
     nxt, collision = mdp.next_cell[cell, a], mdp.collides[cell, a]
     targets, row = np.unique(t, return_inverse=True)
     dist = mdp.bfs_distances_many(targets)
-    expected = reward_fn(reward, d2_after=mdp.d2(nxt, t), pot_before=dist[row, cell], pot_after=dist[row, nxt],
-                         collision=collision, reached=nxt == t, diag2=mdp.diag2)
+    expected = reward_fn(
+        reward,
+        d2_after=mdp.d2(nxt, t),
+        pot_before=dist[row, cell],
+        pot_after=dist[row, nxt],
+        collision=collision,
+        reached=nxt == t,
+        diag2=mdp.diag2,
+    )
     np.testing.assert_allclose(c["reward"], expected, rtol=1e-6)
 
 

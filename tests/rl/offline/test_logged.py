@@ -23,8 +23,9 @@ from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.config import config_for
 
 SMALL = "synthetic-10x8"
-CFG = LogConfig(scene=SMALL, behaviour="noisy-shortest", steps=1200, num_envs=12, max_steps=15, seed=2,
-                minari=False, verbose=False)
+CFG = LogConfig(
+    scene=SMALL, behaviour="noisy-shortest", steps=1200, num_envs=12, max_steps=15, seed=2, minari=False, verbose=False
+)
 
 
 @pytest.fixture()
@@ -49,10 +50,10 @@ def test_transitions_are_aligned_through_minari_and_back(stores, twin):
     ep = next(m.iterate_episodes())
     n = len(ep.actions)
     assert len(ep.observations) == n + 1
-    np.testing.assert_array_equal(ep.observations[:-1], a["obs"][:n])       # observation t
-    np.testing.assert_array_equal(ep.actions, a["action"][:n])              # action t
-    np.testing.assert_allclose(ep.rewards, a["reward"][:n])                 # reward t
-    np.testing.assert_array_equal(ep.observations[1:], a["next_obs"][:n])   # next observation = observation t+1
+    np.testing.assert_array_equal(ep.observations[:-1], a["obs"][:n])  # observation t
+    np.testing.assert_array_equal(ep.actions, a["action"][:n])  # action t
+    np.testing.assert_allclose(ep.rewards, a["reward"][:n])  # reward t
+    np.testing.assert_array_equal(ep.observations[1:], a["next_obs"][:n])  # next observation = observation t+1
     back = from_minari(mid)
     for k, v in back.items():
         np.testing.assert_array_equal(v, a[k], err_msg=k)
@@ -108,9 +109,14 @@ def test_a_mixture_splits_the_robots_between_its_components_and_checkpoints_ente
     norm = Normalizer.fit(twin)
     names = build_observations(twin, "neighbors", norm).names
     torch.manual_seed(0)
-    ckpt = save_checkpoint(tmp_path / "model.pt", QNetwork(len(names), (8,)),
-                           dataclasses.replace(config_for("tuned", scene=SMALL), hidden=(8,)),
-                           norm, names, twin)
+    ckpt = save_checkpoint(
+        tmp_path / "model.pt",
+        QNetwork(len(names), (8,)),
+        dataclasses.replace(config_for("tuned", scene=SMALL), hidden=(8,)),
+        norm,
+        names,
+        twin,
+    )
     cfg = dataclasses.replace(CFG, behaviour="mixture", checkpoint=str(ckpt))
     logged = log_dataset(cfg, twin)
     a = logged.arrays()
@@ -125,8 +131,16 @@ def test_a_mixture_splits_the_robots_between_its_components_and_checkpoints_ente
 
 def test_a_log_from_another_twin_or_preset_is_refused_by_the_trainer_with_a_typed_error(stores, twin, tmp_path):
     logged = log_dataset(CFG, twin)
-    base = dict(scene=SMALL, algorithm="bc", n_steps=10, batch_size=16, hidden=(8,), eval_variants=(),
-                verbose=False, out=str(tmp_path / "run"))
+    base = dict(
+        scene=SMALL,
+        algorithm="bc",
+        n_steps=10,
+        batch_size=16,
+        hidden=(8,),
+        eval_variants=(),
+        verbose=False,
+        out=str(tmp_path / "run"),
+    )
     with pytest.raises(SchemaMismatchError, match="observation preset"):
         train_offline(OfflineConfig(**base, obs="goal"), dataset=logged)
     with pytest.raises(SchemaMismatchError, match="logged on"):

@@ -47,38 +47,85 @@ class RandomAlgo:
 
 def test_bc_trained_offline_saves_reloads_and_beats_a_random_policy(root, tmp_path, small, capsys):
     out = tmp_path / "bc"
-    assert main(["offline", "--scene", SMALL, "--algorithm", "bc", "--transitions", "4000", "--num-envs", "32",
-                 "--n-steps", "400", "--hidden", "64", "64", "--lr", "3e-3", "--shortest-prob", "0.8", "--pairs", "100", "--threads", "1",
-                 "--out", str(out), "--no-verbose"]) == 0
+    assert (
+        main(
+            [
+                "offline",
+                "--scene",
+                SMALL,
+                "--algorithm",
+                "bc",
+                "--transitions",
+                "4000",
+                "--num-envs",
+                "32",
+                "--n-steps",
+                "400",
+                "--hidden",
+                "64",
+                "64",
+                "--lr",
+                "3e-3",
+                "--shortest-prob",
+                "0.8",
+                "--pairs",
+                "100",
+                "--threads",
+                "1",
+                "--out",
+                str(out),
+                "--no-verbose",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert f"bc: {SMALL}/blueprint -> {SMALL}/dynamic" in printed
     for name in ("model.d3", "config.json", "losses.csv", "results.json", "results.md"):
         assert (out / name).exists(), name
     results = json.loads((out / "results.json").read_text())
     assert [(r["dataset"], r["shield"]) for r in results["results"]] == [
-        (f"{SMALL}/blueprint", False), (f"{SMALL}/blueprint", True),
-        (f"{SMALL}/dynamic", False), (f"{SMALL}/dynamic", True)]
+        (f"{SMALL}/blueprint", False),
+        (f"{SMALL}/blueprint", True),
+        (f"{SMALL}/dynamic", False),
+        (f"{SMALL}/dynamic", True),
+    ]
     assert all(r["collisions"] == 0.0 for r in results["results"] if r["shield"])
 
     policy = load_offline_policy(out)
     assert policy.normalizer == Normalizer.fit(small) and policy.config.algorithm == "bc"
     trained, _ = evaluate(policy, small, pairs=200, seed=7, latency=False)
-    chance = OfflinePolicy(q=None, config=policy.config, normalizer=policy.normalizer, obs_preset="neighbors",
-                           meta={}, algo=RandomAlgo())
+    chance = OfflinePolicy(
+        q=None, config=policy.config, normalizer=policy.normalizer, obs_preset="neighbors", meta={}, algo=RandomAlgo()
+    )
     random_, _ = evaluate(chance, small, pairs=200, seed=7, latency=False)
     assert trained.success_rate >= 0.7 and trained.success_rate > random_.success_rate + 0.3, (trained, random_)
 
 
 @pytest.mark.parametrize("algorithm", ["cql", "bcq", "dqn", "ddqn", "nfq"])
 def test_every_q_learning_algorithm_trains_saves_and_reloads_to_the_same_actions(root, tmp_path, small, algorithm):
-    result = train_offline(OfflineConfig(**dict(LOG, algorithm=algorithm, n_steps=20, batch_size=32, hidden=(16,),
-                                                eval_variants=(), threads=1, verbose=False,
-                                                out=str(tmp_path))), dataset=small)
+    result = train_offline(
+        OfflineConfig(
+            **dict(
+                LOG,
+                algorithm=algorithm,
+                n_steps=20,
+                batch_size=32,
+                hidden=(16,),
+                eval_variants=(),
+                threads=1,
+                verbose=False,
+                out=str(tmp_path),
+            )
+        ),
+        dataset=small,
+    )
     assert result.n_steps == 20 and len(result.losses) == 10 and not result.rows
     reloaded = load_offline_policy(result.model)
     free = np.flatnonzero(~np.asarray(small.blocked).ravel())
-    obs = torch.from_numpy(build_observations(small, "neighbors", reloaded.normalizer).observe(
-        free, np.full_like(free, free[0])))
+    obs = torch.from_numpy(
+        build_observations(small, "neighbors", reloaded.normalizer).observe(free, np.full_like(free, free[0]))
+    )
     np.testing.assert_array_equal(result.policy.act(obs).numpy(), reloaded.act(obs).numpy())
     assert ActionScores(reloaded.algo, algorithm)(obs).shape == (len(obs), 4)
     shielded = reloaded.act(obs, shield=True)
@@ -86,12 +133,22 @@ def test_every_q_learning_algorithm_trains_saves_and_reloads_to_the_same_actions
     assert bool(flags.gather(1, shielded[:, None]).all())  # every free cell of the grid has an open neighbour
 
 
-def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_names_its_version(root, tmp_path,
-                                                                                                  small):
+def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_names_its_version(root, tmp_path, small):
     from dtradar_data.store.logged import local_versions, parse_logged_id
 
-    cfg = OfflineConfig(**dict(LOG, algorithm="dqn", n_steps=10, batch_size=16, hidden=(8,), eval_variants=(),
-                               threads=1, verbose=False, out=str(tmp_path / "a")))
+    cfg = OfflineConfig(
+        **dict(
+            LOG,
+            algorithm="dqn",
+            n_steps=10,
+            batch_size=16,
+            hidden=(8,),
+            eval_variants=(),
+            threads=1,
+            verbose=False,
+            out=str(tmp_path / "a"),
+        )
+    )
     first = train_offline(cfg, dataset=small)
     lid = parse_logged_id(f"{SMALL}/blueprint/noisy-shortest")
     (version,) = local_versions(lid)
@@ -100,8 +157,9 @@ def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_n
     assert meta["logged"]["name"] == lid.name and meta["logged"]["version"] == version
     again = train_offline(dataclasses.replace(cfg, out=str(tmp_path / "b")), dataset=small)
     assert local_versions(lid) == [version] and again.logged["source"] == first.logged["source"]  # reused
-    by_name = train_offline(dataclasses.replace(cfg, out=str(tmp_path / "c"), logged=f"{lid.name}@{version}"),
-                            dataset=small)
+    by_name = train_offline(
+        dataclasses.replace(cfg, out=str(tmp_path / "c"), logged=f"{lid.name}@{version}"), dataset=small
+    )
     assert by_name.logged["source"] == first.logged["source"]
     assert load_offline_policy(tmp_path / "c").meta["dataset"]["name"] == f"{SMALL}/blueprint"
     other = train_offline(dataclasses.replace(cfg, out=str(tmp_path / "d"), seed=4), dataset=small)
@@ -109,8 +167,19 @@ def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_n
 
 
 def test_a_log_with_another_preset_is_refused_before_training(root, tmp_path, small):
-    cfg = OfflineConfig(**dict(LOG, algorithm="dqn", n_steps=10, batch_size=16, hidden=(8,), eval_variants=(),
-                               threads=1, verbose=False, out=str(tmp_path / "a")))
+    cfg = OfflineConfig(
+        **dict(
+            LOG,
+            algorithm="dqn",
+            n_steps=10,
+            batch_size=16,
+            hidden=(8,),
+            eval_variants=(),
+            threads=1,
+            verbose=False,
+            out=str(tmp_path / "a"),
+        )
+    )
     first = train_offline(cfg, dataset=small)
     with pytest.raises(Exception, match="preset"):
         train_offline(dataclasses.replace(cfg, obs="goal", logged=first.logged["source"]), dataset=small)

@@ -27,7 +27,7 @@ def env_on(blocked, **kw):
 def test_paper_reward_is_minus_squared_distance_after_the_move():
     env = env_on(np.zeros((5, 7), bool), reward="paper")
     env.reset(seed=0, options={"start": (0, 0), "target": (5, 3)})
-    _, r, terminated, truncated, info = env.step(X_PLUS)          # now at (1, 0): dx = 4, dy = 3
+    _, r, terminated, truncated, info = env.step(X_PLUS)  # now at (1, 0): dx = 4, dy = 3
     assert r == -(4**2 + 3**2)
     assert not terminated and not truncated and not info["collision"]
 
@@ -42,11 +42,11 @@ def test_paper_reward_adds_5000_on_reaching_the_target_and_terminates():
 def test_collision_costs_5000_and_the_robot_stays_in_place():
     env = env_on(two_rooms(), reward="paper")
     env.reset(seed=0, options={"start": (2, 1), "target": (0, 1)})
-    _, r, terminated, _, info = env.step(X_PLUS)                  # into the wall at ix = 3
+    _, r, terminated, _, info = env.step(X_PLUS)  # into the wall at ix = 3
     assert info["collision"] and info["cell"] == (2, 1)
     assert r == -(2**2) - 5000.0 and not terminated
-    _, r, _, _, info = env.step(Y_MINUS)                          # (2, 0) is free
-    _, r, _, _, info = env.step(Y_MINUS)                          # off the grid
+    _, r, _, _, info = env.step(Y_MINUS)  # (2, 0) is free
+    _, r, _, _, info = env.step(Y_MINUS)  # off the grid
     assert info["collision"] and info["cell"] == (2, 0) and r == -(2**2 + 1) - 5000.0
 
 
@@ -72,10 +72,10 @@ def test_shaped_rewards_reward_the_goal_and_punish_collisions(name):
 
 def test_geodesic_reward_is_plus_one_along_a_shortest_path_around_a_wall():
     b = np.zeros((5, 7), bool)
-    b[:4, 3] = True                                               # wall with a gap at the top row
+    b[:4, 3] = True  # wall with a gap at the top row
     env = env_on(b, reward="geodesic")
     env.reset(seed=0, options={"start": (2, 0), "target": (4, 0)})
-    _, r_up, *_ = env.step(Y_PLUS)                                # the only way round is up
+    _, r_up, *_ = env.step(Y_PLUS)  # the only way round is up
     _, r_down, *_ = env.step(Y_MINUS)
     assert r_up == 1.0 and r_down == -1.0
 
@@ -91,13 +91,13 @@ def test_sampled_pairs_are_connected_distinct_and_free():
     assert all(mdp.connected(s, t) and s != t for s, t in pairs)
     assert not mdp.blocked.ravel()[pairs].any()
     sides = {int(mdp.xy(s)[0] > 3) for s, _ in pairs}
-    assert sides == {0, 1}                                        # both rooms are used
+    assert sides == {0, 1}  # both rooms are used
 
 
 def test_isolated_cells_are_never_drawn():
     b = np.ones((3, 5), bool)
-    b[1, 0] = False                                               # an isolated free cell
-    b[1, 2:5] = False                                             # a corridor of three
+    b[1, 0] = False  # an isolated free cell
+    b[1, 2:5] = False  # a corridor of three
     mdp = GridMDP.from_blocked(b)
     pairs = mdp.sample_pairs(50, np.random.default_rng(1))
     assert mdp.cell(0, 1) not in pairs
@@ -115,8 +115,8 @@ def test_bfs_distance_goes_around_obstacles():
     b[:4, 3] = True
     mdp = GridMDP.from_blocked(b)
     d = mdp.bfs_distances(mdp.cell(4, 0))
-    assert d[mdp.cell(2, 0)] == 2 + 4 * 2                         # up 4, across 2, down 4
-    assert d[mdp.cell(3, 0)] == -1                                # blocked
+    assert d[mdp.cell(2, 0)] == 2 + 4 * 2  # up 4, across 2, down 4
+    assert d[mdp.cell(3, 0)] == -1  # blocked
     path = mdp.shortest_path(mdp.cell(2, 0), mdp.cell(4, 0))
     assert len(path) - 1 == 10 and path[0] == mdp.cell(2, 0) and path[-1] == mdp.cell(4, 0)
 

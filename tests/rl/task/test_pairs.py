@@ -35,7 +35,7 @@ def test_the_table_vi_pair_of_an_indoor_twin_lands_on_free_connected_cells(scene
 
 def test_indoor_pairs_read_as_cell_offsets_from_the_grid_centre():
     grid = Grid(x0_m=0.25, y0_m=0.25, cell_m=0.5, nx=42, ny=18)
-    assert to_grid(TABLE_VI["cubicle"], grid) == ((13, 0), (38, 17))   # [-8, -9] -> [17, 8] around (21, 9)
+    assert to_grid(TABLE_VI["cubicle"], grid) == ((13, 0), (38, 17))  # [-8, -9] -> [17, 8] around (21, 9)
     meeting = Grid(x0_m=0.125, y0_m=0.125, cell_m=0.25, nx=38, ny=40)
     assert to_grid(TABLE_VI["meeting"], meeting) == ((0, 0), (36, 37))  # [-20, -22] is clamped onto the grid
 
@@ -49,7 +49,7 @@ def test_city_pairs_read_as_metres_in_the_scene_frame_clamped_onto_the_quadrant(
 
 def test_a_blocked_end_snaps_to_the_nearest_cell_of_the_largest_free_region():
     blocked = np.zeros((5, 6), bool)
-    blocked[:, 2] = True            # a wall: the left region (2 columns) is smaller than the right one (3)
+    blocked[:, 2] = True  # a wall: the left region (2 columns) is smaller than the right one (3)
     blocked[0, 5] = True
     mdp = GridMDP.from_blocked(blocked)
     pair = resolve(mdp, Grid(x0_m=0, y0_m=0, cell_m=1, nx=6, ny=5), "no-such-scene", (3, 0), (5, 4))
@@ -61,12 +61,23 @@ def test_a_blocked_end_snaps_to_the_nearest_cell_of_the_largest_free_region():
 
 
 def test_the_paper_preset_trains_on_one_pair_and_its_episodes_are_not_cut_before_the_safety_cap(tmp_path):
-    cfg = config_for("paper", scene="synthetic-12x8", episodes=3, hidden=(16,), learning_starts=10**9,
-                     eps_start=0.0, eps_end=0.0, threads=1, verbose=False, checkpoint_every=0, out=str(tmp_path))
+    cfg = config_for(
+        "paper",
+        scene="synthetic-12x8",
+        episodes=3,
+        hidden=(16,),
+        learning_starts=10**9,
+        eps_start=0.0,
+        eps_end=0.0,
+        threads=1,
+        verbose=False,
+        checkpoint_every=0,
+        out=str(tmp_path),
+    )
     ds = load_dataset("synthetic-12x8/blueprint")
     pair = training_pair(cfg, ds)
     mdp = GridMDP.from_dataset(ds)
-    assert pair.cap >= CAP_FACTOR * pair.shortest > mdp.max_steps   # longer than the goal-conditioned limit
+    assert pair.cap >= CAP_FACTOR * pair.shortest > mdp.max_steps  # longer than the goal-conditioned limit
 
     # A robot pressing into the grid's edge from the pair's corner start is truncated at the cap, not before.
     env = BatchedNavEnv.from_dataset(ds, 1, obs="paper", reward="paper", max_steps=pair.cap)
@@ -86,8 +97,22 @@ def test_the_paper_preset_trains_on_one_pair_and_its_episodes_are_not_cut_before
     assert tuple(load_policy(result.checkpoint).meta["stats"]["pair"]["start"]) == pair.start
 
     # make eval runs a fixed-pair agent on its own pair, on each twin, instead of on random pairs.
-    assert main(["eval", "--scene", "synthetic-12x8", "--checkpoint", str(result.checkpoint), "--out",
-                 str(tmp_path / "eval"), "--plot-paths", "1"]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "--scene",
+                "synthetic-12x8",
+                "--checkpoint",
+                str(result.checkpoint),
+                "--out",
+                str(tmp_path / "eval"),
+                "--plot-paths",
+                "1",
+            ]
+        )
+        == 0
+    )
     rows = json.loads((tmp_path / "eval" / "results.json").read_text())["results"]
     assert [r["pairs"] for r in rows] == [1, 1] and tuple(rows[0]["pair"]["start"]) == pair.start
 

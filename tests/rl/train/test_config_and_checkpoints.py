@@ -13,18 +13,34 @@ from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DQNConfig, config_for
 
 
-@pytest.mark.parametrize("changes, flag", [
-    ({"lr": 0.0}, "--lr"), ({"lr": -1e-3}, "--lr"), ({"max_steps": -5}, "--max-steps"),
-    ({"total_env_steps": 0}, "--total-env-steps"), ({"gamma": 1.0}, "--gamma"), ({"num_envs": 0}, "--num-envs"),
-    ({"eps_end": 1.5}, "--eps-end"), ({"hidden": (256, 0)}, "--hidden"), ({"lr_end": 0.0}, "--lr-end"),
-])
+@pytest.mark.parametrize(
+    "changes, flag",
+    [
+        ({"lr": 0.0}, "--lr"),
+        ({"lr": -1e-3}, "--lr"),
+        ({"max_steps": -5}, "--max-steps"),
+        ({"total_env_steps": 0}, "--total-env-steps"),
+        ({"gamma": 1.0}, "--gamma"),
+        ({"num_envs": 0}, "--num-envs"),
+        ({"eps_end": 1.5}, "--eps-end"),
+        ({"hidden": (256, 0)}, "--hidden"),
+        ({"lr_end": 0.0}, "--lr-end"),
+    ],
+)
 def test_an_out_of_range_dqn_setting_names_its_flag(changes, flag):
     with pytest.raises(ConfigError, match=flag):
         config_for("tuned", **changes)
 
 
-@pytest.mark.parametrize("changes, flag", [({"lr": 0.0}, "--lr"), ({"transitions": 0}, "--transitions"),
-                                           ({"shortest_prob": 2.0}, "--shortest-prob"), ({"threads": -1}, "--threads")])
+@pytest.mark.parametrize(
+    "changes, flag",
+    [
+        ({"lr": 0.0}, "--lr"),
+        ({"transitions": 0}, "--transitions"),
+        ({"shortest_prob": 2.0}, "--shortest-prob"),
+        ({"threads": -1}, "--threads"),
+    ],
+)
 def test_an_out_of_range_offline_setting_names_its_flag(changes, flag):
     with pytest.raises(ConfigError, match=flag):
         OfflineConfig(**changes).validate()

@@ -14,9 +14,22 @@ from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DQNConfig, config_for
 from dtradar_rl.train.dqn import train
 
-TINY = dict(scene="synthetic-4x3", obs="goal", reward="geodesic", num_envs=32, total_env_steps=16_000,
-            hidden=(64, 64), batch_size=128, learning_starts=1_000, env_steps_per_update=4, target_update_every=100,
-            eps_decay_fraction=0.5, threads=1, verbose=False, checkpoint_every=0)
+TINY = dict(
+    scene="synthetic-4x3",
+    obs="goal",
+    reward="geodesic",
+    num_envs=32,
+    total_env_steps=16_000,
+    hidden=(64, 64),
+    batch_size=128,
+    learning_starts=1_000,
+    env_steps_per_update=4,
+    target_update_every=100,
+    eps_decay_fraction=0.5,
+    threads=1,
+    verbose=False,
+    checkpoint_every=0,
+)
 
 
 def test_dqn_on_a_tiny_table_learns_the_optimal_action_everywhere(tmp_path):
@@ -48,8 +61,14 @@ def test_training_is_seeded(tmp_path):
 
 @pytest.mark.parametrize("expert_weight", [0.0, 1.0])
 def test_resumed_training_equals_an_uninterrupted_run(tmp_path, expert_weight):
-    cfg = dict(TINY, buffer_size=1_000, eps_start=0.3, eps_end=0.3, lr_end=-1.0,  # budget-independent
-               expert_weight=expert_weight)  # with the expert loss, last.pt also carries the replay's expert moves
+    cfg = dict(
+        TINY,
+        buffer_size=1_000,
+        eps_start=0.3,
+        eps_end=0.3,
+        lr_end=-1.0,  # budget-independent
+        expert_weight=expert_weight,
+    )  # with the expert loss, last.pt also carries the replay's expert moves
     full = train(config_for("tuned", out=str(tmp_path / "full"), **dict(cfg, total_env_steps=4_000)))
     train(config_for("tuned", out=str(tmp_path / "res"), **dict(cfg, total_env_steps=2_000)))
     resumed = train(config_for("tuned", out=str(tmp_path / "res"), resume=True, **dict(cfg, total_env_steps=4_000)))
@@ -78,8 +97,18 @@ def test_paper_preset_matches_the_paper():
 
 
 def test_paper_preset_trains_for_its_episode_budget(tmp_path):
-    result = train(config_for("paper", scene="synthetic-6x5", episodes=3, learning_starts=16, out=str(tmp_path),
-                              threads=1, verbose=False, checkpoint_every=0))
+    result = train(
+        config_for(
+            "paper",
+            scene="synthetic-6x5",
+            episodes=3,
+            learning_starts=16,
+            out=str(tmp_path),
+            threads=1,
+            verbose=False,
+            checkpoint_every=0,
+        )
+    )
     assert result.episodes == 3 and result.updates > 0
     assert load_policy(result.checkpoint).obs_preset == "paper"
 

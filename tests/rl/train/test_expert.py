@@ -70,9 +70,19 @@ def test_the_expert_loss_needs_the_geodesic_reward_and_a_positive_margin():
 
 
 def test_training_with_the_expert_loss_learns_the_shortest_moves(tmp_path):
-    common = dict(scene="synthetic-12x8", total_env_steps=6_000, num_envs=32, learning_starts=256,
-                  env_steps_per_update=8, verbose=False, threads=1, checkpoint_every=0, eps_decay_fraction=0.2)
+    common = dict(
+        scene="synthetic-12x8",
+        total_env_steps=6_000,
+        num_envs=32,
+        learning_starts=256,
+        env_steps_per_update=8,
+        verbose=False,
+        threads=1,
+        checkpoint_every=0,
+        eps_decay_fraction=0.2,
+    )
     res = train(config_for("tuned", **common, expert_weight=1.0, out=str(tmp_path / "expert")))
-    m, _ = evaluate(load_policy(res.checkpoint), load_dataset("synthetic-12x8/blueprint"), pairs=100, seed=0,
-                    latency=False)
+    m, _ = evaluate(
+        load_policy(res.checkpoint), load_dataset("synthetic-12x8/blueprint"), pairs=100, seed=0, latency=False
+    )
     assert m.success_rate >= 0.9 and m.spl >= 0.85

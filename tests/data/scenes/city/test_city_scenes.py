@@ -4,10 +4,10 @@ reproducibly on the roads; bad city files fail clearly. No ray tracer needed."""
 from __future__ import annotations
 
 import math
-import tomllib
 
 import numpy as np
 import pytest
+import tomllib
 from shapely.geometry import Point, Polygon
 
 from dtradar_data.core.errors import SceneFileError, UnknownNameError
@@ -17,8 +17,12 @@ from dtradar_data.scenes.city.reader import city_file, city_spec, parse_city
 from dtradar_data.scenes.city.streets import Road, find_roads, place_vehicles, quadrant_rect
 
 QUADRANTS = ("q1", "q2", "q3", "q4")
-PAPER_TX = {"q1": (-170.0, -92.0, 18.0), "q2": (-165.0, 74.0, 18.0), "q3": (205.0, 159.0, 18.0),
-            "q4": (70.0, -170.0, 18.0)}  # DT-RaDaR Table III
+PAPER_TX = {
+    "q1": (-170.0, -92.0, 18.0),
+    "q2": (-165.0, 74.0, 18.0),
+    "q3": (205.0, 159.0, 18.0),
+    "q4": (70.0, -170.0, 18.0),
+}  # DT-RaDaR Table III
 
 
 @pytest.fixture(scope="module")
@@ -32,9 +36,13 @@ def _buildings(spec):
 
 def test_every_city_quadrant_is_a_builtin_scene_and_a_city_builds_its_quadrants_and_dynamic_twin():
     assert {f"{c}-{q}" for c in ("dallas", "houston") for q in QUADRANTS} <= set(available_scenes())
-    assert build_targets("dallas") == [("dallas-q1", "blueprint"), ("dallas-q2", "blueprint"),
-                                       ("dallas-q3", "blueprint"), ("dallas-q4", "blueprint"),
-                                       ("dallas-q3", "dynamic")]
+    assert build_targets("dallas") == [
+        ("dallas-q1", "blueprint"),
+        ("dallas-q2", "blueprint"),
+        ("dallas-q3", "blueprint"),
+        ("dallas-q4", "blueprint"),
+        ("dallas-q3", "dynamic"),
+    ]
     assert build_targets("houston", "dynamic") == [("houston-q2", "dynamic")]
     assert build_targets("dallas-q1") == [("dallas-q1", "blueprint")]
 
@@ -75,8 +83,9 @@ def test_cells_mostly_covered_by_buildings_are_blocked_and_open_streets_are_free
     buildings = _buildings(spec)
     for iy in range(0, spec.grid.ny, 5):
         for ix in range(0, spec.grid.nx, 5):
-            cell = Polygon([(xs[ix] - h, ys[iy] - h), (xs[ix] + h, ys[iy] - h), (xs[ix] + h, ys[iy] + h),
-                            (xs[ix] - h, ys[iy] + h)])
+            cell = Polygon(
+                [(xs[ix] - h, ys[iy] - h), (xs[ix] + h, ys[iy] - h), (xs[ix] + h, ys[iy] + h), (xs[ix] - h, ys[iy] + h)]
+            )
             share = sum(cell.intersection(b).area for b in buildings) / cell.area
             if share >= 0.5 + 1e-6:
                 assert blocked[iy, ix]
@@ -158,14 +167,17 @@ def _dallas_doc(**changes):
     return data
 
 
-@pytest.mark.parametrize("changes, message", [
-    ({"grid.cell_m": -4.0}, r"\[grid\]: cell_m"),
-    ({"grid.cel_m": 4.0}, "unknown key 'cel_m'; did you mean 'cell_m'"),
-    ({"city.ground_material": "mud"}, "not an ITU material"),
-    ({"quadrants.q3.tx_m": [1.0, 2.0]}, r"\[quadrants.q3\]: tx_m"),
-    ({"city": None}, "missing section 'city'"),
-    ({"dynamic.quadrant": "q5"}, r"\[dynamic\]: quadrant"),
-])
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"grid.cell_m": -4.0}, r"\[grid\]: cell_m"),
+        ({"grid.cel_m": 4.0}, "unknown key 'cel_m'; did you mean 'cell_m'"),
+        ({"city.ground_material": "mud"}, "not an ITU material"),
+        ({"quadrants.q3.tx_m": [1.0, 2.0]}, r"\[quadrants.q3\]: tx_m"),
+        ({"city": None}, "missing section 'city'"),
+        ({"dynamic.quadrant": "q5"}, r"\[dynamic\]: quadrant"),
+    ],
+)
 def test_a_bad_city_file_names_the_section_and_the_field(changes, message):
     with pytest.raises(SceneFileError, match=message):
         parse_city(_dallas_doc(**changes), origin="dallas.toml")

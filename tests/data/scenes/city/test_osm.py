@@ -29,9 +29,11 @@ ox = pytest.importorskip("osmnx")
 FIXTURE = Path(__file__).parent / "fixtures" / "tiny_houston.osm"
 BOX, CRS = CITY_BOXES["houston"]
 # A plausible Overpass /api/status reply: osmnx 2.x reads its 5th line ("N slots available now." -> no pause).
-STATUS_TEXT = ("Connected as: 2130706433\nCurrent time: 2026-01-01T00:00:00Z\nAnnounced endpoint: none\n"
-               "Rate limit: 2\n2 slots available now.\nCurrently running queries (pid, space limit, time limit, "
-               "start time):\n")
+STATUS_TEXT = (
+    "Connected as: 2130706433\nCurrent time: 2026-01-01T00:00:00Z\nAnnounced endpoint: none\n"
+    "Rate limit: 2\n2 slots available now.\nCurrently running queries (pid, space limit, time limit, "
+    "start time):\n"
+)
 
 
 @pytest.fixture(autouse=True)
@@ -60,18 +62,24 @@ def overpass_json_from_osm_xml(path: Path) -> dict:
         elif el.tag == "way":
             item["nodes"] = [int(nd.get("ref")) for nd in el.findall("nd")]
         elif el.tag == "relation":
-            item["members"] = [{"type": m.get("type"), "ref": int(m.get("ref")), "role": m.get("role")}
-                               for m in el.findall("member")]
+            item["members"] = [
+                {"type": m.get("type"), "ref": int(m.get("ref")), "role": m.get("role")} for m in el.findall("member")
+            ]
         else:
             continue  # <bounds>
         if tags:
             item["tags"] = tags
         elements.append(item)
-    return {"version": 0.6, "generator": "Overpass API (dtradar test double)",
-            "osm3s": {"timestamp_osm_base": "2026-01-01T00:00:00Z",
-                      "copyright": "The data included in this document is from www.openstreetmap.org. "
-                                   "The data is made available under ODbL."},
-            "elements": elements}
+    return {
+        "version": 0.6,
+        "generator": "Overpass API (dtradar test double)",
+        "osm3s": {
+            "timestamp_osm_base": "2026-01-01T00:00:00Z",
+            "copyright": "The data included in this document is from www.openstreetmap.org. "
+            "The data is made available under ODbL.",
+        },
+        "elements": elements,
+    }
 
 
 class FakeOverpass:
@@ -156,12 +164,16 @@ def closed_loopback_url() -> str:
 
 # --- local XML ------------------------------------------------------------------------------------------------------
 
+
 def test_a_local_osm_file_gives_buildings_parking_and_roads_with_their_tags():
     fp = read_osm_xml(FIXTURE, BOX, CRS)
     assert fp.counts() == {"building": 7, "parking": 1, "road": 3}
     by_id = {f.source_id: f for f in fp.features}
     assert (by_id["way/101"].height_m, by_id["way/101"].height_source, by_id["way/101"].label) == (
-        45.0, "height", "Test Tower A")
+        45.0,
+        "height",
+        "Test Tower A",
+    )
     assert by_id["way/102"].height_m == pytest.approx(45.72) and by_id["way/102"].material == "glass"
     assert (by_id["way/103"].height_m, by_id["way/103"].material) == (17.5, "brick")
     assert (by_id["way/104"].height_source, by_id["way/104"].material) == ("default", "marble")
@@ -188,6 +200,7 @@ def test_a_broken_osm_file_is_a_typed_error(tmp_path):
 
 
 # --- download through a loopback Overpass server --------------------------------------------------------------------
+
 
 def test_a_download_from_overpass_is_cached_and_read_back_without_the_server(overpass, data_root):
     started = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
@@ -266,6 +279,7 @@ def test_the_guard_refuses_connections_beyond_loopback():
 
 
 # --- no cache and no network ----------------------------------------------------------------------------------------
+
 
 def test_offline_without_a_cache_raises_one_error_naming_both_ways_out_and_writes_nothing(data_root, monkeypatch):
     monkeypatch.setenv("DTRADAR_OFFLINE", "1")
