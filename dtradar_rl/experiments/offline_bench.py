@@ -35,7 +35,7 @@ from dtradar_rl.offline.behaviours import BEHAVIOURS, behaviour_policy
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.trainer import train_offline
-from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.config import Config, ConfigError
 from dtradar_rl.task.runs import dqn_checkpoint
 from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
@@ -53,7 +53,7 @@ NAMES = {
 
 
 @dataclass(frozen=True)
-class OfflineBenchConfig:
+class OfflineBenchConfig(Config):
     """Offline-RL benchmark: d3rlpy algorithms on every logged behaviour dataset of a scene, several seeds,
     evaluated on the blueprint and dynamic twins beside the online DQN and the behaviour itself."""
 

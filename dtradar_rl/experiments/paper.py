@@ -28,7 +28,7 @@ from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import cross_matrix
 from dtradar_rl.evaluation.fixed_pair import evaluate_pair
 from dtradar_rl.experiments.paper_report import render
-from dtradar_rl.task.config import ConfigError, check_device
+from dtradar_rl.task.config import Config, ConfigError, check_device
 from dtradar_rl.task.pairs import paper_pair
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import is_synthetic, load_dataset
@@ -55,7 +55,7 @@ _QUADRANT = re.compile(r"^(.+)-q(\d)$")
 
 
 @dataclass(frozen=True)
-class PaperConfig:
+class PaperConfig(Config):
     """Regenerate the paper's tables and figures from built datasets into one report folder."""
 
     scenes: tuple[str, ...] = DEFAULT_SCENES

@@ -27,14 +27,14 @@ import numpy as np
 from dtradar_data.core.errors import MissingDependencyError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins
-from dtradar_rl.task.config import ConfigError, flag
+from dtradar_rl.task.config import Config, ConfigError, flag
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import PRESETS, config_for
 from dtradar_rl.train.dqn import train
 
 
 @dataclass(frozen=True)
-class SweepConfig:
+class SweepConfig(Config):
     """Train and evaluate several scenes x seeds as one sweep (on Ray by default)."""
 
     scenes: tuple[str, ...] = ("cubicle",)

@@ -1,4 +1,4 @@
-"""No two dtradar_data modules import each other, directly or through others, counting imports inside functions:
+"""No two modules of a package import each other, directly or through others, counting imports inside functions:
 each module can be read, tested and moved on top of the ones it imports (the layers contracts in pyproject.toml check
 the packages; this checks every module)."""
 
@@ -54,12 +54,10 @@ def test_the_cycle_finder_finds_a_cycle_and_only_the_cycle():
     assert cycles({"a": {"b"}, "b": set()}) == []
 
 
-def test_no_import_cycle_between_dtradar_data_modules():
-    graph = grimp.build_graph("dtradar_data", cache_dir=None)
-    edges = {
-        m: {i for i in graph.find_modules_directly_imported_by(m) if i.startswith("dtradar_data")}
-        for m in graph.modules
-    }
+@pytest.mark.parametrize("package", ["dtradar_data", "dtradar_rl"])
+def test_no_import_cycle_between_the_modules_of(package):
+    graph = grimp.build_graph(package, cache_dir=None)
+    edges = {m: {i for i in graph.find_modules_directly_imported_by(m) if i.startswith(package)} for m in graph.modules}
     found = cycles(edges)
     chains = [graph.find_shortest_chain(importer=c[0], imported=c[1]) for c in found]
     assert not found, f"import cycles: {found}; e.g. {chains}"
