@@ -24,6 +24,7 @@ from dtradar_data.core.files import write_atomic
 from dtradar_rl.agents.planner import FingerprintPlanner
 from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.experiments.adapt import AdaptConfig, adapt, first_time_at
+from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
@@ -50,7 +51,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=600_000, help="training budget of each agent (the paper's: 600K)")
     ap.add_argument("--seconds", type=float, default=20.0, help="fine-tuning (and from-scratch) training seconds")
     ap.add_argument("--adapt-seeds", nargs="*", type=int, default=None, help="seeds to adapt (default: --seeds)")
-    ap.add_argument("--runs", default="runs/bench_dynamic")
+    ap.add_argument("--runs", default=str(run_dir("bench_dynamic")))
     ap.add_argument("--out", default="results")
     ap.add_argument("--name", default="bench_dynamic", help="stem of the result files")
     args = ap.parse_args()

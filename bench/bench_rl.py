@@ -33,6 +33,7 @@ from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.evaluation.evaluate import evaluate, markdown_table
 from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import auto_threads, describe, machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
@@ -68,7 +69,7 @@ class BenchConfig:
     """torch threads (0 = auto)"""
     out: str = "results"
     """where bench_rl.{json,md} go (bench_rl_<scene>.{json,md} for a scene other than the cubicle)"""
-    runs: str = "runs/bench_rl"
+    runs: str = str(run_dir("bench_rl"))
     """where the benchmark's checkpoints go"""
 
 

@@ -1,6 +1,7 @@
 """Evaluation on seeded pairs of any twin: success, SPL, collisions, decision time, the cross matrix, fixed-pair
 inference, and the ``make eval`` / ``cross`` jobs."""
 
-from dtradar_rl.evaluation.evaluate import Metrics, cross_matrix, evaluate, evaluate_twins, spl
+# ``evaluate`` is also the name of a module here, so the function is imported from it (or from ``dtradar_rl``).
+from dtradar_rl.evaluation.evaluate import Metrics, cross_matrix, evaluate_twins, spl
 
-__all__ = ["Metrics", "cross_matrix", "evaluate", "evaluate_twins", "spl"]
+__all__ = ["Metrics", "cross_matrix", "evaluate_twins", "spl"]

@@ -30,6 +30,7 @@ from dtradar_rl.evaluation.fixed_pair import evaluate_pair
 from dtradar_rl.experiments.paper_report import render
 from dtradar_rl.task.config import Config, ConfigError, check_device
 from dtradar_rl.task.pairs import paper_pair
+from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import is_synthetic, load_dataset
 from dtradar_rl.train.checkpoints import load_policy
@@ -60,7 +61,7 @@ class PaperConfig(Config):
 
     scenes: tuple[str, ...] = DEFAULT_SCENES
     """scenes to report on (city quadrants: dallas-q1 ... houston-q4; synthetic-<nx>x<ny> for a quick run)"""
-    out: str = "runs/paper"
+    out: str = str(run_dir("paper"))
     """report folder: report.md, report.json, figures/, and the trained runs under train/"""
     episodes: int = 0
     """training episodes of the paper's agent (0 = the paper's: 500 indoor, 80 outdoor)"""

@@ -28,6 +28,7 @@ from dtradar_data.core.errors import MissingDependencyError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins
 from dtradar_rl.task.config import Config, ConfigError, flag
+from dtradar_rl.task.runs import run_dir
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import PRESETS, config_for
 from dtradar_rl.train.dqn import train
@@ -55,7 +56,7 @@ class SweepConfig(Config):
     """an existing Ray cluster (e.g. auto or ray://head:10001); default: a local Ray on this machine's cores"""
     threads: int = 1
     """CPUs (and torch threads) per run"""
-    out: str = "runs/sweep"
+    out: str = str(run_dir("sweep"))
     """output folder: one sub-folder per run, plus sweep.json, sweep.md and sweep.png"""
 
     def validate(self) -> SweepConfig:
