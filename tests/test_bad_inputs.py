@@ -25,8 +25,7 @@ from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish import cards, hub
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.scenes import load_scene_spec
-from dtradar_data.store import listing
-from dtradar_data.store import local as store
+from dtradar_data.store import listing, writing
 from dtradar_data.store.versions import version_id
 from dtradar_rl import cli as rl_cli
 from dtradar_rl.envs.nav_env import DtradarNavEnv, InvalidActionError
@@ -36,7 +35,7 @@ V0, V1 = "0123456789abcdef", "fedcba9876543210"
 
 def put(version=V0, name="cubicle/blueprint", **meta):
     ds = synthetic_dataset(6, 4, name=name)
-    return store.write_version(name, version, ds.table, {**ds.meta, **meta})
+    return writing.write_version(name, version, ds.table, {**ds.meta, **meta})
 
 
 @pytest.fixture()

@@ -40,7 +40,7 @@ from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
 from dtradar_data.scenes import build_targets, load_scene_spec
 from dtradar_data.scenes.model import Box
-from dtradar_data.store import local, versions
+from dtradar_data.store import local, versions, writing
 
 REDUCTION_DOC = (
     "path power = |a|^2 averaged over all (RX port, TX port) pairs; strongest path = largest path power; "
@@ -384,7 +384,7 @@ def _store(
                 "trace_seconds": round(trace_s, 2),
             },
         }
-        out = local.write_version(ds_id, version, cells, meta, paths=paths, extra_files=extra)
+        out = writing.write_version(ds_id, version, cells, meta, paths=paths, extra_files=extra)
     if tracer is not None:
         tracer.close()
     shutil.rmtree(work_dir, ignore_errors=True)

@@ -33,7 +33,7 @@ from dtradar_data.core.errors import (
     RevisionNotFoundError,
 )
 from dtradar_data.core.ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
-from dtradar_data.store import listing, local
+from dtradar_data.store import listing, local, writing
 from dtradar_data.store.card import default_hub_repo, render_version_card
 from dtradar_data.store.catalog import as_id
 
@@ -341,6 +341,6 @@ def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | N
             if (got / fname).is_file():
                 shutil.move(str(got / fname), version_dir / fname)
         preferred = revision if revision and is_tag(revision) else _card_tag(version_dir / P.CARD_FILE)
-        return local.install_staged(did.with_revision(None), version_dir, preferred_tag=preferred)
+        return writing.install_staged(did.with_revision(None), version_dir, preferred_tag=preferred)
     finally:
         shutil.rmtree(stage, ignore_errors=True)

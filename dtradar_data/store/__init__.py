@@ -1,7 +1,8 @@
 """The local dataset store: versioned, content-hashed Parquet under the data root.
 
 - :mod:`.versions` — version ids (content hashes of the build inputs) and the tags in ``refs.json``;
-- :mod:`.local` — atomic writes of one version, checked reads, ``load``;
+- :mod:`.local` — checked reads of a stored version, ``load``;
+- :mod:`.writing` — atomic writes of one version and installs of a download;
 - :mod:`.listing` — every dataset and version, full verification, history;
 - :mod:`.catalog` — which dataset names exist (built-in scenes and stored ones);
 - :mod:`.card` — the dataset card of a version, a pure function of its metadata;
@@ -18,15 +19,13 @@ from dtradar_data.store.listing import (
     version_infos,
 )
 from dtradar_data.store.local import (
-    InvalidTableError,
-    install_staged,
     load,
     read_meta,
     read_table,
     resolve,
     version_exists,
-    write_version,
 )
+from dtradar_data.store.writing import InvalidTableError, install_staged, write_version
 
 __all__ = [
     "DatasetEntry",

@@ -8,6 +8,7 @@ import pytest
 from dtradar_data import cli
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.store import local as store
+from dtradar_data.store import writing
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 
@@ -20,7 +21,7 @@ def root(root, tmp_path, monkeypatch):
 
 def put(version=V0, name="cubicle/blueprint", **meta):
     ds = synthetic_dataset(6, 4, name=name)
-    return store.write_version(name, version, ds.table, {**ds.meta, "rt": {"max_depth": 5}, **meta})
+    return writing.write_version(name, version, ds.table, {**ds.meta, "rt": {"max_depth": 5}, **meta})
 
 
 def test_list_shows_built_and_unbuilt_datasets(root, capsys):

@@ -3,7 +3,7 @@
 ``<root>/logged/<scene>/<variant>/<behaviour>/<version>/{transitions.parquet, meta.json, README.md}`` and
 ``.../<behaviour>/refs.json``: a tree apart from ``<root>/datasets`` so that RT listings never see them. A version is
 written into a staging folder under ``<root>/work`` and renamed into place (complete or absent), as for RT datasets
-(:mod:`dtradar_data.store.local`).
+(:mod:`dtradar_data.store.writing`).
 """
 
 from __future__ import annotations

@@ -12,8 +12,7 @@ from dtradar_data import cli
 from dtradar_data.core.schema import CELL_SCHEMA, COLUMN_DESCRIPTIONS, PATH_SCHEMA
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish import cards
-from dtradar_data.store import card
-from dtradar_data.store import local as store
+from dtradar_data.store import card, writing
 
 REPO_CARDS = Path(__file__).resolve().parents[3] / "cards"
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
@@ -69,7 +68,7 @@ def put(version=V0, rt=RT, licence="CC-BY-4.0", with_paths=True, png=None):
             ],
             schema=PATH_SCHEMA,
         )
-    return store.write_version(
+    return writing.write_version(
         "cubicle/blueprint", version, ds.table, meta, paths=paths, extra_files={"coverage.png": png} if png else None
     )
 

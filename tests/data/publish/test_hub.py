@@ -16,6 +16,7 @@ from dtradar_data.core.errors import CorruptDatasetError, HubError
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish import hub
 from dtradar_data.store import local as store
+from dtradar_data.store import writing
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 
@@ -31,7 +32,7 @@ def root(root, tmp_path, monkeypatch):
 
 def put(version=V0, **meta):
     ds = synthetic_dataset(5, 3, name="cubicle/blueprint")
-    return store.write_version(
+    return writing.write_version(
         "cubicle/blueprint", version, ds.table, {**ds.meta, "rt": {"max_depth": 5}, "licence": "CC-BY-4.0", **meta}
     )
 

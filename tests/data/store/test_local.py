@@ -19,6 +19,7 @@ from dtradar_data.core.errors import (
 from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, RADIO_COLUMNS
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.store import local as store
+from dtradar_data.store import writing
 
 V0, V1 = "0123456789abcdef", "fedcba9876543210"
 
@@ -61,7 +62,7 @@ def paths_table(cells: pa.Table) -> pa.Table:
 
 def test_write_then_load_roundtrips_the_table_the_grid_and_the_mask(root):
     cells, meta = make()
-    path = store.write_version("cubicle/blueprint", V0, cells, meta)
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
     assert path == root / "datasets" / "cubicle" / "blueprint" / V0
     assert {p.name for p in path.iterdir()} == {"cells.parquet", "meta.json", "README.md"}
     ds = dtradar_data.load("cubicle/blueprint")
@@ -75,7 +76,7 @@ def test_write_then_load_roundtrips_the_table_the_grid_and_the_mask(root):
 
 def test_the_parquet_file_carries_the_explicit_schema_zstd_and_the_metadata(root):
     cells, meta = make()
-    path = store.write_version("cubicle/blueprint", V0, cells, meta)
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
     pf = pq.ParquetFile(path / "cells.parquet")
     assert pf.schema_arrow.remove_metadata().equals(CELL_SCHEMA.remove_metadata())
     assert pf.metadata.row_group(0).column(0).compression == "ZSTD"
@@ -89,7 +90,7 @@ def test_the_parquet_file_carries_the_explicit_schema_zstd_and_the_metadata(root
 def test_rows_in_any_order_are_stored_row_major(root):
     cells, meta = make()
     shuffled = cells.take(np.random.default_rng(0).permutation(cells.num_rows))
-    store.write_version("cubicle/blueprint", V0, shuffled, meta)
+    writing.write_version("cubicle/blueprint", V0, shuffled, meta)
     assert dtradar_data.load("cubicle/blueprint").table.equals(cells)
 
 
@@ -97,7 +98,7 @@ def test_the_per_path_table_and_extra_files_are_stored_and_loaded_on_request(roo
     cells, meta = make()
     png = tmp_path / "cov.png"
     png.write_bytes(b"\x89PNG fake")
-    path = store.write_version(
+    path = writing.write_version(
         "cubicle/blueprint", V0, cells, meta, paths=paths_table(cells), extra_files={"coverage.png": png}
     )
     assert (path / "coverage.png").read_bytes() == png.read_bytes()
@@ -108,9 +109,9 @@ def test_the_per_path_table_and_extra_files_are_stored_and_loaded_on_request(roo
 
 def test_writing_an_existing_version_reuses_it_and_never_rewrites(root):
     cells, meta = make()
-    path = store.write_version("cubicle/blueprint", V0, cells, meta)
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
     before = (path / "cells.parquet").stat().st_mtime_ns, (path / "meta.json").read_text()
-    again = store.write_version("cubicle/blueprint", V0, cells, {**meta, "rt": {"max_depth": 99}})
+    again = writing.write_version("cubicle/blueprint", V0, cells, {**meta, "rt": {"max_depth": 99}})
     assert again == path and ((path / "cells.parquet").stat().st_mtime_ns, (path / "meta.json").read_text()) == before
     assert json.loads((path.parent / "refs.json").read_text())["tags"] == {"v0": V0}
 
@@ -119,9 +120,9 @@ def test_a_schema_mismatch_fails_the_write_and_leaves_nothing_behind(root):
     cells, meta = make()
     bad = cells.set_column(cells.schema.get_field_index("tau_s"), "tau_s", cells.column("tau_s").cast(pa.float64()))
     with pytest.raises(SchemaMismatchError, match="'tau_s' has type double, expected float"):
-        store.write_version("cubicle/blueprint", V0, bad, meta)
+        writing.write_version("cubicle/blueprint", V0, bad, meta)
     with pytest.raises(SchemaMismatchError, match="missing column 'los'"):
-        store.write_version("cubicle/blueprint", V0, cells.drop_columns(["los"]), meta)
+        writing.write_version("cubicle/blueprint", V0, cells.drop_columns(["los"]), meta)
     assert not store.version_exists("cubicle/blueprint", V0)
     assert not (root / "work").exists() or list((root / "work").iterdir()) == []
     assert not (root / "datasets" / "cubicle" / "blueprint" / V0).exists()
@@ -129,15 +130,15 @@ def test_a_schema_mismatch_fails_the_write_and_leaves_nothing_behind(root):
 
 def test_a_failure_in_the_middle_of_a_write_leaves_no_version_and_no_temp_dir(root, monkeypatch):
     cells, meta = make()
-    store.write_version("cubicle/blueprint", V0, cells, meta)
+    writing.write_version("cubicle/blueprint", V0, cells, meta)
     refs_before = (root / "datasets/cubicle/blueprint/refs.json").read_text()
 
     def boom(*args, **kwargs):
         raise OSError("disk full (injected)")
 
-    monkeypatch.setattr(store, "_write_parquet", boom)
+    monkeypatch.setattr(writing, "_write_parquet", boom)
     with pytest.raises(OSError, match="injected"):
-        store.write_version("cubicle/blueprint", V1, cells, meta)
+        writing.write_version("cubicle/blueprint", V1, cells, meta)
     assert not (root / "datasets/cubicle/blueprint" / V1).exists()
     assert list((root / "work").iterdir()) == []
     assert (root / "datasets/cubicle/blueprint/refs.json").read_text() == refs_before
@@ -146,14 +147,14 @@ def test_a_failure_in_the_middle_of_a_write_leaves_no_version_and_no_temp_dir(ro
 
 def test_a_failure_while_renaming_into_place_leaves_refs_and_versions_untouched(root, monkeypatch):
     cells, meta = make()
-    store.write_version("cubicle/blueprint", V0, cells, meta)
+    writing.write_version("cubicle/blueprint", V0, cells, meta)
 
     def no_rename(src, dst):
         raise OSError("rename failed (injected)")
 
-    monkeypatch.setattr(store.os, "rename", no_rename)
+    monkeypatch.setattr(writing.os, "rename", no_rename)
     with pytest.raises(OSError, match="injected"):
-        store.write_version("cubicle/blueprint", V1, cells, meta)
+        writing.write_version("cubicle/blueprint", V1, cells, meta)
     assert sorted(
         p.name for p in (root / "datasets/cubicle/blueprint").iterdir() if not p.name.startswith(".")
     ) == sorted(["refs.json", V0])
@@ -162,8 +163,8 @@ def test_a_failure_while_renaming_into_place_leaves_refs_and_versions_untouched(
 
 def test_rows_that_do_not_form_the_grid_are_rejected(root):
     cells, meta = make()
-    with pytest.raises(store.InvalidTableError, match="not the 8x6 grid"):
-        store.write_version("cubicle/blueprint", V0, cells.slice(0, 47), meta)
+    with pytest.raises(writing.InvalidTableError, match="not the 8x6 grid"):
+        writing.write_version("cubicle/blueprint", V0, cells.slice(0, 47), meta)
 
 
 def test_nulls_in_a_non_null_column_are_a_schema_mismatch(root):
@@ -171,7 +172,7 @@ def test_nulls_in_a_non_null_column_are_a_schema_mismatch(root):
     i = cells.schema.get_field_index("num_paths")
     nulled = cells.set_column(i, pa.field("num_paths", pa.int16()), pa.array([None] * 48, pa.int16()))
     with pytest.raises(SchemaMismatchError, match="'num_paths' has 48 nulls"):
-        store.write_version("cubicle/blueprint", V0, nulled, meta)
+        writing.write_version("cubicle/blueprint", V0, nulled, meta)
 
 
 def test_unknown_name_on_load_suggests_the_closest(root):
@@ -186,7 +187,7 @@ def test_a_known_but_unbuilt_dataset_says_how_to_build_it(root):
 
 def test_a_missing_revision_lists_the_existing_versions(root):
     cells, meta = make()
-    store.write_version("cubicle/blueprint", V0, cells, meta)
+    writing.write_version("cubicle/blueprint", V0, cells, meta)
     with pytest.raises(RevisionNotFoundError) as err:
         store.load("cubicle/blueprint@v7")
     assert f"v0 = {V0}" in str(err.value)
@@ -206,7 +207,7 @@ def corrupt(path, how):
 @pytest.mark.parametrize("how", ["truncate", "flip"])
 def test_a_corrupt_parquet_file_is_reported_with_its_name_and_how_to_fix(root, how):
     cells, meta = make()
-    path = store.write_version("cubicle/blueprint", V0, cells, meta)
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
     corrupt(path / "cells.parquet", how)
     with pytest.raises(CorruptDatasetError) as err:
         store.load("cubicle/blueprint")
@@ -216,7 +217,7 @@ def test_a_corrupt_parquet_file_is_reported_with_its_name_and_how_to_fix(root, h
 @pytest.mark.parametrize("how", ["truncate", "flip"])
 def test_parquet_level_corruption_is_caught_even_without_the_hash_check(root, how):
     cells, meta = make()
-    path = store.write_version("cubicle/blueprint", V0, cells, meta)
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
     corrupt(path / "cells.parquet", how)
     with pytest.raises(CorruptDatasetError, match="cells.parquet"):
         store.load("cubicle/blueprint", verify=False)
@@ -224,7 +225,7 @@ def test_parquet_level_corruption_is_caught_even_without_the_hash_check(root, ho
 
 def test_a_stored_file_with_another_schema_is_a_schema_mismatch_naming_the_differences(root):
     cells, meta = make()
-    path = store.write_version("cubicle/blueprint", V0, cells, meta)
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
     wrong = cells.drop_columns(["delay_spread_s"]).append_column("extra_col", pa.array(np.zeros(48)))
     pq.write_table(wrong, path / "cells.parquet")
     with pytest.raises(SchemaMismatchError) as err:
@@ -235,7 +236,7 @@ def test_a_stored_file_with_another_schema_is_a_schema_mismatch_naming_the_diffe
 
 def test_list_datasets_shows_builtin_scenes_and_stored_versions(root):
     cells, meta = make()
-    store.write_version("cubicle/blueprint", V0, cells, meta)
+    writing.write_version("cubicle/blueprint", V0, cells, meta)
     rows = {r.name: r for r in dtradar_data.list_datasets()}
     assert {"cubicle/blueprint", "cubicle/dynamic", "meeting/blueprint", "meeting/dynamic"} <= set(rows)
     assert rows["cubicle/blueprint"].built and rows["cubicle/blueprint"].latest == V0
@@ -245,7 +246,7 @@ def test_list_datasets_shows_builtin_scenes_and_stored_versions(root):
 
 def test_a_refs_file_written_by_hand_badly_is_a_typed_error(root):
     cells, meta = make()
-    store.write_version("cubicle/blueprint", V0, cells, meta)
+    writing.write_version("cubicle/blueprint", V0, cells, meta)
     (root / "datasets/cubicle/blueprint/refs.json").write_text("{not json")
     with pytest.raises(CorruptDatasetError, match="refs.json"):
         store.load("cubicle/blueprint")
@@ -253,7 +254,7 @@ def test_a_refs_file_written_by_hand_badly_is_a_typed_error(root):
 
 def test_refs_is_replaced_atomically_without_leftover_temp_files(root):
     cells, meta = make()
-    store.write_version("cubicle/blueprint", V0, cells, meta)
-    store.write_version("cubicle/blueprint", V1, cells, meta)
+    writing.write_version("cubicle/blueprint", V0, cells, meta)
+    writing.write_version("cubicle/blueprint", V1, cells, meta)
     ddir = root / "datasets/cubicle/blueprint"
     assert sorted(os.listdir(ddir)) == sorted([".lock", "refs.json", V0, V1])

@@ -7,7 +7,7 @@ import pytest
 from dtradar_data.core.errors import RevisionNotFoundError
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.store import local as store
-from dtradar_data.store import versions
+from dtradar_data.store import versions, writing
 
 SPEC = {"scene": "cubicle", "variant": "blueprint", "objects": [{"kind": "chair", "x_m": 1.0}]}
 RT = {"frequency_hz": 2.4e9, "max_depth": 5, "seed": 42}
@@ -57,7 +57,7 @@ def build(rt):
     ds = synthetic_dataset(5, 4, name="cubicle/blueprint")
     version = versions.version_id(inputs(rt=rt))
     if not store.version_exists("cubicle/blueprint", version):
-        store.write_version("cubicle/blueprint", version, ds.table, {**ds.meta, "rt": rt})
+        writing.write_version("cubicle/blueprint", version, ds.table, {**ds.meta, "rt": rt})
     return version
 
 

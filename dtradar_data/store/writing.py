@@ -1,0 +1,280 @@
+"""Storing one dataset version: checked, staged and installed atomically under the dataset's lock.
+
+A build runs for minutes to hours while other processes may read, list or pull the same dataset, so a version must
+appear complete or not at all, and a failed or concurrent store must never damage what is already there; keeping every
+write here, apart from the reads of :mod:`dtradar_data.store.local`, leaves one module that creates version
+directories or changes ``refs.json``. Files are written into a staging directory under ``<root>/work/`` (Parquet with
+zstd, page checksums and the build metadata as JSON under the schema-metadata key ``b"dtradar.meta"``; ``meta.json``
+with every data file's sha256 and size), renamed into ``<root>/datasets/<scene>/<variant>/<version>`` in one
+``rename`` and tagged by replacing ``refs.json`` atomically; an existing version is never rewritten.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import os
+import shutil
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from filelock import FileLock
+
+from dtradar_data.core import layout as P
+from dtradar_data.core.errors import CorruptDatasetError, DtradarError, SchemaMismatchError
+from dtradar_data.core.files import json_safe, sha256_file
+from dtradar_data.core.ids import HASH_RE, DatasetId
+from dtradar_data.core.record import RECORD_FORMAT
+from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, SCHEMA_VERSION
+from dtradar_data.store.card import render_version_card
+from dtradar_data.store.catalog import as_id
+from dtradar_data.store.local import (
+    check_can_store,
+    history_metas,
+    read_meta,
+    schema_diff,
+    verify_dir,
+    version_exists,
+)
+from dtradar_data.store.versions import Refs, read_refs, write_refs
+
+log = logging.getLogger(__name__)
+
+META_KEY = b"dtradar.meta"
+#: Files the store itself writes; ``extra_files`` may not shadow them.
+RESERVED_FILES = frozenset({P.CELLS_FILE, P.PATHS_FILE, P.META_FILE, P.CARD_FILE})
+
+
+class InvalidTableError(DtradarError, ValueError):
+    """A table whose rows do not form the grid described by its metadata, or metadata that is unusable."""
+
+
+# ---------------------------------------------------------------------------------------------------------- schema
+
+
+def conform(table: pa.Table, schema: pa.Schema, what: str) -> pa.Table:
+    """``table`` with exactly ``schema`` (column order, field descriptions), or :class:`SchemaMismatchError`.
+
+    Types must already match: silently casting e.g. float64 angles to float32 would hide a pipeline bug.
+    """
+    diff = [d for d in schema_diff(table.schema, schema) if "is nullable" not in d]
+    for f in schema:  # a nullable Arrow field is fine if it holds no nulls where the contract forbids them
+        if not f.nullable and f.name in table.column_names and table.column(f.name).null_count:
+            diff.append(f"column {f.name!r} has {table.column(f.name).null_count} nulls, expected none")
+    if diff:
+        raise SchemaMismatchError(
+            f"{what} does not match the schema (v{SCHEMA_VERSION}): " + "; ".join(diff),
+            hint="fix the table producer, or bump SCHEMA_VERSION with a new golden file",
+        )
+    return pa.Table.from_arrays([table.column(f.name) for f in schema], schema=schema)
+
+
+def _check_grid(cells: pa.Table, meta: dict[str, Any]) -> pa.Table:
+    """Sort row-major and check that the rows are exactly the ``nx × ny`` grid of ``meta['grid']``."""
+    try:
+        nx, ny = int(meta["grid"]["nx"]), int(meta["grid"]["ny"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InvalidTableError(
+            "meta has no usable 'grid' (x0_m, y0_m, cell_m, nx, ny)",
+            hint="pass meta['grid'] = scene_spec.grid.to_dict()",
+        ) from exc
+    cells = cells.sort_by([("iy", "ascending"), ("ix", "ascending")])
+    ix = cells.column("ix").to_numpy()
+    iy = cells.column("iy").to_numpy()
+    gy, gx = np.divmod(np.arange(nx * ny), nx)
+    if cells.num_rows != nx * ny or not (np.array_equal(ix, gx) and np.array_equal(iy, gy)):
+        raise InvalidTableError(
+            f"cells has {cells.num_rows} rows that are not the {nx}x{ny} grid (one row per (ix, iy), "
+            f"0 <= ix < {nx}, 0 <= iy < {ny})",
+            hint="emit one row per grid cell, blocked cells included",
+        )
+    return cells
+
+
+def table_stats(cells: pa.Table) -> dict[str, Any]:
+    """Counts and per-column ``{min, max, nulls}`` for the card (the pipeline's ``meta['stats']`` keys win)."""
+    import pyarrow.compute as pc
+
+    ranges = {}
+    for f in cells.schema:
+        if pa.types.is_floating(f.type) or pa.types.is_integer(f.type):
+            mm = pc.min_max(cells.column(f.name)).as_py()
+            ranges[f.name] = {"min": mm["min"], "max": mm["max"], "nulls": cells.column(f.name).null_count}
+    blocked = cells.column("blocked")
+    return {
+        "num_cells": cells.num_rows,
+        "num_free": cells.num_rows - int(pc.sum(blocked).as_py() or 0),
+        "num_with_paths": int(pc.sum(pc.greater(cells.column("num_paths"), 0)).as_py() or 0),
+        "num_los": int(pc.sum(cells.column("los")).as_py() or 0),
+        "columns": json_safe(ranges),
+    }
+
+
+# ------------------------------------------------------------------------------------------------------ file utils
+
+
+def _write_parquet(table: pa.Table, path: Path, meta_json: bytes) -> None:
+    schema_meta = dict(table.schema.metadata or {})
+    schema_meta[META_KEY] = meta_json
+    pq.write_table(
+        table.replace_schema_metadata(schema_meta),
+        path,
+        compression="zstd",
+        write_page_checksum=True,
+        write_statistics=True,
+    )
+
+
+def _locked(directory: Path) -> FileLock:
+    """An exclusive lock per dataset (a ``.lock`` file in its folder), so two processes cannot hand out one tag."""
+    directory.mkdir(parents=True, exist_ok=True)
+    return FileLock(directory / ".lock")
+
+
+# ------------------------------------------------------------------------------------------------------- writing
+
+
+def write_version(
+    dataset_id: str | DatasetId,
+    version: str,
+    cells: pa.Table,
+    meta: dict[str, Any],
+    *,
+    paths: pa.Table | None = None,
+    extra_files: dict[str, Path] | None = None,
+) -> Path:
+    """Store one dataset version atomically and tag it; returns its directory.
+
+    An existing ``version`` is reused as is (same inputs, same content). ``meta`` is stored verbatim plus
+    ``name``, ``scene``, ``variant``, ``version``, ``schema_version`` and ``files`` (sha256 + bytes per file).
+    ``extra_files`` maps a file name in the version directory (e.g. ``coverage.png``) to a source path.
+    """
+    did = as_id(dataset_id, check_known=False)
+    if did.revision:
+        raise InvalidTableError(
+            f"write_version takes a dataset name without a revision, got {did}",
+            hint=f"pass {did.name!r} and the version separately",
+        )
+    if not isinstance(version, str) or not HASH_RE.fullmatch(version):
+        raise InvalidTableError(
+            f"version {version!r} is not a lowercase hex content hash",
+            hint="compute it with dtradar_data.store.versions.version_id(inputs)",
+        )
+    final = P.version_dir(did.scene, did.variant, version)
+    if version_exists(did, version):
+        log.info("%s: version %s exists, reusing it", did.name, version)
+        return final
+    check_can_store(did, version)
+
+    if int(meta.get("schema_version", SCHEMA_VERSION)) != SCHEMA_VERSION:
+        raise SchemaMismatchError(
+            f"meta says schema_version {meta['schema_version']}, this library writes v{SCHEMA_VERSION}",
+            hint="rebuild the table with this library version",
+        )
+    cells = _check_grid(conform(cells, CELL_SCHEMA, f"cells table of {did.name}"), meta)
+    if paths is not None:
+        paths = conform(paths, PATH_SCHEMA, f"paths table of {did.name}").sort_by(
+            [("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")]
+        )
+    extra_files = dict(extra_files or {})
+    for fname, src in extra_files.items():
+        if fname in RESERVED_FILES or Path(fname).name != fname or fname.startswith("."):
+            raise InvalidTableError(
+                f"extra file name {fname!r} is reserved or not a plain file name",
+                hint=f"use a plain name other than {sorted(RESERVED_FILES)}",
+            )
+        if not Path(src).is_file():
+            raise InvalidTableError(f"extra file {fname!r}: {src} does not exist", hint="write it before storing")
+
+    meta = json_safe(copy.deepcopy(meta))
+    meta["stats"] = {**table_stats(cells), **(meta.get("stats") or {})}
+    meta.update(
+        name=did.name,
+        scene=did.scene,
+        variant=did.variant,
+        version=version,
+        schema_version=SCHEMA_VERSION,
+        record_format=RECORD_FORMAT,
+    )
+    meta.setdefault("created_utc", datetime.now(timezone.utc).isoformat(timespec="seconds"))
+    meta.pop("files", None)
+    # The Parquet copy of the metadata is the content description only: file hashes cannot include themselves.
+    meta_json = json.dumps(meta, sort_keys=True, ensure_ascii=False, allow_nan=False).encode()
+
+    P.work_root().mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f"stage-{did.scene}-{did.variant}-{version}-", dir=P.work_root()))
+    try:
+        _write_parquet(cells, stage / P.CELLS_FILE, meta_json)
+        if paths is not None:
+            _write_parquet(paths, stage / P.PATHS_FILE, meta_json)
+        for fname, src in sorted(extra_files.items()):
+            shutil.copyfile(src, stage / fname)
+        meta["files"] = {
+            f.name: {"sha256": sha256_file(f), "bytes": f.stat().st_size}
+            for f in sorted(stage.iterdir())
+            if f.is_file()
+        }
+        return _install(did, version, stage, meta)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)  # after a successful install the stage is gone already
+
+
+def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], preferred_tag: str | None = None) -> Path:
+    """Under the dataset lock: tag, write meta.json and the card into ``stage``, rename it into place."""
+    ddir = P.dataset_dir(did.scene, did.variant)
+    final = ddir / version
+    with _locked(ddir):
+        if (final / P.META_FILE).is_file():  # another process finished the same version meanwhile
+            return final
+        refs = read_refs(ddir / P.REFS_FILE)
+        tag = refs.tag_of(version)
+        if tag is None:
+            tag = preferred_tag if preferred_tag and preferred_tag not in refs.tags else refs.next_tag()
+        (stage / P.META_FILE).write_text(json.dumps(meta, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
+        history = history_metas(did, refs) + [(tag, meta)]
+        (stage / P.CARD_FILE).write_text(render_version_card(meta, tag=tag, history=history))
+        if final.exists():  # a leftover without meta.json (e.g. copied by hand): never merge into it
+            raise CorruptDatasetError(
+                f"{final} exists but has no {P.META_FILE}", hint="remove that directory and build again"
+            )
+        os.rename(stage, final)
+        refs.tags[tag] = version
+        refs.latest = version if _is_newer(tag, refs) else refs.latest
+        write_refs(ddir / P.REFS_FILE, refs)
+    log.info("%s: stored version %s as %s in %s", did.name, version, tag, final)
+    return final
+
+
+def _is_newer(tag: str, refs: Refs) -> bool:
+    ordered = refs.ordered()
+    return not ordered or ordered[-1][0] == tag
+
+
+def install_staged(dataset_id: str | DatasetId, stage: Path, *, preferred_tag: str | None = None) -> Path:
+    """Install an already complete version directory (e.g. downloaded from the Hub) after verifying it fully.
+
+    Used by :mod:`dtradar_data.publish.hub`; ``stage`` must be under the data root's work dir and is consumed.
+    """
+    did = as_id(dataset_id, check_known=False)
+    meta = read_meta(stage)
+    version = meta.get("version", "")
+    if meta.get("name") != did.name or not HASH_RE.fullmatch(str(version)):
+        raise CorruptDatasetError(
+            f"{stage / P.META_FILE} describes {meta.get('name')!r}@{version!r}, not a version of {did.name}",
+            hint="check the repository you pulled from",
+        )
+    problems = verify_dir(stage)
+    if problems:
+        raise CorruptDatasetError(
+            f"downloaded {did.name}@{version} failed verification: " + "; ".join(problems),
+            hint="pull again; if it persists the published files are damaged: re-publish",
+        )
+    if version_exists(did, version):
+        return P.version_dir(did.scene, did.variant, version)
+    return _install(did, version, stage, meta, preferred_tag=preferred_tag)
