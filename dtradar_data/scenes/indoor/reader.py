@@ -1,173 +1,43 @@
 """Read an indoor scene file (TOML) into a :class:`~dtradar_data.scenes.model.SceneSpec`.
 
 A room scene is a rectangular room (walls, floor, optional ceiling) plus obstacles, each a box as the paper describes
-them. One TOML file per scene holds the *blueprint* objects and a ``[dynamic]`` section that lists the *changes*
-(objects added, moved / re-oriented by name, removed): the dynamic twin is blueprint + changes, so the two variants can
-never drift apart silently.
-
-File layout (``cubicle.toml`` beside this module is a commented example)::
-
-    format = 1
-    [scene]    name, title, description, source, licence, attribution
-    [room]     width_m (x), length_m (y), height_m, wall_thickness_m, wall_material, floor_material,
-               floor_thickness_m, [ceiling_material, ceiling_thickness_m]
-    [grid]     cell_m, nx, ny, [x0_m, y0_m]          (default: first cell centre at cell_m/2 from the corner)
-    [tx]       position_m, [look_at_m, num_rows, num_cols, pattern, polarization, power_dbm]
-    [robot]    rx_height_m, robot_height_m
-    [kinds.<kind>]   defaults for objects of that kind: material, width_m, length_m, height_m, [z_m, yaw_deg]
-    [[objects]]      name, kind, x_m, y_m, [material, width_m, length_m, height_m, z_m, yaw_deg]
-    [dynamic]        description, [[dynamic.add]] (like objects), [[dynamic.move]] (name + fields to change),
-                     remove = [names]
-
-The room frame: the interior floor spans ``[0, width_m] x [0, length_m]`` at ``z = 0``; walls stand outside it.
-
-The document's shape (sections, keys, types, ranges, names) is checked by pydantic models; what pydantic cannot see
-(objects inside the room, unique names, changes that name existing objects) is checked after it. Either way a mistake
-raises :class:`~dtradar_data.core.errors.SceneFileError` naming the file, the object and the field, and how to fix it.
+them, and a dataset is only as trustworthy as the scene it was traced in: this module turns a document whose shape
+:mod:`dtradar_data.scenes.indoor.document` has checked into the scene, and checks what a schema cannot see (objects
+inside the room, the transmitter and grid inside it, unique names, changes that name existing objects), each mistake
+a :class:`~dtradar_data.core.errors.SceneFileError` naming the file, the object and the field, and how to fix it. One
+file per scene holds the *blueprint* objects and a ``[dynamic]`` section that lists the *changes* (objects added,
+moved / re-oriented by name, removed): the dynamic twin is built here as blueprint + changes, so the two variants can
+never drift apart silently. The room frame: the interior floor spans ``[0, width_m] x [0, length_m]`` at ``z = 0``;
+walls stand outside it.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
 import tomllib
-from pydantic import BeforeValidator, ValidationError
+from pydantic import ValidationError
 
 from dtradar_data.core.errors import SceneFileError, did_you_mean
 from dtradar_data.core.grid import Grid
-from dtradar_data.scenes.fields import (
-    Material,
-    Num,
-    ObjName,
-    Pos,
-    PosInt,
-    SceneFileModel,
-    SceneName,
-    Text,
-    Vec3,
-    choice,
-    name_check,
+from dtradar_data.scenes.indoor.document import (
+    FORMAT,
+    OBJECT_KEYS,
+    DocumentErrors,
+    DynamicModel,
+    GridModel,
+    ObjectModel,
+    RoomDocument,
+    RoomModel,
+    TxModel,
 )
-from dtradar_data.scenes.model import (
-    PATTERNS,
-    POLARIZATIONS,
-    Box,
-    Room,
-    SceneSpec,
-    TxSpec,
-)
+from dtradar_data.scenes.model import Box, Room, SceneSpec, TxSpec
 
-FORMAT = 1
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
-
-
-# ------------------------------------------------------------------------------------------- document models
-class SceneMeta(SceneFileModel):
-    name: SceneName
-    title: Text
-    description: Text
-    source: Text
-    licence: Text
-    attribution: Text
-
-
-class RoomModel(SceneFileModel):
-    width_m: Pos
-    length_m: Pos
-    height_m: Pos
-    wall_thickness_m: Pos
-    wall_material: Material
-    floor_material: Material
-    floor_thickness_m: Pos
-    ceiling_material: Material | None = None
-    ceiling_thickness_m: Pos | None = None
-
-
-class GridModel(SceneFileModel):
-    cell_m: Pos
-    nx: PosInt
-    ny: PosInt
-    x0_m: Num | None = None
-    y0_m: Num | None = None
-
-
-class TxModel(SceneFileModel):
-    position_m: Vec3
-    look_at_m: Vec3 | None = None
-    num_rows: PosInt = 8
-    num_cols: PosInt = 2
-    pattern: Annotated[str, BeforeValidator(choice(PATTERNS, "an antenna pattern"))] = "tr38901"
-    polarization: Annotated[str, BeforeValidator(choice(POLARIZATIONS, "a polarization"))] = "VH"
-    power_dbm: Num = 0.0
-
-
-class RobotModel(SceneFileModel):
-    rx_height_m: Pos
-    robot_height_m: Pos
-
-
-class KindDefaults(SceneFileModel):
-    material: Material | None = None
-    width_m: Pos | None = None
-    length_m: Pos | None = None
-    height_m: Pos | None = None
-    z_m: Num | None = None
-    yaw_deg: Num | None = None
-
-
-class ObjectModel(SceneFileModel):
-    name: ObjName
-    kind: ObjName
-    x_m: Num
-    y_m: Num
-    material: Material
-    width_m: Pos
-    length_m: Pos
-    height_m: Pos
-    z_m: Num = 0.0
-    yaw_deg: Num = 0.0
-
-
-class MoveModel(SceneFileModel):
-    name: Text
-    x_m: Num | None = None
-    y_m: Num | None = None
-    z_m: Num | None = None
-    yaw_deg: Num | None = None
-
-
-class DynamicModel(SceneFileModel):
-    description: Text
-    add: list[dict[str, Any]] = []
-    move: list[MoveModel] = []
-    remove: list[Text] = []
-
-
-class RoomDocument(SceneFileModel):
-    format: int
-    scene: SceneMeta
-    room: RoomModel
-    grid: GridModel
-    tx: TxModel
-    robot: RobotModel
-    kinds: dict[Annotated[str, BeforeValidator(name_check("kind name", allow_dash=False))], KindDefaults] = {}
-    objects: list[dict[str, Any]]
-    dynamic: DynamicModel | None = None
-
-
-_OBJECT_KEYS = tuple(ObjectModel.model_fields)
 _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
-_SECTION_HINTS = {
-    "scene": "name, title, description, source, licence, attribution",
-    "room": "width_m, ...",
-    "grid": "cell_m, nx, ny",
-    "tx": "position_m",
-    "robot": "rx_height_m, robot_height_m",
-    "objects": "[[objects]] blocks",
-}
 
 
 # ------------------------------------------------------------------------------------------- entry points
@@ -196,85 +66,8 @@ def parse_room(data: dict[str, Any], variant: str, *, origin: str = "<scene>") -
 
 
 # ------------------------------------------------------------------------------------------- the reader
-class _Reader:
-    def __init__(self, origin: str, data: dict[str, Any]):
-        self.origin = origin
-        self.data = data
-
-    def fail(self, where: str, problem: str, hint: str) -> SceneFileError:
-        return SceneFileError(f"{self.origin}: {where}: {problem}", hint=hint)
-
-    # pydantic's error locations, spoken the way the file is written: "[room]", "objects[1] 'table_01'", ...
-    def where(self, loc: tuple) -> str:
-        if not loc:
-            return "top level"
-        head = loc[0]
-        if head in ("objects", "add") and len(loc) > 1 and isinstance(loc[1], int):
-            items = self.data.get("objects") if head == "objects" else (self.data.get("dynamic") or {}).get("add")
-            prefix = "objects" if head == "objects" else "dynamic.add"
-            name = items[loc[1]].get("name") if isinstance(items, list) and isinstance(items[loc[1]], dict) else None
-            return f"{prefix}[{loc[1]}]" + (f" {name!r}" if isinstance(name, str) else "")
-        if head == "dynamic" and len(loc) > 2 and isinstance(loc[2], int):
-            return f"dynamic.{loc[1]}[{loc[2]}]"
-        if head == "kinds" and len(loc) > 1:
-            return f"[kinds.{loc[1]}]"
-        return f"[{head}]" if len(loc) > 1 else "top level"
-
-    def raise_first(self, exc: ValidationError, base_loc: tuple = ()) -> None:
-        errors = exc.errors()
-        # A misspelt key also makes the right one "missing": report the misspelling, it explains both.
-        errors.sort(key=lambda e: e["type"] != "extra_forbidden")
-        e = errors[0]
-        loc = base_loc + tuple(e["loc"])
-        # a union (e.g. `Material | None`) reports its branch in the location: keep only the field names
-        loc = tuple(p for p in loc if not (isinstance(p, str) and ("[" in p or p in ("function-before", "none"))))
-        where, field = self.where(loc), next((p for p in reversed(loc) if isinstance(p, str)), None)
-        more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
-        if e["type"] == "extra_forbidden":
-            parent = self.allowed_keys(loc[:-1])
-            close = did_you_mean(str(field), parent)
-            raise self.fail(
-                where,
-                f"unknown key {field!r}" + (f"; {close}" if close else "") + more,
-                "allowed keys: " + ", ".join(sorted(parent)),
-            )
-        if e["type"] == "missing":
-            if len(loc) == 1:
-                raise self.fail(
-                    where,
-                    f"missing section [{field}]" + more,
-                    f"add a [{field}] table ({_SECTION_HINTS.get(field, 'see cubicle.toml')})",
-                )
-            raise self.fail(where, f"missing field {field!r}" + more, f"add `{field} = ...` to {where}")
-        if e["type"] == "dtradar":
-            raise self.fail(where, f"{field} {e['ctx']['problem']}" + more, e["ctx"]["hint"])
-        if e["type"] in ("model_type", "dict_type"):
-            raise self.fail(where, f"{field or 'this'} must be a table" + more, "write key = value lines under it")
-        if e["type"] == "list_type":
-            raise self.fail(
-                where,
-                f"{field} must be an array" + more,
-                f"write each entry as a [[{'.'.join(str(p) for p in loc)}]] block or a [list]",
-            )
-        raise self.fail(where, f"{field}: {e['msg']}" + more, "see cubicle.toml for the expected form")
-
-    def allowed_keys(self, loc: tuple) -> tuple[str, ...]:
-        model = {
-            (): RoomDocument,
-            ("scene",): SceneMeta,
-            ("room",): RoomModel,
-            ("grid",): GridModel,
-            ("tx",): TxModel,
-            ("robot",): RobotModel,
-            ("dynamic",): DynamicModel,
-        }.get(tuple(loc[:1]))
-        if loc and loc[0] in ("objects", "add") or (len(loc) > 1 and loc[:2] == ("dynamic", "add")):
-            return _OBJECT_KEYS
-        if len(loc) > 1 and loc[0] == "kinds":
-            return tuple(KindDefaults.model_fields)
-        if len(loc) > 2 and loc[:2] == ("dynamic", "move"):
-            return tuple(MoveModel.model_fields)
-        return tuple((model or RoomDocument).model_fields)
+class _Reader(DocumentErrors):
+    """The :class:`SceneSpec` of one document, with the checks pydantic cannot make."""
 
     # -- the document
     def spec(self, variant: str) -> SceneSpec:
@@ -412,7 +205,7 @@ class _Reader:
             raise self.fail(where, f"invalid kind {kind!r}", "floor and ceiling come from [room]")
         merged = {**kinds.get(kind, {}), **raw} if isinstance(kind, str) else dict(raw)
         for key in _SIZE_KEYS:
-            if key not in merged and set(raw) <= set(_OBJECT_KEYS) and {"name", "kind", "x_m", "y_m"} <= set(raw):
+            if key not in merged and set(raw) <= set(OBJECT_KEYS) and {"name", "kind", "x_m", "y_m"} <= set(raw):
                 known = did_you_mean(str(kind), kinds)
                 raise self.fail(
                     where,
