@@ -21,7 +21,7 @@ import trimesh
 
 from dtradar_data.core.errors import SceneFileError
 from dtradar_data.scenes.model import MeshScene, SceneSpec
-from dtradar_data.scenes.xml_scene import FILE_SHAPES, PRIMITIVE_SHAPES
+from dtradar_data.scenes.xml_shapes import FILE_SHAPES, PRIMITIVE_SHAPES
 
 FLAT_M = 0.05  # shapes thinner than this (road markings, flat roofs on their own) cannot block the robot
 SNAP_M = 1e-4  # section end points are rounded to this so that segments of neighbouring triangles join

@@ -24,15 +24,8 @@ from dtradar_data.scenes.city.reader import (
 )
 from dtradar_data.scenes.indoor.reader import load_room_file
 from dtradar_data.scenes.model import SceneSpec
-from dtradar_data.scenes.xml_scene import (
-    is_mesh_scene_file,
-    is_sionna_name,
-    load_mesh_scene_file,
-    load_sionna_spec,
-    load_xml_spec,
-    sionna_dataset_scenes,
-    sionna_scene_names,
-)
+from dtradar_data.scenes.sionna_scenes import is_sionna_name, sionna_dataset_scenes, sionna_scene_names
+from dtradar_data.scenes.xml_scene import is_mesh_scene_file, load_mesh_scene_file, load_sionna_spec, load_xml_spec
 
 __all__ = [
     "SceneSpec",

@@ -1,14 +1,12 @@
 """Scenes built on a Mitsuba/Sionna XML file: Sionna's bundled cities (``sionna:munich`` ...) or the user's own XML.
 
-Three ways to name one:
-
-- ``sionna:munich`` (also ``sionna:etoile``, ``sionna:florence``, ``sionna:san_francisco``,
-  ``sionna:simple_street_canyon``): the scene that ships inside the installed sionna-rt wheel, with the grid,
-  transmitter and robot of :data:`SIONNA_DEFAULTS`. Its dataset is named ``sionna-munich/...`` (dataset scene names
-  allow only ``[a-z0-9_-]``), and that name works too.
-- ``path/to/scene.xml``: a user's Mitsuba/Sionna XML, with the grid and transmitter on the command line
-  (``--grid X0 Y0 CELL_M NX NY --tx X Y Z``).
-- a small scene file (TOML)::
+The ray tracer takes any Mitsuba scene, but a dataset needs more than geometry (a grid, a transmitter, the robot's
+heights, a name and a licence) and must be rebuilt the same from a name; this module supplies them, in three ways.
+``sionna:munich`` (also ``sionna:etoile``, ``sionna:florence``, ``sionna:san_francisco``,
+``sionna:simple_street_canyon``; its dataset scene ``sionna-munich`` works too) takes the grid, transmitter and robot
+of :data:`~dtradar_data.scenes.sionna_scenes.SIONNA_DEFAULTS`; ``path/to/scene.xml`` takes the grid and transmitter
+from the command line (``--grid X0 Y0 CELL_M NX NY --tx X Y Z``), since they cannot be guessed from arbitrary
+geometry; and a small scene file (TOML) with an ``[xml]`` section names the XML and writes them down::
 
       format = 1
       [scene]  name, title, [description, source, licence, attribution]
@@ -16,31 +14,18 @@ Three ways to name one:
       [grid]   x0_m, y0_m, cell_m, nx, ny
       [tx]     position_m = [x, y, z], [look_at_m, num_rows, num_cols, pattern, polarization, power_dbm]
       [robot]  [rx_height_m = 1.5, robot_height_m = 1.5]
-
-The XML is parsed here only for what identifies it (its shapes' files, hashed into the spec's digest) and for which
-shapes are the ground; meshes, occupancy and footprints are :mod:`dtradar_data.geometry.xml_meshes`'s business. Bundled
-files are found through package metadata, never by importing Sionna (only ``dtradar_data.rt`` may).
 """
 
 from __future__ import annotations
 
-import hashlib
 import re
-import xml.etree.ElementTree as ET
-from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tomllib
 from pydantic import BeforeValidator, Field, ValidationError
 
-from dtradar_data.core.errors import (
-    SceneFileError,
-    did_you_mean,
-    unknown_name,
-)
-from dtradar_data.core.files import installed_file
+from dtradar_data.core.errors import SceneFileError
 from dtradar_data.core.grid import Grid
 from dtradar_data.core.ids import SCENE_RE
 from dtradar_data.scenes.fields import Num, Pos, PosInt, SceneFileModel, SceneName, Text
@@ -52,183 +37,20 @@ from dtradar_data.scenes.model import (
     SceneSpec,
     TxSpec,
 )
+from dtradar_data.scenes.sionna_scenes import (
+    SIONNA_ATTRIBUTION,
+    SIONNA_DEFAULTS,
+    SIONNA_LICENCE,
+    SIONNA_PREFIX,
+    dataset_scene_name,
+    is_sionna_name,
+    sionna_key,
+    sionna_version,
+    sionna_xml,
+)
+from dtradar_data.scenes.xml_shapes import mesh_scene
 
 FORMAT = 1
-SIONNA_PREFIX = "sionna:"
-SIONNA_DIST = "sionna-rt"
-#: Shapes whose id or file name matches this are the ground (Sionna's scenes: ``mesh-ground``, ``mesh-Plane``,
-#: ``mesh-Terrain``, ``mesh-floor``); a scene file's ``[xml] ground`` names them explicitly instead.
-GROUND_RE = re.compile(r"ground|floor|plane|terrain", re.IGNORECASE)
-#: Mitsuba shape plugins whose geometry we can read: mesh files, and the unit primitives a hand-written XML uses.
-FILE_SHAPES = ("ply", "obj")
-PRIMITIVE_SHAPES = ("rectangle", "cube")
-
-SIONNA_LICENCE = "Apache-2.0 (sionna-rt; scene geometry from OpenStreetMap, ODbL)"
-SIONNA_ATTRIBUTION = "NVIDIA Sionna RT example scenes; building data (c) OpenStreetMap contributors"
-
-#: The five bundled city scenes: a grid over the central streets and a transmitter in the open above one.
-#: Chosen from the scenes' building footprints at 1.5 m (see README, "Sionna scenes"): each grid is 400 m x 400 m
-#: around the scene's centre at 5 m cells (the street canyon: all of it at 2 m), so it traces in minutes on 2 CPU
-#: cores; each TX stands over a street or square, at least 15 m from every building, 20 m above the ground (the
-#: paper's city transmitters are at 18-20 m).
-SIONNA_DEFAULTS: dict[str, dict[str, Any]] = {
-    "simple_street_canyon": {
-        "title": "Sionna simple street canyon",
-        "description": "Sionna RT's bundled street canyon: six blocks along one street, on a concrete floor.",
-        "grid": {"x0_m": -49.0, "y0_m": -29.0, "cell_m": 2.0, "nx": 50, "ny": 30},
-        "tx": {"position_m": [-30.0, 0.0, 20.0]},
-    },
-    "munich": {
-        "title": "Sionna Munich (Frauenkirche)",
-        "description": "Sionna RT's bundled twin of central Munich around the Frauenkirche and Marienplatz.",
-        "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
-        "tx": {"position_m": [40.0, 90.0, 20.0]},  # in the square north of the Neues Rathaus
-    },
-    "etoile": {
-        "title": "Sionna Paris Etoile",
-        "description": "Sionna RT's bundled twin of the Place Charles de Gaulle (Arc de Triomphe), Paris.",
-        "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
-        "tx": {"position_m": [-60.0, 0.0, 20.0]},  # on the roundabout, east of the Arc
-    },
-    "florence": {
-        "title": "Sionna Florence",
-        "description": "Sionna RT's bundled twin of central Florence.",
-        "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
-        "tx": {"position_m": [-50.0, -30.0, 20.0]},  # in the square south of the cathedral quarter
-    },
-    "san_francisco": {
-        "title": "Sionna San Francisco",
-        "description": "Sionna RT's bundled twin of part of San Francisco, buildings on terrain.",
-        "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
-        "tx": {"position_m": [40.0, 40.0, 33.0]},  # a crossing; the terrain there is at 13 m
-    },
-}
-
-
-# ------------------------------------------------------------------------------------------- names
-def sionna_scene_names() -> list[str]:
-    """``["sionna:etoile", ...]``: the bundled scenes a build can name."""
-    return [SIONNA_PREFIX + n for n in sorted(SIONNA_DEFAULTS)]
-
-
-def dataset_scene_name(name: str) -> str:
-    """``"sionna:san_francisco"`` -> ``"sionna-san_francisco"``: the dataset grammar has no colon."""
-    return name.replace(":", "-")
-
-
-def sionna_dataset_scenes() -> list[str]:
-    return [dataset_scene_name(n) for n in sionna_scene_names()]
-
-
-def is_sionna_name(scene: str) -> bool:
-    """Whether ``scene`` is meant as a bundled Sionna scene (known or not): ``sionna:...`` or ``sionna-...``."""
-    return scene.startswith((SIONNA_PREFIX, "sionna-"))
-
-
-def sionna_key(scene: str) -> str:
-    """``"sionna:munich"`` or ``"sionna-munich"`` -> ``"munich"``; :class:`UnknownNameError` with did-you-mean."""
-    key = scene.split(":", 1)[1] if scene.startswith(SIONNA_PREFIX) else scene.removeprefix("sionna-")
-    if key not in SIONNA_DEFAULTS:
-        raise unknown_name("Sionna scene", scene, sionna_scene_names())
-    return key
-
-
-def sionna_xml(key: str) -> Path:
-    """The bundled XML of one Sionna scene, found through package metadata (importing sionna is ``rt``'s job)."""
-    return installed_file(SIONNA_DIST, f"sionna/rt/scenes/{key}/{key}.xml", f"the scene sionna:{key}")
-
-
-# ------------------------------------------------------------------------------------------- the XML
-@dataclass(frozen=True)
-class XmlShape:
-    """One ``<shape>`` of a Mitsuba scene: its id, plugin type and (for mesh files) the resolved file."""
-
-    id: str
-    type: str
-    file: Path | None
-
-
-def read_shapes(xml: Path) -> list[XmlShape]:
-    """The top-level shapes of a Mitsuba XML file; :class:`SceneFileError` for an unreadable file, a missing mesh
-    file, an unsupported shape type or a scene without shapes."""
-    xml = Path(xml)
-    if not xml.is_file():
-        raise SceneFileError(
-            f"{xml}: no such XML scene file",
-            hint="check the path, or name a bundled scene: " + ", ".join(sionna_scene_names()),
-        )
-    try:
-        root = ET.parse(xml).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise SceneFileError(
-            f"{xml}: not a readable XML file ({e})",
-            hint="export the scene again (Blender's Mitsuba add-on writes Sionna's format)",
-        ) from e
-    if root.tag != "scene":
-        raise SceneFileError(
-            f"{xml}: the root element is <{root.tag}>, not <scene>",
-            hint="a Mitsuba/Sionna scene file starts with <scene version=...>",
-        )
-    shapes = []
-    for i, el in enumerate(root.findall("shape")):
-        kind = el.get("type", "")
-        sid = el.get("id") or el.get("name") or f"shape-{i}"
-        if kind in FILE_SHAPES:
-            fn = next((s.get("value") for s in el.findall("string") if s.get("name") == "filename"), None)
-            if not fn:
-                raise SceneFileError(
-                    f"{xml}: shape {sid!r} ({kind}) has no filename",
-                    hint='add <string name="filename" value="meshes/...ply"/>',
-                )
-            file = (xml.parent / fn).resolve()
-            if not file.is_file():
-                raise SceneFileError(
-                    f"{xml}: shape {sid!r} refers to {fn}, which does not exist ({file})",
-                    hint="mesh paths are relative to the XML file's folder; copy the meshes along",
-                )
-            shapes.append(XmlShape(sid, kind, file))
-        elif kind in PRIMITIVE_SHAPES:
-            shapes.append(XmlShape(sid, kind, None))
-        else:
-            raise SceneFileError(
-                f"{xml}: shape {sid!r} has type {kind!r}, which dtradar cannot read",
-                hint=f"use {', '.join(FILE_SHAPES + PRIMITIVE_SHAPES)} shapes (export meshes as PLY)",
-            )
-    if not shapes:
-        raise SceneFileError(f"{xml}: the scene has no shapes", hint="a scene needs at least a ground and buildings")
-    return shapes
-
-
-def content_sha256(xml: Path, shapes: list[XmlShape]) -> str:
-    """sha256 over the XML and each referenced mesh file (once, in order of first use), each length-prefixed."""
-    h = hashlib.sha256()
-    seen: set[Path] = set()
-    for f in [Path(xml)] + [s.file for s in shapes if s.file is not None]:
-        if f in seen:
-            continue
-        seen.add(f)
-        data = f.read_bytes()
-        h.update(len(data).to_bytes(8, "little"))
-        h.update(data)
-    return h.hexdigest()
-
-
-def mesh_scene(xml: Path, label: str, ground: list[str] | None = None) -> MeshScene:
-    """The :class:`MeshScene` of an XML file: content hash and ground shapes (by name unless given)."""
-    shapes = read_shapes(xml)
-    ids = [s.id for s in shapes]
-    if ground is None:
-        ground = [s.id for s in shapes if GROUND_RE.search(s.id) or (s.file and GROUND_RE.search(s.file.name))]
-    else:
-        for g in ground:
-            if g not in ids:
-                close = did_you_mean(g, ids)
-                raise SceneFileError(
-                    f"{xml}: [xml] ground names shape {g!r}, which the XML does not have"
-                    + (f"; {close}" if close else ""),
-                    hint="use the shape's id attribute",
-                )
-    return MeshScene(xml=label, sha256=content_sha256(xml, shapes), ground=tuple(ground), path=str(Path(xml).resolve()))
 
 
 # ------------------------------------------------------------------------------------------- the scene file
@@ -436,7 +258,7 @@ def load_sionna_spec(scene: str, variant: str, *, grid=None, tx=None, cell_m=Non
                 "name": dataset_scene_name(SIONNA_PREFIX + key),
                 "title": d["title"],
                 "description": d["description"],
-                "source": f"sionna-rt {_sionna_version()}: sionna/rt/scenes/{key}/{key}.xml",
+                "source": f"sionna-rt {sionna_version()}: sionna/rt/scenes/{key}/{key}.xml",
                 "licence": SIONNA_LICENCE,
                 "attribution": SIONNA_ATTRIBUTION,
             },
@@ -473,10 +295,3 @@ def load_xml_spec(path: str | Path, variant: str, *, grid=None, tx=None, cell_m=
         str(path),
     )
     return _spec(doc, base, variant, grid=grid, tx=tx, cell_m=cell_m, origin=str(path))
-
-
-def _sionna_version() -> str:
-    try:
-        return metadata.version(SIONNA_DIST)
-    except metadata.PackageNotFoundError:
-        return "(not installed)"

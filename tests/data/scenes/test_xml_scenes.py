@@ -7,7 +7,7 @@ import pytest
 
 from dtradar_data.core.errors import SceneFileError, UnknownNameError
 from dtradar_data.scenes import available_scenes, build_targets, load_scene_spec
-from dtradar_data.scenes.xml_scene import sionna_scene_names, sionna_xml
+from dtradar_data.scenes.sionna_scenes import sionna_scene_names, sionna_xml
 
 SIONNA = ["sionna:etoile", "sionna:florence", "sionna:munich", "sionna:san_francisco", "sionna:simple_street_canyon"]
 
