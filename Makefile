@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic bench-latency
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -135,3 +135,7 @@ bench-dynamic:
 # Serial vs Ray tracing, side by side in one run (cells/s and the speed-up on this machine's cores).
 bench-ray:
 	$(PY) bench/bench_ray.py $(ARGS)
+
+# One robot's decision time: p50/p99 with 1 and 2 torch threads, idle and beside a busy process -> results/bench_latency_*
+bench-latency:
+	$(PY) bench/bench_latency.py --scene $(SCENE) $(ARGS)

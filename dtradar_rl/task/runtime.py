@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import torch
@@ -48,4 +50,21 @@ def auto_threads(max_threads: int = 2) -> int:
     return max(1, min(max_threads, int(round(idle_cores()))))
 
 
-__all__ = ["auto_threads", "describe", "idle_cores", "machine"]
+#: Torch threads for one robot's decision (batch 1). Measured with ``make bench-latency`` on 2 cores: with two
+#: intra-op threads the same forward pass takes 0.06 ms in some runs and 8-16 ms in others (the threads wait on
+#: each other whenever another process holds a core); with one thread it stays near 0.06 ms, idle or not.
+DECISION_THREADS = 1
+
+
+@contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """Run the block with ``n`` torch intra-op threads, then restore the previous count."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+__all__ = ["DECISION_THREADS", "auto_threads", "describe", "idle_cores", "machine", "torch_threads"]

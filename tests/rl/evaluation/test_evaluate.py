@@ -4,11 +4,14 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from dtradar_data.core.errors import DtradarError
+from dtradar_rl.agents.planner import FingerprintPlanner
 from dtradar_rl.cli import main
-from dtradar_rl.evaluation.evaluate import markdown_table, path_length, spl
+from dtradar_rl.evaluation.evaluate import LATENCY_DECISIONS, decision_latency_ms, markdown_table, path_length, spl
 from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.twins import load_dataset
 
 
 def test_spl_of_an_optimal_path_is_one():
@@ -44,7 +47,8 @@ def test_markdown_table_lists_every_case():
         ]
     )
     assert md.splitlines()[0].startswith("| case | pairs | success | SPL")
-    assert "| a -> b | 3 | 1.000 | 0.900 | 0.00 | 4.0 | 3.0 | - |" in md
+    assert "| a -> b | 3 | 1.000 | 0.900 | 0.00 | 4.0 | 3.0 | - | - |" in md
+    assert "decision p50 (ms) | p99 (ms)" in md.splitlines()[0]
 
 
 def test_cli_trains_then_evaluates_on_blueprint_and_dynamic(tmp_path, capsys):
@@ -224,3 +228,26 @@ def test_shield_needs_the_neighbors_preset(tmp_path):
 
     with pytest.raises(DtradarError, match="neighbors"):
         load_policy(tmp_path / "model.pt").shield_columns()
+
+
+def test_batch_1_decisions_are_timed_single_threaded_and_the_thread_count_is_restored():
+    ds = load_dataset("synthetic-12x8/blueprint")
+    planner = FingerprintPlanner(ds)
+    seen = []
+    act = planner.act
+
+    def recording(obs, shield=False):
+        seen.append((obs.shape[0], torch.get_num_threads()))
+        return act(obs, shield)
+
+    planner.act = recording
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        p50, p99 = decision_latency_ms(planner, ds, repeats=200)
+        assert torch.get_num_threads() == 2  # restored
+    finally:
+        torch.set_num_threads(before)
+    assert 0 < p50 <= p99
+    assert len(seen) >= 200 and set(seen) == {(1, 1)}  # one robot, one thread, every decision
+    assert LATENCY_DECISIONS >= 1000  # what evaluate() times by default
