@@ -44,6 +44,7 @@ import torch
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
 from dtradar_rl.task.mdp import GridMDP, NoConnectedPairError, check_reward, potential_kind, reward_fn
+from dtradar_rl.task.noise import ERRORS, NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
 from dtradar_rl.task.observations import Normalizer, ObservationTable, build_observations, check_preset
 
 #: Above this many (target, cell) entries the geodesic distance table keeps only a random pool of targets.
@@ -69,6 +70,7 @@ class BatchedNavEnv:
         aug_obstacles: int = 0,
         aug_obstacle_size: int = 1,
         aug_potential: str = "replan",
+        noise: str | NoiseModel = "none",
     ):
         if num_envs < 1:
             raise InvalidCoordinatesError(f"num_envs must be >= 1, got {num_envs}")
@@ -150,6 +152,23 @@ class BatchedNavEnv:
             self.adist = torch.full((n, mdp.num_cells), -1, dtype=torch.int32, device=dev)
             self._nbr_cols = self._neighbor_columns(obs_table)
 
+        # Measurement noise (see dtradar_rl.task.noise): its own generator, so "none" leaves every draw unchanged.
+        model = noise_model(noise)
+        self.noise = None if model.is_zero else RadioNoise(model, obs_table, obs_table.normalizer, dev)
+        self.noise_gen = torch.Generator(device=dev)
+        self.noise_gen.manual_seed(int(seed) + NOISE_SEED_OFFSET)
+        if self.noise is not None:  # drawn at every reset and step; nothing is observed before the first reset
+            self.errors = torch.zeros((n, self.noise.groups, len(ERRORS)), dtype=torch.float64, device=dev)
+
+    def _draw_errors(self, idx: torch.Tensor | None = None) -> None:
+        """A new measurement for robots ``idx`` (default all): fresh noise errors."""
+        if self.noise is None:
+            return
+        if idx is None:
+            self.errors = self.noise.draw(self.num_envs, self.noise_gen)
+        else:
+            self.errors[idx] = self.noise.draw(idx.numel(), self.noise_gen)
+
     @staticmethod
     def _neighbor_columns(obs_table: ObservationTable) -> torch.Tensor | None:
         """``long[4, F+1]``: the cell-part columns (radio features + has-radio flag) of each neighbour, if observed."""
@@ -164,7 +183,11 @@ class BatchedNavEnv:
     @property
     def state_keys(self) -> tuple[str, ...]:
         """Attributes that hold the episodes' state (what a training checkpoint saves to resume exactly)."""
-        return ("cell", "target", "tpool", "steps") + (("extra", "adist") if self.aug_obstacles else ())
+        return (
+            ("cell", "target", "tpool", "steps")
+            + (("extra", "adist") if self.aug_obstacles else ())
+            + (("errors",) if self.noise is not None else ())
+        )
 
     @classmethod
     def from_dataset(
@@ -206,6 +229,7 @@ class BatchedNavEnv:
             st = self.members[self.comp_first[c] + j]
         self.cell[idx], self.target[idx], self.tpool[idx] = st, tgt, tp
         self.steps[idx] = 0
+        self._draw_errors(idx)
 
     # -- obstacle augmentation -------------------------------------------------------------------------------------
     def _draw_obstacles(self, k: int) -> torch.Tensor:
@@ -306,7 +330,8 @@ class BatchedNavEnv:
             hidden = self.extra.gather(1, self.next_cell[self.cell])  # [N, 4]
             cols = self._nbr_cols.to(self.device)
             cell_part[:, cols.reshape(-1)] *= (~hidden).float().repeat_interleave(cols.shape[1], 1)
-        return torch.cat([cell_part, self.target_part[self.target]], 1)
+        obs = torch.cat([cell_part, self.target_part[self.target]], 1)
+        return obs if self.noise is None else self.noise.apply(obs, self.cell, self.errors)
 
     def _potential(self, cell: torch.Tensor) -> torch.Tensor:
         if self.potential == "geodesic" and self.aug_obstacles and self.aug_potential == "replan":
@@ -367,6 +392,7 @@ class BatchedNavEnv:
         ).float()
         self.cell = nxt
         self.steps += 1
+        self._draw_errors()
         terminated = reached
         truncated = (self.steps >= self.max_steps) & ~terminated
         info = {"collision": collision, "is_success": reached, "steps": self.steps.clone()}

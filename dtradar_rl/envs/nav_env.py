@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+import torch
 from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError
 from dtradar_rl.task.mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
+from dtradar_rl.task.noise import NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
 from dtradar_rl.task.observations import Normalizer, build_observations, check_preset
 from dtradar_rl.task.twins import load_dataset
 
@@ -53,14 +55,15 @@ class DtradarNavEnv(gym.Env):
     ``"synthetic/blueprint"``); ``obs``: observation preset (default ``"goal"``); ``reward``: reward name (default
     ``"paper"``); ``max_steps``: step limit; ``normalizer``: feature statistics (default: fitted on ``dataset``;
     pass the training twin's when evaluating on another twin); ``render_mode``: ``None``, ``"ansi"`` or
-    ``"rgb_array"``.
+    ``"rgb_array"``; ``noise``: measurement noise level (``"none"``, ``"realistic"``, ``"2x"``; see
+    :mod:`dtradar_rl.task.noise`), drawn anew at every reset and step from a generator seeded by ``reset(seed=...)``.
 
     ## Info
     ``cell`` and ``target`` (ix, iy), ``collision``, ``is_success``, ``distance`` (breadth-first steps from the
     current cell to the target).
 
     ## Version History
-    * v0: initial version.
+    * v0: initial version; the ``noise`` argument (default ``"none"``: unchanged) added later.
     """
 
     metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
@@ -73,6 +76,7 @@ class DtradarNavEnv(gym.Env):
         max_steps: int | None = None,
         normalizer: Normalizer | dict | None = None,
         render_mode: str | None = None,
+        noise: str | NoiseModel = "none",
     ):
         ds = load_dataset(dataset) if isinstance(dataset, str) else dataset
         self.dataset_name = ds.name
@@ -90,10 +94,30 @@ class DtradarNavEnv(gym.Env):
         # Observations come from the lookup tables, so their exact range is known: bound the space by it.
         lows = np.concatenate([self.table.cell_part.min(0), self.table.target_part.min(0)]).astype(np.float32)
         highs = np.concatenate([self.table.cell_part.max(0), self.table.target_part.max(0)]).astype(np.float32)
-        self.observation_space = spaces.Box(lows, highs, (self.table.dim,), np.float32)
+        if noise_model(noise).is_zero:
+            self.observation_space = spaces.Box(lows, highs, (self.table.dim,), np.float32)
+        else:  # a noisy measurement can fall outside the table's range
+            self.observation_space = spaces.Box(-np.inf, np.inf, (self.table.dim,), np.float32)
         self._cell = self._target = 0
         self._steps = 0
         self._dist: np.ndarray | None = None
+        model = noise_model(noise)
+        self.noise = None if model.is_zero else RadioNoise(model, self.table, self.normalizer, torch.device("cpu"))
+        self.noise_gen = torch.Generator()
+        self.noise_gen.manual_seed(NOISE_SEED_OFFSET)
+        self._errors = None
+
+    def _observe(self) -> np.ndarray:
+        obs = self.table.observe(self._cell, self._target)
+        if self.noise is None:
+            return obs
+        cells = torch.as_tensor([self._cell])
+        return self.noise.apply(torch.from_numpy(obs[None]), cells, self._errors)[0].numpy()
+
+    def _measure(self) -> None:
+        """A new measurement at the robot's cell: fresh noise errors (nothing without noise)."""
+        if self.noise is not None:
+            self._errors = self.noise.draw(1, self.noise_gen)
 
     # ---------------------------------------------------------------------------------------------------------
     def _cell_of(self, xy) -> int:
@@ -104,6 +128,8 @@ class DtradarNavEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        if seed is not None:
+            self.noise_gen.manual_seed(int(seed) + NOISE_SEED_OFFSET)
         options = options or {}
         if "start" in options or "target" in options:
             if not ("start" in options and "target" in options):
@@ -117,7 +143,8 @@ class DtradarNavEnv(gym.Env):
             start, target = self.mdp.sample_pairs(1, self.np_random)[0]
         self._cell, self._target, self._steps = int(start), int(target), 0
         self._dist = self.mdp.bfs_distances(self._target)
-        return self.table.observe(self._cell, self._target), self._info(False)
+        self._measure()
+        return self._observe(), self._info(False)
 
     def _potential(self, cell: int) -> float:
         if potential_kind(self.reward_name) == "geodesic":
@@ -151,7 +178,8 @@ class DtradarNavEnv(gym.Env):
             diag2=self.mdp.diag2,
         )
         truncated = self._steps >= self.max_steps and not reached
-        obs = self.table.observe(self._cell, self._target)
+        self._measure()
+        obs = self._observe()
         return obs, float(np.float32(reward)), bool(reached), bool(truncated), self._info(collision)
 
     def _info(self, collision: bool) -> dict:

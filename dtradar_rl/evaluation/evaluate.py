@@ -27,6 +27,7 @@ from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runtime import DECISION_THREADS, torch_threads
 from dtradar_rl.task.twins import load_dataset
 
@@ -114,13 +115,18 @@ def rollout(
     max_steps: int | None = None,
     device: str = "cpu",
     shield: bool = False,
+    noise: str = "none",
+    noise_seed: int = 0,
 ) -> Rollouts:
     """Run the greedy policy from every (start, target) pair at once in the batched environment.
 
-    ``shield``: mask moves into neighbours sensed as occupied (see :meth:`Policy.act`)."""
+    ``shield``: mask moves into neighbours sensed as occupied (see :meth:`Policy.act`). ``noise``: the robots
+    observe the radio features as a receiver would measure them (:mod:`dtradar_rl.task.noise`), seeded by
+    ``noise_seed``."""
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     n = len(pairs)
-    env = policy.env_for(ds, n, reward="paper", max_steps=max_steps or None, device=device)
+    kw = {} if noise_model(noise).is_zero else {"noise": noise, "seed": noise_seed}
+    env = policy.env_for(ds, n, reward="paper", max_steps=max_steps or None, device=device, **kw)
     env.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
     cells = [env.cell.clone()]
     done = torch.zeros(n, dtype=torch.bool, device=env.device)
@@ -178,9 +184,20 @@ def evaluate(
     latency: bool = True,
     device: str = "cpu",
     shield: bool = False,
+    noise: str = "none",
 ) -> tuple[Metrics, Rollouts]:
-    """Metrics of ``policy`` on ``ds`` over ``pairs`` seeded (start, target) pairs."""
-    r = rollout(policy, ds, sample_eval_pairs(ds, pairs, seed), max_steps=max_steps, device=device, shield=shield)
+    """Metrics of ``policy`` on ``ds`` over ``pairs`` seeded (start, target) pairs (``noise``: see :func:`rollout`,
+    seeded by ``seed``)."""
+    r = rollout(
+        policy,
+        ds,
+        sample_eval_pairs(ds, pairs, seed),
+        max_steps=max_steps,
+        device=device,
+        shield=shield,
+        noise=noise,
+        noise_seed=seed,
+    )
     return metrics_from_rollouts(r, decision_latency_ms(policy, ds) if latency else None), r
 
 
@@ -196,6 +213,7 @@ def evaluate_twins(
     device: str = "cpu",
     shield: bool = True,
     datasets: dict[str, Dataset] | None = None,
+    noise: str = "none",
 ) -> list[tuple[dict[str, Any], Dataset, Rollouts]]:
     """:func:`evaluate` on every twin ``<scene>/<variant>`` that is built (others are skipped with a message),
     unshielded and, with ``shield`` and the neighbors preset, shielded. Returns ``(row, dataset, rollouts)`` per
@@ -212,11 +230,15 @@ def evaluate_twins(
             print(f"skipping {name}: {e.message}")
             continue
         for sh in [False] + ([True] if shield and policy.obs_preset == "neighbors" else []):
-            metrics, roll = evaluate(policy, ds, pairs=pairs, seed=seed, max_steps=max_steps, device=device, shield=sh)
-            case = f"{label}{trained} -> {ds.name}" + (" (shielded)" if sh else "")
-            out.append(
-                ({"case": case, "dataset": ds.name, "version": ds.version, "shield": sh, **metrics.to_dict()}, ds, roll)
+            metrics, roll = evaluate(
+                policy, ds, pairs=pairs, seed=seed, max_steps=max_steps, device=device, shield=sh, noise=noise
             )
+            noisy = "" if noise_model(noise).is_zero else f", noise {noise}"
+            case = f"{label}{trained} -> {ds.name}" + (
+                f" (shielded{noisy})" if sh else (f" ({noisy[2:]})" if noisy else "")
+            )
+            row = {"case": case, "dataset": ds.name, "version": ds.version, "shield": sh, "noise": noise}
+            out.append(({**row, **metrics.to_dict()}, ds, roll))
     return out
 
 

@@ -16,6 +16,7 @@ from dtradar_rl.agents.planner import planner_for_scene
 from dtradar_rl.evaluation.evaluate import cross_matrix, evaluate_twins, write_results
 from dtradar_rl.evaluation.fixed_pair import evaluate_pair
 from dtradar_rl.task.config import Config, ConfigError, check_device
+from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import dqn_checkpoint, run_dir
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
@@ -45,6 +46,9 @@ class EvalConfig(Config):
     planner: bool = True
     """also report the classical baseline (fingerprint localisation + breadth-first replanning on the blueprint;
     see dtradar_rl.agents.planner)"""
+    noise: str = "none"
+    """measurement noise the robots observe with: none, realistic or 2x (see dtradar_rl.task.noise; seeded by
+    --seed)"""
     plot_paths: int = 6
     """navigation paths drawn over the coverage map per twin"""
     out: str = ""
@@ -62,6 +66,7 @@ class EvalConfig(Config):
             if v not in VARIANTS:
                 raise unknown_name("variant (--variants)", v, VARIANTS)
         check_device(self.device)
+        noise_model(self.noise)
         return self
 
 
@@ -113,11 +118,13 @@ def run_eval(cfg: EvalConfig) -> str:
         max_steps=cfg.max_steps or None,
         device=cfg.device,
         shield=cfg.shield,
+        noise=cfg.noise,
     ):
         rows.append(row)
         k = min(cfg.plot_paths, len(roll.paths))
         out.mkdir(parents=True, exist_ok=True)
-        png = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}.png"
+        noisy = "" if cfg.noise == "none" else f"_noise-{cfg.noise}"
+        png = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}{noisy}.png"
         plot_paths(
             ds,
             roll.paths[:k],
@@ -138,6 +145,7 @@ def run_eval(cfg: EvalConfig) -> str:
                 max_steps=cfg.max_steps or None,
                 device=cfg.device,
                 shield=False,
+                noise=cfg.noise,
             )
         ]
     config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}

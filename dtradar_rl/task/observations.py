@@ -100,6 +100,10 @@ class ObservationTable:
     cell_part: np.ndarray  # float32[H*W, Dc]
     target_part: np.ndarray  # float32[H*W, Dt]
     names: tuple[str, ...]
+    #: ``bool[H*W]``: the cell is free and has radio features (the neighbours' has-radio flags read this)
+    has_radio: np.ndarray | None = None
+    #: the normaliser the tables were built with (measurement noise perturbs the raw values behind them)
+    normalizer: Normalizer | None = None
 
     @property
     def dim(self) -> int:
@@ -127,9 +131,9 @@ def build_observations(ds: Dataset, preset: str, normalizer: Normalizer) -> Obse
         target = paper[:, :2].copy()
         tnames = ["target_x_m", "target_y_m"]
     parts = [paper]
+    has_radio = (~blocked & np.isfinite(raw[:, [col[c] for c in RADIO_FEATURES]]).all(1)).astype(np.float32)
     if preset == "neighbors":
         radio = paper[:, 2:]
-        has_radio = (~blocked & np.isfinite(raw[:, [col[c] for c in RADIO_FEATURES]]).all(1)).astype(np.float32)
         iy, ix = np.divmod(np.arange(n), w)
         for (dx, dy), act in zip(ACTION_DELTAS, ("X-", "X+", "Y-", "Y+")):
             jx, jy = ix + dx, iy + dy
@@ -139,4 +143,6 @@ def build_observations(ds: Dataset, preset: str, normalizer: Normalizer) -> Obse
             parts += [radio[j] * flag[:, None], flag[:, None]]
             names += [f"{act}:{c}" for c in RADIO_FEATURES] + [f"{act}:has_radio"]
     cell_part = np.ascontiguousarray(np.concatenate(parts, 1), np.float32)
-    return ObservationTable(preset, cell_part, np.ascontiguousarray(target), tuple(names + tnames))
+    return ObservationTable(
+        preset, cell_part, np.ascontiguousarray(target), tuple(names + tnames), has_radio > 0.5, normalizer
+    )

@@ -13,6 +13,7 @@ from typing import Any
 from dtradar_data.core.errors import unknown_name
 from dtradar_rl.envs.batched import AUG_POTENTIALS
 from dtradar_rl.task.config import INDOOR_SCENES, ConfigError, TwinConfig
+from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.twins import is_synthetic
 
@@ -35,6 +36,9 @@ class DQNConfig(TwinConfig):
     memory_radius: int = 0
     """memory agent: append a (2R+1)^2 window of the cells sensed as occupied and visited so far this episode
     (0 = off; needs --obs neighbors; see dtradar_rl.envs.memory)"""
+    noise: str = "none"
+    """measurement-noise augmentation: train on radio features as a receiver would measure them (none, realistic,
+    2x; see dtradar_rl.task.noise), drawn anew at every step"""
     total_env_steps: int = 600_000
     """training budget in environment steps (all robots together); the paper's is 600K"""
     episodes: int = 0
@@ -114,6 +118,7 @@ class DQNConfig(TwinConfig):
                 f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
                 f"radio features), got --obs {self.obs}"
             )
+        noise_model(self.noise)
         if self.pair not in PAIR_MODES:
             raise unknown_name("pair mode (--pair)", self.pair, PAIR_MODES)
         if (self.start is None) != (self.target is None):

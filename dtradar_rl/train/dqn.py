@@ -128,6 +128,7 @@ def train(
         aug_obstacles=cfg.aug_obstacles,
         aug_obstacle_size=cfg.aug_obstacle_size,
         aug_potential=cfg.aug_potential,
+        noise=cfg.noise,
     )
     q = QNetwork(env.obs_dim, cfg.hidden).to(device)
     if init is not None:
@@ -170,6 +171,8 @@ def train(
         env_steps, updates, episodes = state["env_steps"], state["updates"], [tuple(e) for e in state["episodes"]]
         gen.set_state(state["gen"].cpu())
         env.gen.set_state(state["env_gen"].cpu())
+        if "env_noise_gen" in state:
+            env.noise_gen.set_state(state["env_noise_gen"].cpu())
         for k in env.state_keys:
             setattr(env, k, state["env"][k].to(device))
         ep_reward, ep_collisions = state["ep_reward"].to(device), state["ep_collisions"].to(device)
@@ -188,6 +191,7 @@ def train(
             "episodes": episodes,
             "gen": gen.get_state(),
             "env_gen": env.gen.get_state(),
+            "env_noise_gen": env.noise_gen.get_state(),
             "env": {k: getattr(env, k) for k in env.state_keys},
             "ep_reward": ep_reward,
             "ep_collisions": ep_collisions,

@@ -112,6 +112,15 @@ def test_cli_trains_then_evaluates_on_blueprint_and_dynamic(tmp_path, capsys):
     for name in ("results.md", "config.json", "paths_blueprint.png", "paths_dynamic.png"):
         assert (out / name).exists(), name
 
+    noisy = tmp_path / "eval-noise"
+    argv = ["eval", "--scene", "synthetic-6x5", "--checkpoint", str(run / "model.pt"), "--pairs", "20"]
+    assert main([*argv, "--noise", "realistic", "--no-planner", "--out", str(noisy)]) == 0
+    rows = json.loads((noisy / "results.json").read_text())["results"]
+    assert [r["case"].endswith("noise realistic)") for r in rows] == [True] * 4
+    assert {r["noise"] for r in rows} == {"realistic"} and (noisy / "paths_dynamic_noise-realistic.png").exists()
+    assert main([*argv, "--noise", "loud"]) == 2
+    assert "unknown noise level 'loud'" in capsys.readouterr().err
+
 
 def test_cli_reports_a_missing_checkpoint_with_a_fix(tmp_path, capsys):
     assert main(["eval", "--scene", "synthetic-6x5", "--checkpoint", str(tmp_path / "none.pt")]) == 2
