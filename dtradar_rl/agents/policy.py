@@ -72,6 +72,7 @@ class Policy:
             ds,
             num_envs,
             memory_radius=getattr(self.config, "memory_radius", 0),
+            memory_bumps=getattr(self.config, "memory_bumps", False),
             obs=self.obs_preset,
             normalizer=self.normalizer,
             **kwargs,

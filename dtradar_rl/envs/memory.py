@@ -6,7 +6,10 @@ episode, two maps of the grid:
 
 * ``sensed``: cells it has sensed as occupied: a neighbour whose radio features are missing (has-radio flag 0 in the
   ``neighbors`` observation; an augmented obstacle reads the same, see :mod:`dtradar_rl.envs.batched`) or off the grid;
-* ``visited``: cells it has stood on.
+* ``visited``: cells it has stood on;
+* ``bumped`` (with ``memory_bumps``): cells it tried to move into and could not: the feedback of a bumper or of
+  wheel odometry. A free street cell that no ray reached reads as "no radio" like an obstacle, so only a bump tells
+  the two apart.
 
 The observation is the ``neighbors`` one followed by a ``(2R+1) x (2R+1)`` window of each map centred on the robot
 (``memory_radius = R``; cells off the grid read as sensed). Everything the memory holds is derived from earlier
@@ -36,6 +39,7 @@ from dtradar_rl.task.observations import (
 )
 
 CHANNELS: tuple[str, ...] = ("sensed", "visited")
+BUMP_CHANNELS: tuple[str, ...] = CHANNELS + ("bumped",)
 
 
 def flag_columns() -> list[int]:
@@ -48,10 +52,11 @@ class MemoryLayout:
     """Index tables of the memory maps of one grid, padded by ``radius`` cells on every side (the padding reads as
     sensed, so the window never needs a bounds check)."""
 
-    def __init__(self, nx: int, ny: int, radius: int):
+    def __init__(self, nx: int, ny: int, radius: int, bumps: bool = False):
         if radius < 1:
             raise InvalidCoordinatesError(f"memory radius must be >= 1, got {radius}")
         self.nx, self.ny, self.radius = nx, ny, radius
+        self.channels = BUMP_CHANNELS if bumps else CHANNELS
         r, pw = radius, nx + 2 * radius
         self.padded_cells = pw * (ny + 2 * radius)
         iy, ix = np.divmod(np.arange(nx * ny), nx)
@@ -69,12 +74,14 @@ class MemoryLayout:
 
     @property
     def dim(self) -> int:
-        return len(CHANNELS) * (2 * self.radius + 1) ** 2
+        return len(self.channels) * (2 * self.radius + 1) ** 2
 
     @property
     def names(self) -> tuple[str, ...]:
         r = self.radius
-        return tuple(f"{ch}[{dx:+d},{dy:+d}]" for ch in CHANNELS for dy in range(-r, r + 1) for dx in range(-r, r + 1))
+        return tuple(
+            f"{ch}[{dx:+d},{dy:+d}]" for ch in self.channels for dy in range(-r, r + 1) for dx in range(-r, r + 1)
+        )
 
 
 def _require_neighbors(obs_table: ObservationTable) -> None:
@@ -88,9 +95,18 @@ def _require_neighbors(obs_table: ObservationTable) -> None:
 class MemoryNavEnv(BatchedNavEnv):
     """:class:`~dtradar_rl.envs.batched.BatchedNavEnv` whose observation carries each robot's memory window."""
 
-    def __init__(self, mdp: GridMDP, obs_table: ObservationTable, num_envs: int, *, memory_radius: int = 5, **kw):
+    def __init__(
+        self,
+        mdp: GridMDP,
+        obs_table: ObservationTable,
+        num_envs: int,
+        *,
+        memory_radius: int = 5,
+        memory_bumps: bool = False,
+        **kw,
+    ):
         _require_neighbors(obs_table)
-        self.layout = MemoryLayout(mdp.nx, mdp.ny, memory_radius)
+        self.layout = MemoryLayout(mdp.nx, mdp.ny, memory_radius, bumps=memory_bumps)
         super().__init__(mdp, obs_table, num_envs, **kw)
         lay, dev = self.layout, self.device
         t = lambda a: torch.as_tensor(a, device=dev)
@@ -99,6 +115,7 @@ class MemoryNavEnv(BatchedNavEnv):
         self._flags = torch.as_tensor(flag_columns(), device=dev)
         self.sensed = self._sensed_init.repeat(self.num_envs, 1)
         self.visited = torch.zeros_like(self.sensed)
+        self.bumped = torch.zeros_like(self.sensed) if memory_bumps else None
 
     @classmethod
     def from_dataset(
@@ -117,7 +134,7 @@ class MemoryNavEnv(BatchedNavEnv):
 
     @property
     def state_keys(self) -> tuple[str, ...]:
-        return super().state_keys + ("sensed", "visited")
+        return super().state_keys + ("sensed", "visited") + (("bumped",) if self.bumped is not None else ())
 
     def _sense(self, idx: torch.Tensor | None = None) -> None:
         """Record what robots ``idx`` (default all) sense from where they stand now."""
@@ -137,16 +154,24 @@ class MemoryNavEnv(BatchedNavEnv):
         if idx.numel():
             self.sensed[idx] = self._sensed_init
             self.visited[idx] = 0.0
+            if self.bumped is not None:
+                self.bumped[idx] = 0.0
             self._sense(idx)
 
     def step(self, actions: torch.Tensor):
+        before = self.cell
         _, reward, terminated, truncated, info = super().step(actions)
+        if self.bumped is not None:  # the bumper: a move that failed marks the cell it aimed at
+            hit = torch.nonzero(info["collision"], as_tuple=True)[0]
+            a = actions.to(self.device, torch.long)[hit]
+            self.bumped[hit, self._nbr[before[hit], a]] = 1.0
         self._sense()
         return self.observe(), reward, terminated, truncated, info
 
     def memory_window(self) -> torch.Tensor:
         win = self._win[self.cell]
-        return torch.cat([self.sensed.gather(1, win), self.visited.gather(1, win)], 1)
+        maps = [self.sensed, self.visited] + ([self.bumped] if self.bumped is not None else [])
+        return torch.cat([m.gather(1, win) for m in maps], 1)
 
     def observe(self) -> torch.Tensor:
         return torch.cat([super().observe(), self.memory_window()], 1)
@@ -156,11 +181,16 @@ class MemoryGymEnv(DtradarNavEnv):
     """The gymnasium env with the same memory window appended (one robot; numpy)."""
 
     def __init__(
-        self, dataset: Dataset | str = "synthetic/blueprint", obs: str = "neighbors", memory_radius: int = 5, **kwargs
+        self,
+        dataset: Dataset | str = "synthetic/blueprint",
+        obs: str = "neighbors",
+        memory_radius: int = 5,
+        memory_bumps: bool = False,
+        **kwargs,
     ):
         super().__init__(dataset, obs=obs, **kwargs)
         _require_neighbors(self.table)
-        self.layout = MemoryLayout(self.mdp.nx, self.mdp.ny, memory_radius)
+        self.layout = MemoryLayout(self.mdp.nx, self.mdp.ny, memory_radius, bumps=memory_bumps)
         base = self.observation_space
         m = self.layout.dim
         self.observation_space = spaces.Box(
@@ -171,6 +201,7 @@ class MemoryGymEnv(DtradarNavEnv):
         )
         self._sensed = self.layout.sensed_init.copy()
         self._visited = np.zeros_like(self._sensed)
+        self._bumped = np.zeros_like(self._sensed) if memory_bumps else None
 
     def _sense(self, obs: np.ndarray) -> np.ndarray:
         occupied = (obs[flag_columns()] < 0.5).astype(np.float32)
@@ -178,21 +209,30 @@ class MemoryGymEnv(DtradarNavEnv):
         self._sensed[nbr] = np.maximum(self._sensed[nbr], occupied)
         self._visited[self.layout.pad[self._cell]] = 1.0
         win = self.layout.window[self._cell]
-        return np.concatenate([obs, self._sensed[win], self._visited[win]]).astype(np.float32)
+        maps = [self._sensed, self._visited] + ([self._bumped] if self._bumped is not None else [])
+        return np.concatenate([obs] + [m[win] for m in maps]).astype(np.float32)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         obs, info = super().reset(seed=seed, options=options)
         self._sensed = self.layout.sensed_init.copy()
         self._visited[:] = 0.0
+        if self._bumped is not None:
+            self._bumped[:] = 0.0
         return self._sense(obs), info
 
     def step(self, action):
+        before = self._cell
         obs, reward, terminated, truncated, info = super().step(action)
+        if self._bumped is not None and info["collision"]:
+            self._bumped[self.layout.neighbor[before, int(action)]] = 1.0
         return self._sense(obs), reward, terminated, truncated, info
 
 
-def batched_env(ds: Dataset, num_envs: int, *, memory_radius: int = 0, **kwargs) -> BatchedNavEnv:
-    """A batched env over ``ds``: with memory when ``memory_radius`` > 0, else the plain one."""
+def batched_env(
+    ds: Dataset, num_envs: int, *, memory_radius: int = 0, memory_bumps: bool = False, **kwargs
+) -> BatchedNavEnv:
+    """A batched env over ``ds``: with memory when ``memory_radius`` > 0 (and a bump map with ``memory_bumps``),
+    else the plain one."""
     if memory_radius:
-        return MemoryNavEnv.from_dataset(ds, num_envs, memory_radius=memory_radius, **kwargs)
+        return MemoryNavEnv.from_dataset(ds, num_envs, memory_radius=memory_radius, memory_bumps=memory_bumps, **kwargs)
     return BatchedNavEnv.from_dataset(ds, num_envs, **kwargs)

@@ -36,6 +36,9 @@ class DQNConfig(TwinConfig):
     memory_radius: int = 0
     """memory agent: append a (2R+1)^2 window of the cells sensed as occupied and visited so far this episode
     (0 = off; needs --obs neighbors; see dtradar_rl.envs.memory)"""
+    memory_bumps: bool = False
+    """memory agent: also keep a map of the cells a move into failed (a bumper's feedback), so a free street cell
+    that no ray reached, which reads as "no radio" like an obstacle, can be told from a wall by trying it"""
     noise: str = "none"
     """measurement-noise augmentation: train on radio features as a receiver would measure them (none, realistic,
     2x; see dtradar_rl.task.noise), drawn anew at every step"""
@@ -113,6 +116,8 @@ class DQNConfig(TwinConfig):
             "aug_obstacle_size",
         )
         self.check_at_least(0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every", "memory_radius")
+        if self.memory_bumps and not self.memory_radius:
+            raise ConfigError("--memory-bumps is a map of the memory agent", hint="set --memory-radius too (e.g. 5)")
         if self.memory_radius and self.obs != "neighbors":
             raise ConfigError(
                 f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "

@@ -119,6 +119,7 @@ def train(
         ds,
         cfg.num_envs,
         memory_radius=cfg.memory_radius,
+        memory_bumps=cfg.memory_bumps,
         obs=cfg.obs,
         normalizer=normalizer,
         reward=cfg.reward,

@@ -13,10 +13,12 @@ def dyn():
     return load_dataset("synthetic-12x8/dynamic")
 
 
-def test_memory_agents_in_the_batched_env_agree_step_for_step_with_the_gymnasium_env(dyn):
+@pytest.mark.parametrize("bumps", [False, True])
+def test_memory_agents_in_the_batched_env_agree_step_for_step_with_the_gymnasium_env(dyn, bumps):
     norm, n, steps = Normalizer.fit(dyn), 12, 30
-    batched = MemoryNavEnv.from_dataset(dyn, n, normalizer=norm, reward="geodesic", max_steps=steps, memory_radius=3)
-    envs = [MemoryGymEnv(dyn, reward="geodesic", normalizer=norm, max_steps=steps, memory_radius=3) for _ in range(n)]
+    kw = {"reward": "geodesic", "normalizer": norm, "max_steps": steps, "memory_radius": 3, "memory_bumps": bumps}
+    batched = MemoryNavEnv.from_dataset(dyn, n, **kw)
+    envs = [MemoryGymEnv(dyn, **kw) for _ in range(n)]
     rng = np.random.default_rng(0)
     pairs = envs[0].mdp.sample_pairs(n, rng)
     batched.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
@@ -96,3 +98,22 @@ def test_a_tiny_memory_agent_trains_saves_and_evaluates(tmp_path):
     policy = load_policy(result.checkpoint)
     metrics, _ = evaluate(policy, load_dataset("synthetic-12x8/dynamic"), pairs=10)
     assert 0.0 <= metrics.success_rate <= 1.0 and metrics.latency_ms > 0
+
+
+def test_the_bump_map_marks_the_cell_a_failed_move_aimed_at_and_only_that():
+    ds = load_dataset("synthetic-12x8/blueprint")
+    env = MemoryGymEnv(ds, memory_radius=2, memory_bumps=True, max_steps=50)
+    assert env.layout.channels[-1] == "bumped" and env.observation_space.shape[0] == OBS_DIMS["neighbors"] + 3 * 25
+    blocked = env.mdp.blocked
+    iy, ix, a = next(
+        (int(y), int(x) - 1, 1)  # stand left of a wall cell, move X+ into it
+        for y, x in np.argwhere(blocked)
+        if x >= 1 and not blocked[y, x - 1]
+    )
+    target = next((int(x), int(y)) for y, x in np.argwhere(~blocked) if (x, y) != (ix, iy))
+    obs, _ = env.reset(options={"start": (ix, iy), "target": target})
+    bump = slice(OBS_DIMS["neighbors"] + 2 * 25, None)
+    assert obs[bump].sum() == 0
+    obs, _, _, _, info = env.step(a)
+    assert info["collision"] and obs[bump].sum() == 1
+    assert obs[bump].reshape(5, 5)[2, 3] == 1  # the window's centre row, one cell towards +x
