@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic bench-latency
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic bench-latency bench-nav
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -139,3 +139,7 @@ bench-ray:
 # One robot's decision time: p50/p99 with 1 and 2 torch threads, idle and beside a busy process -> results/bench_latency_*
 bench-latency:
 	$(PY) bench/bench_latency.py --scene $(SCENE) $(ARGS)
+
+# The default agent and the planner on every twin, with and without measurement noise -> results/bench_nav.*
+bench-nav:
+	$(PY) bench/bench_nav.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)

@@ -28,7 +28,7 @@ from dtradar_rl.experiments.paper import PaperConfig, run_paper
 from dtradar_rl.experiments.sweep import SweepConfig, sweep
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.logged import LogConfig
-from dtradar_rl.train.config import PRESETS, DQNConfig, config_for
+from dtradar_rl.train.config import DEFAULT_PRESET, PRESETS, DQNConfig, config_for
 from dtradar_rl.train.dqn import train
 
 OFFLINE_DEFAULT = OfflineConfig()
@@ -45,7 +45,7 @@ def run_train(cfg: DQNConfig) -> None:
 
 def _train_default(argv: list[str]) -> DQNConfig:
     """The train subcommand's defaults come from ``--preset`` (read before tyro parses the rest)."""
-    preset, scene = "tuned", DQNConfig.scene
+    preset, scene = DEFAULT_PRESET, DQNConfig.scene
     for i, a in enumerate(argv):
         for option in ("--preset", "--scene"):
             value = (
@@ -55,7 +55,7 @@ def _train_default(argv: list[str]) -> DQNConfig:
             )
             if value is not None:
                 preset, scene = (value, scene) if option == "--preset" else (preset, value)
-    return config_for(preset if preset in PRESETS else "tuned", scene=scene)
+    return config_for(preset if preset in PRESETS else DEFAULT_PRESET, scene=scene)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -69,7 +69,8 @@ def _parse_and_run(argv: list[str]) -> int:
     train_default = _train_default(argv)
 
     def train_cmd(cfg: Annotated[DQNConfig, tyro.conf.arg(name="")] = train_default) -> None:
-        """Train a DQN agent on a scene's blueprint twin (--preset tuned|robust|paper picks the defaults below)."""
+        """Train a DQN agent on a scene's blueprint twin. --preset picks the defaults below: memory-escape (the
+        default: the best agent measured on every twin), tuned, robust, memory or paper."""
         run_train(cfg.validate())
 
     def eval_cmd(cfg: Annotated[EvalConfig, tyro.conf.arg(name="")] = EvalConfig()) -> None:

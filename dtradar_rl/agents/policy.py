@@ -19,6 +19,9 @@ from dtradar_rl.envs.memory import batched_env
 from dtradar_rl.task.config import ConfigError, TwinConfig
 from dtradar_rl.task.observations import PAPER_COLUMNS, RADIO_FEATURES, Normalizer, build_observations
 
+#: Seed of the loop escapes' random moves.
+ESCAPE_SEED = 0
+
 
 class QNetwork(nn.Module):
     """``obs -> [Linear, ReLU] x len(hidden) -> Linear -> 4 action values``."""
@@ -45,16 +48,39 @@ class Policy:
     normalizer: Normalizer
     obs_preset: str
     meta: dict[str, Any]
+    #: the seeded generator of loop escapes (reset by :meth:`env_for`, so every evaluation repeats)
+    escape_gen: torch.Generator | None = None
 
     def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
         """Greedy actions. ``shield=True`` (``neighbors`` preset only) never picks a move into a neighbour that
-        the twin shows without radio features (blocked or off the grid), unless every move is such."""
+        the twin shows without radio features (blocked or off the grid), unless every move is such.
+
+        Loop escape (agents trained with ``memory_visits`` and ``escape_after`` = k > 0): a robot standing on a
+        cell it has already stood on k times this episode (its memory's ``visits_here``) takes a random move
+        instead; a greedy policy that deterministic observations lead into a cycle would otherwise repeat it until
+        the step limit."""
         with torch.no_grad():
             q = self.q(obs)
             if shield:
                 flags = obs[..., self.shield_columns()] > 0.5
                 q = torch.where(flags | ~flags.any(-1, keepdim=True), q, torch.full_like(q, -torch.inf))
-            return q.argmax(-1)
+            action = q.argmax(-1)
+        k = self.escape_after
+        if k:
+            stuck = obs[..., -1] >= k  # visits_here: the last column of a memory agent's observation
+            if bool(stuck.any()):
+                if self.escape_gen is None:
+                    self.escape_gen = _escape_generator(obs.device)
+                moves = torch.randint(4, action.shape, generator=self.escape_gen, device=obs.device)
+                action = torch.where(stuck, moves, action)
+        return action
+
+    @property
+    def escape_after(self) -> int:
+        """Earlier stands on a cell after which the policy leaves it at random (0 = never)."""
+        if not getattr(self.config, "memory_visits", False):
+            return 0
+        return int(getattr(self.config, "escape_after", 0))
 
     def shield_columns(self) -> list[int]:
         """Observation columns of the four has-radio flags (``neighbors`` preset), in action order."""
@@ -67,12 +93,15 @@ class Policy:
         return [len(PAPER_COLUMNS) + a * k + k - 1 for a in range(4)]
 
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
-        """A batched env over ``ds`` that observes with this policy's preset and training normaliser."""
+        """A batched env over ``ds`` that observes with this policy's preset and training normaliser (and restarts
+        the loop escapes' generator, so the same evaluation gives the same moves)."""
+        self.escape_gen = None
         return batched_env(
             ds,
             num_envs,
             memory_radius=getattr(self.config, "memory_radius", 0),
             memory_bumps=getattr(self.config, "memory_bumps", False),
+            memory_visits=getattr(self.config, "memory_visits", False),
             obs=self.obs_preset,
             normalizer=self.normalizer,
             **kwargs,
@@ -80,3 +109,9 @@ class Policy:
 
     def observations(self, ds: Dataset):
         return build_observations(ds, self.obs_preset, self.normalizer)
+
+
+def _escape_generator(device: torch.device) -> torch.Generator:
+    gen = torch.Generator(device=device)
+    gen.manual_seed(ESCAPE_SEED)
+    return gen

@@ -9,7 +9,11 @@ episode, two maps of the grid:
 * ``visited``: cells it has stood on;
 * ``bumped`` (with ``memory_bumps``): cells it tried to move into and could not: the feedback of a bumper or of
   wheel odometry. A free street cell that no ray reached reads as "no radio" like an obstacle, so only a bump tells
-  the two apart.
+  the two apart;
+* ``visits`` (with ``memory_visits``): how many times it has stood on each cell; the observation gets one more
+  column, ``visits_here``: the earlier stands on the cell it stands on now (capped at :data:`VISITS_CAP`). A
+  policy that finds itself back on a cell it already left twice is in a loop: the default agent then takes a
+  random move (``escape_after``, :class:`~dtradar_rl.agents.policy.Policy`).
 
 The observation is the ``neighbors`` one followed by a ``(2R+1) x (2R+1)`` window of each map centred on the robot
 (``memory_radius = R``; cells off the grid read as sensed). Everything the memory holds is derived from earlier
@@ -40,6 +44,7 @@ from dtradar_rl.task.observations import (
 
 CHANNELS: tuple[str, ...] = ("sensed", "visited")
 BUMP_CHANNELS: tuple[str, ...] = CHANNELS + ("bumped",)
+VISITS_CAP = 8
 
 
 def flag_columns() -> list[int]:
@@ -52,11 +57,12 @@ class MemoryLayout:
     """Index tables of the memory maps of one grid, padded by ``radius`` cells on every side (the padding reads as
     sensed, so the window never needs a bounds check)."""
 
-    def __init__(self, nx: int, ny: int, radius: int, bumps: bool = False):
+    def __init__(self, nx: int, ny: int, radius: int, bumps: bool = False, visits: bool = False):
         if radius < 1:
             raise InvalidCoordinatesError(f"memory radius must be >= 1, got {radius}")
         self.nx, self.ny, self.radius = nx, ny, radius
         self.channels = BUMP_CHANNELS if bumps else CHANNELS
+        self.visits = visits
         r, pw = radius, nx + 2 * radius
         self.padded_cells = pw * (ny + 2 * radius)
         iy, ix = np.divmod(np.arange(nx * ny), nx)
@@ -74,14 +80,14 @@ class MemoryLayout:
 
     @property
     def dim(self) -> int:
-        return len(self.channels) * (2 * self.radius + 1) ** 2
+        return len(self.channels) * (2 * self.radius + 1) ** 2 + int(self.visits)
 
     @property
     def names(self) -> tuple[str, ...]:
         r = self.radius
         return tuple(
             f"{ch}[{dx:+d},{dy:+d}]" for ch in self.channels for dy in range(-r, r + 1) for dx in range(-r, r + 1)
-        )
+        ) + (("visits_here",) if self.visits else ())
 
 
 def _require_neighbors(obs_table: ObservationTable) -> None:
@@ -103,10 +109,11 @@ class MemoryNavEnv(BatchedNavEnv):
         *,
         memory_radius: int = 5,
         memory_bumps: bool = False,
+        memory_visits: bool = False,
         **kw,
     ):
         _require_neighbors(obs_table)
-        self.layout = MemoryLayout(mdp.nx, mdp.ny, memory_radius, bumps=memory_bumps)
+        self.layout = MemoryLayout(mdp.nx, mdp.ny, memory_radius, bumps=memory_bumps, visits=memory_visits)
         super().__init__(mdp, obs_table, num_envs, **kw)
         lay, dev = self.layout, self.device
         t = lambda a: torch.as_tensor(a, device=dev)
@@ -116,6 +123,7 @@ class MemoryNavEnv(BatchedNavEnv):
         self.sensed = self._sensed_init.repeat(self.num_envs, 1)
         self.visited = torch.zeros_like(self.sensed)
         self.bumped = torch.zeros_like(self.sensed) if memory_bumps else None
+        self.visits = torch.zeros_like(self.sensed) if memory_visits else None
 
     @classmethod
     def from_dataset(
@@ -134,7 +142,8 @@ class MemoryNavEnv(BatchedNavEnv):
 
     @property
     def state_keys(self) -> tuple[str, ...]:
-        return super().state_keys + ("sensed", "visited") + (("bumped",) if self.bumped is not None else ())
+        extra = (("bumped",) if self.bumped is not None else ()) + (("visits",) if self.visits is not None else ())
+        return super().state_keys + ("sensed", "visited") + extra
 
     def _sense(self, idx: torch.Tensor | None = None) -> None:
         """Record what robots ``idx`` (default all) sense from where they stand now."""
@@ -147,6 +156,8 @@ class MemoryNavEnv(BatchedNavEnv):
         nbr = self._nbr[cells]
         self.sensed[rows[:, None], nbr] = torch.maximum(self.sensed[rows[:, None], nbr], occupied)
         self.visited[rows, self._pad[cells]] = 1.0
+        if self.visits is not None:
+            self.visits[rows, self._pad[cells]] += 1.0
 
     def reset_where(self, mask: torch.Tensor, starts=None, targets=None) -> None:
         super().reset_where(mask, starts=starts, targets=targets)
@@ -156,6 +167,8 @@ class MemoryNavEnv(BatchedNavEnv):
             self.visited[idx] = 0.0
             if self.bumped is not None:
                 self.bumped[idx] = 0.0
+            if self.visits is not None:
+                self.visits[idx] = 0.0
             self._sense(idx)
 
     def step(self, actions: torch.Tensor):
@@ -171,7 +184,11 @@ class MemoryNavEnv(BatchedNavEnv):
     def memory_window(self) -> torch.Tensor:
         win = self._win[self.cell]
         maps = [self.sensed, self.visited] + ([self.bumped] if self.bumped is not None else [])
-        return torch.cat([m.gather(1, win) for m in maps], 1)
+        parts = [m.gather(1, win) for m in maps]
+        if self.visits is not None:
+            here = self.visits.gather(1, self._pad[self.cell][:, None])
+            parts.append((here - 1.0).clamp(0.0, VISITS_CAP))
+        return torch.cat(parts, 1)
 
     def observe(self) -> torch.Tensor:
         return torch.cat([super().observe(), self.memory_window()], 1)
@@ -186,31 +203,41 @@ class MemoryGymEnv(DtradarNavEnv):
         obs: str = "neighbors",
         memory_radius: int = 5,
         memory_bumps: bool = False,
+        memory_visits: bool = False,
         **kwargs,
     ):
         super().__init__(dataset, obs=obs, **kwargs)
         _require_neighbors(self.table)
-        self.layout = MemoryLayout(self.mdp.nx, self.mdp.ny, memory_radius, bumps=memory_bumps)
+        self.layout = MemoryLayout(self.mdp.nx, self.mdp.ny, memory_radius, bumps=memory_bumps, visits=memory_visits)
         base = self.observation_space
         m = self.layout.dim
+        high = np.ones(m, np.float32)
+        if memory_visits:
+            high[-1] = VISITS_CAP
         self.observation_space = spaces.Box(
             np.concatenate([base.low, np.zeros(m, np.float32)]),
-            np.concatenate([base.high, np.ones(m, np.float32)]),
+            np.concatenate([base.high, high]),
             (base.shape[0] + m,),
             np.float32,
         )
         self._sensed = self.layout.sensed_init.copy()
         self._visited = np.zeros_like(self._sensed)
         self._bumped = np.zeros_like(self._sensed) if memory_bumps else None
+        self._visits = np.zeros_like(self._sensed) if memory_visits else None
 
     def _sense(self, obs: np.ndarray) -> np.ndarray:
         occupied = (obs[flag_columns()] < 0.5).astype(np.float32)
         nbr = self.layout.neighbor[self._cell]
         self._sensed[nbr] = np.maximum(self._sensed[nbr], occupied)
-        self._visited[self.layout.pad[self._cell]] = 1.0
+        here = self.layout.pad[self._cell]
+        self._visited[here] = 1.0
         win = self.layout.window[self._cell]
         maps = [self._sensed, self._visited] + ([self._bumped] if self._bumped is not None else [])
-        return np.concatenate([obs] + [m[win] for m in maps]).astype(np.float32)
+        parts = [obs] + [m[win] for m in maps]
+        if self._visits is not None:
+            self._visits[here] += 1.0
+            parts.append(np.clip([self._visits[here] - 1.0], 0.0, VISITS_CAP))
+        return np.concatenate(parts).astype(np.float32)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         obs, info = super().reset(seed=seed, options=options)
@@ -218,6 +245,8 @@ class MemoryGymEnv(DtradarNavEnv):
         self._visited[:] = 0.0
         if self._bumped is not None:
             self._bumped[:] = 0.0
+        if self._visits is not None:
+            self._visits[:] = 0.0
         return self._sense(obs), info
 
     def step(self, action):
@@ -229,10 +258,18 @@ class MemoryGymEnv(DtradarNavEnv):
 
 
 def batched_env(
-    ds: Dataset, num_envs: int, *, memory_radius: int = 0, memory_bumps: bool = False, **kwargs
+    ds: Dataset,
+    num_envs: int,
+    *,
+    memory_radius: int = 0,
+    memory_bumps: bool = False,
+    memory_visits: bool = False,
+    **kwargs,
 ) -> BatchedNavEnv:
-    """A batched env over ``ds``: with memory when ``memory_radius`` > 0 (and a bump map with ``memory_bumps``),
-    else the plain one."""
+    """A batched env over ``ds``: with memory when ``memory_radius`` > 0 (and a bump map with ``memory_bumps``, the
+    visit count with ``memory_visits``), else the plain one."""
     if memory_radius:
-        return MemoryNavEnv.from_dataset(ds, num_envs, memory_radius=memory_radius, memory_bumps=memory_bumps, **kwargs)
+        return MemoryNavEnv.from_dataset(
+            ds, num_envs, memory_radius=memory_radius, memory_bumps=memory_bumps, memory_visits=memory_visits, **kwargs
+        )
     return BatchedNavEnv.from_dataset(ds, num_envs, **kwargs)

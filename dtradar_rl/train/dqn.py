@@ -4,23 +4,28 @@
     result = train(config_for("tuned", scene="synthetic", total_env_steps=100_000))
     result.checkpoint   # runs/synthetic/dqn/model.pt, with config.json, curves.csv and curves.png beside it
 
-Four presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`); what each reaches
-is
-measured in the docs (Navigation, Benchmarks), not here:
+Five presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`; the default is
+:data:`~dtradar_rl.train.config.DEFAULT_PRESET`); what each reaches is measured in the docs (Navigation,
+Benchmarks), not here:
 
 ``paper``  the paper's protocol: its Table VI start/target pair per run (:mod:`dtradar_rl.task.pairs`), ``paper``
            observations (10 inputs, no target) and reward, 5 dense ReLU layers of 256, γ = 0.9, constant ε = 0.1,
            one environment, one gradient update per step, episodes until the target (safety cap 10x the shortest
            path), 500 episodes indoor / 80 outdoor.
-``tuned``  the default, goal-conditioned over random pairs: ``neighbors`` observations (senses blocked
-           neighbours), ``geodesic`` shaped reward, Double DQN, 2 x 256 hidden units, γ = 0.5, 256 robots in the
-           batched torch environment, ε decaying 1 → 0.05 over 40 % of the budget, Adam 1e-3 decaying linearly to
-           1e-4, one gradient update (batch 512) per 48 environment steps: updates, not table lookups, bound the speed.
+``tuned``  goal-conditioned over random pairs (the base the other presets but ``paper`` extend): ``neighbors``
+           observations (senses blocked neighbours), ``geodesic`` shaped reward, Double DQN, 2 x 256 hidden units,
+           γ = 0.5, 256 robots in the batched torch environment, ε decaying 1 → 0.05 over 40 % of the budget, Adam
+           1e-3 decaying linearly to 1e-4, one gradient update (batch 512) per 48 environment steps: updates, not
+           table lookups, bound the speed.
 ``robust`` ``tuned`` + obstacle augmentation (domain randomisation, :mod:`dtradar_rl.envs.batched`): at every episode
            reset each robot gets 10 random extra obstacles of 1 x 1 to 2 x 2 cells that collide and read as blocked
            neighbours, with the geodesic potential replanned around them, so the agent learns to detour.
 ``memory`` ``robust`` + a window of the obstacles sensed and cells visited so far (:mod:`dtradar_rl.envs.memory`), so a
            dead end, once seen, is not revisited.
+``memory-escape`` (the default) ``memory`` + the count of the robot's earlier stands on its cell (``visits_here``)
+           in its observation, and a loop escape when acting: a robot back on a cell for the third time takes a
+           random move (:class:`~dtradar_rl.agents.policy.Policy`), so a deterministic cycle cannot last until the
+           step limit.
 
 The loop: every robot acts ε-greedily, the batch of transitions goes into a replay buffer, finished robots are
 reset; every ``env_steps_per_update`` environment steps one Huber-loss update on a random minibatch follows, with
@@ -120,6 +125,7 @@ def train(
         cfg.num_envs,
         memory_radius=cfg.memory_radius,
         memory_bumps=cfg.memory_bumps,
+        memory_visits=cfg.memory_visits,
         obs=cfg.obs,
         normalizer=normalizer,
         reward=cfg.reward,

@@ -13,10 +13,17 @@ def dyn():
     return load_dataset("synthetic-12x8/dynamic")
 
 
-@pytest.mark.parametrize("bumps", [False, True])
-def test_memory_agents_in_the_batched_env_agree_step_for_step_with_the_gymnasium_env(dyn, bumps):
+@pytest.mark.parametrize(("bumps", "visits"), [(False, False), (True, False), (False, True), (True, True)])
+def test_memory_agents_in_the_batched_env_agree_step_for_step_with_the_gymnasium_env(dyn, bumps, visits):
     norm, n, steps = Normalizer.fit(dyn), 12, 30
-    kw = {"reward": "geodesic", "normalizer": norm, "max_steps": steps, "memory_radius": 3, "memory_bumps": bumps}
+    kw = {
+        "reward": "geodesic",
+        "normalizer": norm,
+        "max_steps": steps,
+        "memory_radius": 3,
+        "memory_bumps": bumps,
+        "memory_visits": visits,
+    }
     batched = MemoryNavEnv.from_dataset(dyn, n, **kw)
     envs = [MemoryGymEnv(dyn, **kw) for _ in range(n)]
     rng = np.random.default_rng(0)
@@ -117,3 +124,19 @@ def test_the_bump_map_marks_the_cell_a_failed_move_aimed_at_and_only_that():
     obs, _, _, _, info = env.step(a)
     assert info["collision"] and obs[bump].sum() == 1
     assert obs[bump].reshape(5, 5)[2, 3] == 1  # the window's centre row, one cell towards +x
+
+
+def test_visits_here_counts_the_earlier_stands_on_the_current_cell_in_this_episode():
+    ds = load_dataset("synthetic-12x8/blueprint")
+    env = MemoryGymEnv(ds, memory_radius=2, memory_visits=True, max_steps=50)
+    free = np.argwhere(~env.mdp.blocked)
+    (y, x) = next((int(y), int(x)) for y, x in free if x + 1 < env.mdp.nx and not env.mdp.blocked[y, x + 1])
+    target = next((int(tx), int(ty)) for ty, tx in free if (tx, ty) not in ((x, y), (x + 1, y)))
+    obs, _ = env.reset(options={"start": (x, y), "target": target})
+    seen = [obs[-1]]
+    for a in (1, 0, 1, 0):  # X+, X-, X+, X-: back and forth between two cells
+        obs, *_ = env.step(a)
+        seen.append(obs[-1])
+    assert seen == [0, 0, 1, 1, 2] and env.layout.names[-1] == "visits_here"
+    obs, _ = env.reset(options={"start": (x, y), "target": target})
+    assert obs[-1] == 0  # a new episode forgets
