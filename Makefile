@@ -91,7 +91,8 @@ offline:
 
 BEHAVIOUR ?= noisy-shortest
 # A logged offline-RL dataset <scene>/blueprint/<behaviour> in the store (+ Minari copy), e.g.
-# make logged SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt"
+# make logged SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt" (a memoryless agent:
+# make train SCENE=cubicle ARGS="--preset tuned")
 logged:
 	$(PY) -m dtradar_rl log --scene $(SCENE) --behaviour $(BEHAVIOUR) $(ARGS)
 

@@ -30,7 +30,7 @@ from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins
 from dtradar_rl.task.config import Config, ConfigError, flag
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.train.checkpoints import load_policy
-from dtradar_rl.train.config import PRESETS, config_for
+from dtradar_rl.train.config import DEFAULT_PRESET, PRESETS, config_for
 from dtradar_rl.train.dqn import train
 
 
@@ -42,8 +42,8 @@ class SweepConfig(Config):
     """scenes to train on (their blueprint twin) and evaluate (their twins)"""
     seeds: tuple[int, ...] = (0, 1, 2)
     """training seeds"""
-    preset: str = "tuned"
-    """training preset (tuned, robust, paper)"""
+    preset: str = DEFAULT_PRESET
+    """training preset (memory-escape, the default; tuned, robust, memory, paper)"""
     total_env_steps: int = 0
     """training budget per run (0 = the preset's)"""
     variants: tuple[str, ...] = ("blueprint", "dynamic")

@@ -213,6 +213,12 @@ def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, dev
     if "epsilon-greedy" not in spec.used:
         return None
     policy = load_policy(spec.checkpoint, device)
+    if getattr(policy.config, "memory_radius", 0):
+        raise ConfigError(
+            f"the checkpoint {spec.checkpoint} is a memory agent ({policy.config.preset} preset): a logged step holds "
+            "the twin's observation only, not the agent's memory of the episode",
+            hint='log with a memoryless agent: make train SCENE=<scene> ARGS="--preset tuned --out runs/<scene>/tuned"',
+        )
     if policy.obs_preset != obs:
         raise ConfigError(
             f"the checkpoint {spec.checkpoint} observes {policy.obs_preset!r}, the log {obs!r}",

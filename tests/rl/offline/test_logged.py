@@ -128,6 +128,18 @@ def test_a_mixture_splits_the_robots_between_its_components_and_checkpoints_ente
     eps = log_dataset(dataclasses.replace(cfg, behaviour="epsilon-greedy", epsilon=0.0), twin)
     assert eps.name == f"{SMALL}/blueprint/epsilon-greedy"
 
+    memory = save_checkpoint(  # the default agent's memory is not in a logged step: refused, with the way out
+        tmp_path / "memory" / "model.pt",
+        QNetwork(len(names) + 3 * 9 + 1, (8,)),
+        dataclasses.replace(config_for(scene=SMALL, memory_radius=1), hidden=(8,)),
+        norm,
+        [*names, *(f"memory{i}" for i in range(3 * 9 + 1))],
+        twin,
+    )
+    with pytest.raises(ConfigError, match="memory agent") as e:
+        log_dataset(dataclasses.replace(cfg, behaviour="epsilon-greedy", checkpoint=str(memory)), twin)
+    assert "--preset tuned" in e.value.hint
+
 
 def test_a_log_from_another_twin_or_preset_is_refused_by_the_trainer_with_a_typed_error(stores, twin, tmp_path):
     logged = log_dataset(CFG, twin)
