@@ -17,6 +17,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
@@ -70,7 +71,9 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=0, help="torch threads for training (0 = auto)")
     ap.add_argument("--runs", default=str(run_dir("bench_nav")))
     ap.add_argument("--out", default="results")
+    ap.add_argument("--name", default="bench_nav", help="stem of the result files")
     args = ap.parse_args()
+    torch.set_num_threads(1)  # the evaluations: 500 robots at once gain nothing from a second thread on 2 cores
     rows, m_start = [], machine()
     for scene in args.scenes:
         twins = {}
@@ -112,12 +115,13 @@ def main() -> None:
     result = {"args": vars(args), "rows": rows, "machine": {"start": m_start, "end": machine()}, "goals": GOALS}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "bench_nav.json", json.dumps(result, indent=2) + "\n")
+    stem = out / args.name
+    write_atomic(stem.with_suffix(".json"), json.dumps(result, indent=2) + "\n")
     md = markdown(result)
-    write_atomic(out / "bench_nav.md", md)
-    plot(result, out / "bench_nav.png")
+    write_atomic(stem.with_suffix(".md"), md)
+    plot(result, stem.with_suffix(".png"))
     print(md, end="")
-    print(f"results: {out / 'bench_nav.json'}, .md, .png")
+    print(f"results: {stem}.json, .md, .png")
 
 
 def _groups(rows):

@@ -57,8 +57,8 @@ class Policy:
 
         Loop escape (agents trained with ``memory_visits`` and ``escape_after`` = k > 0): a robot standing on a
         cell it has already stood on k times this episode (its memory's ``visits_here``) takes a random move
-        instead; a greedy policy that deterministic observations lead into a cycle would otherwise repeat it until
-        the step limit."""
+        instead (with the shield, one the shield allows); a greedy policy that deterministic observations lead into a
+        cycle would otherwise repeat it until the step limit."""
         with torch.no_grad():
             q = self.q(obs)
             if shield:
@@ -71,7 +71,11 @@ class Policy:
             if bool(stuck.any()):
                 if self.escape_gen is None:
                     self.escape_gen = _escape_generator(obs.device)
-                moves = torch.randint(4, action.shape, generator=self.escape_gen, device=obs.device)
+                if shield:  # a random move among the ones the shield allows
+                    score = torch.rand(q.shape, generator=self.escape_gen, device=obs.device)
+                    moves = torch.where(flags | ~flags.any(-1, keepdim=True), score, -1.0).argmax(-1)
+                else:
+                    moves = torch.randint(4, action.shape, generator=self.escape_gen, device=obs.device)
                 action = torch.where(stuck, moves, action)
         return action
 

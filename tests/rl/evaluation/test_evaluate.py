@@ -133,6 +133,8 @@ def test_cross_matrix_over_a_list_of_datasets(tmp_path):
             main(
                 [
                     "train",
+                    "--preset",
+                    "tuned",
                     "--scene",
                     s,
                     "--total-env-steps",
@@ -179,6 +181,8 @@ def test_shield_never_moves_into_a_sensed_obstacle(tmp_path):
         main(
             [
                 "train",
+                "--preset",
+                "tuned",
                 "--scene",
                 "synthetic-6x5",
                 "--total-env-steps",
@@ -212,6 +216,8 @@ def test_shield_needs_the_neighbors_preset(tmp_path):
         main(
             [
                 "train",
+                "--preset",
+                "tuned",
                 "--scene",
                 "synthetic-6x5",
                 "--obs",
