@@ -74,7 +74,8 @@ class OfflineBenchConfig(Config):
     epsilon: float = 0.3
     """epsilon-greedy: probability of a random move"""
     checkpoint: str = ""
-    """online DQN checkpoint (default runs/<scene>/dqn/model.pt, trained when missing)"""
+    """online DQN checkpoint (default runs/<scene>/dqn/model.pt when it is a memoryless agent, else a tuned one is
+    trained into <out>/online_dqn)"""
     online_steps: int = 600_000
     """environment steps of the online DQN when it has to be trained (tuned preset)"""
     num_envs: int = 256
@@ -110,13 +111,21 @@ class OfflineBenchConfig(Config):
         return self
 
 
+def _memoryless(path: Path) -> bool:
+    """A checkpoint the epsilon-greedy behaviour can act with (a memory agent's memory is not in a logged step)."""
+    return path.is_file() and not getattr(load_policy(path).config, "memory_radius", 0)
+
+
 def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, Any]]:
-    path = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
-    if path.is_file():
+    path = Path(cfg.checkpoint) if cfg.checkpoint else dqn_checkpoint(cfg.scene)
+    if cfg.checkpoint or _memoryless(path):
         return path, {"trained_here": False}
+    own = cfg.out_dir / "online_dqn" / "model.pt"  # make train's default agent has a memory: train a tuned one
+    if own.is_file():
+        return own, {"trained_here": False}
     from dtradar_rl.train.dqn import train
 
-    say(f"no online DQN at {path}: training one (tuned, {cfg.online_steps} env steps)")
+    say(f"no memoryless online DQN at {path}: training one (tuned, {cfg.online_steps} env steps)")
     t0 = time.perf_counter()
     dqn_cfg = replace(
         config_for("tuned", scene=cfg.scene),
@@ -214,7 +223,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     needs_dqn = any(b in ("epsilon-greedy", "mixture") for b in cfg.behaviours)
     online: dict[str, Any] = {}
     ckpt = Path(cfg.checkpoint) if cfg.checkpoint else None
-    if needs_dqn or cfg.checkpoint or dqn_checkpoint(cfg.scene).is_file():
+    if needs_dqn or cfg.checkpoint or _memoryless(dqn_checkpoint(cfg.scene)):
         ckpt, info = _online_checkpoint(cfg, say)
         policy = load_policy(ckpt, cfg.device)
         rows = [
