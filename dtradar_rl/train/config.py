@@ -184,6 +184,16 @@ PRESETS: dict[str, dict[str, Any]] = {
         "memory_visits": True,
         "escape_after": 2,
     },
+    # memory-escape trained on noisy measurements (dtradar_rl.task.noise): measured on three twins, not yet on all
+    "memory-escape-noise": {
+        "aug_obstacles": 10,
+        "aug_obstacle_size": 2,
+        "aug_potential": "replan",
+        "memory_radius": 5,
+        "memory_visits": True,
+        "escape_after": 2,
+        "noise": "realistic",
+    },
     # The episodes decide the paper's budget; total_env_steps is only a backstop far above what they use.
     "paper": dict(
         obs="paper",
