@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 from dtradar_data.core.errors import unknown_name
-from dtradar_rl.task.observations import PAPER_COLUMNS, RADIO_FEATURES, Normalizer, ObservationTable
+from dtradar_rl.task.observations import RADIO_FEATURES, Normalizer, ObservationTable
 
 #: Offset of a noise generator's seed from its env's seed (a separate stream from pair sampling).
 NOISE_SEED_OFFSET = 7919
@@ -107,7 +107,6 @@ class RadioNoise:
         #: ``bool[cells]``: the cell has radio features (the own-cell group's presence; neighbours carry a flag)
         self.has_radio = torch.as_tensor(table.has_radio, dtype=torch.bool, device=dev)
         self.k = {c: i for i, c in enumerate(RADIO_FEATURES)}
-        assert RADIO_FEATURES == PAPER_COLUMNS[2:]
 
     @property
     def groups(self) -> int:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from dtradar_data.core.errors import UnknownNameError
+from dtradar_data.core.errors import SchemaMismatchError, UnknownNameError
 from dtradar_rl.cli import main
 from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.offline.config import OfflineConfig
@@ -133,10 +133,9 @@ def test_every_q_learning_algorithm_trains_saves_and_reloads_to_the_same_actions
     assert bool(flags.gather(1, shielded[:, None]).all())  # every free cell of the grid has an open neighbour
 
 
-def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_names_its_version(root, tmp_path, small):
-    from dtradar_data.store.logged import local_versions, parse_logged_id
-
-    cfg = OfflineConfig(
+def tiny_dqn(out) -> OfflineConfig:
+    """Offline DQN for ten updates, no evaluation: enough to see which logged dataset a run trains on."""
+    return OfflineConfig(
         **dict(
             LOG,
             algorithm="dqn",
@@ -146,9 +145,15 @@ def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_n
             eval_variants=(),
             threads=1,
             verbose=False,
-            out=str(tmp_path / "a"),
+            out=str(out),
         )
     )
+
+
+def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_names_its_version(root, tmp_path, small):
+    from dtradar_data.store.logged import local_versions, parse_logged_id
+
+    cfg = tiny_dqn(tmp_path / "a")
     first = train_offline(cfg, dataset=small)
     lid = parse_logged_id(f"{SMALL}/blueprint/noisy-shortest")
     (version,) = local_versions(lid)
@@ -167,19 +172,7 @@ def test_without_logged_the_trainer_logs_a_named_dataset_once_and_every_result_n
 
 
 def test_a_log_with_another_preset_is_refused_before_training(root, tmp_path, small):
-    cfg = OfflineConfig(
-        **dict(
-            LOG,
-            algorithm="dqn",
-            n_steps=10,
-            batch_size=16,
-            hidden=(8,),
-            eval_variants=(),
-            threads=1,
-            verbose=False,
-            out=str(tmp_path / "a"),
-        )
-    )
+    cfg = tiny_dqn(tmp_path / "a")
     first = train_offline(cfg, dataset=small)
-    with pytest.raises(Exception, match="preset"):
+    with pytest.raises(SchemaMismatchError, match="preset"):
         train_offline(dataclasses.replace(cfg, obs="goal", logged=first.logged["source"]), dataset=small)

@@ -10,7 +10,7 @@ from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import MemoryNavEnv
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.task.noise import NOISE_LEVELS, REALISTIC, RadioNoise, noise_model
-from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
+from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.twins import load_dataset
 
 SMALL = "synthetic-12x8"
@@ -99,4 +99,3 @@ def test_both_envs_draw_the_same_noise_step_for_step(ds, cls):
         assert (te, tr) == (bool(tb[0]), bool(rb[0]))
         if te or tr:
             break
-    assert PAPER_COLUMNS[0] == "x_m"
