@@ -69,8 +69,8 @@ def _parse_and_run(argv: list[str]) -> int:
     train_default = _train_default(argv)
 
     def train_cmd(cfg: Annotated[DQNConfig, tyro.conf.arg(name="")] = train_default) -> None:
-        """Train a DQN agent on a scene's blueprint twin. --preset picks the defaults below: memory-escape (the
-        default: the best agent measured on every twin), tuned, robust, memory or paper."""
+        """Train a DQN agent on a scene's blueprint twin. --preset picks the defaults below: memory-escape-noise
+        (the default: the best agent measured on every twin), memory-escape, tuned, robust, memory or paper."""
         run_train(cfg.validate())
 
     def eval_cmd(cfg: Annotated[EvalConfig, tyro.conf.arg(name="")] = EvalConfig()) -> None:

@@ -25,7 +25,7 @@ class DQNConfig(TwinConfig):
     """Deep Q-learning on the navigation MDP of one dataset (defaults: the ``tuned`` preset)."""
 
     preset: str = "tuned"
-    """the preset these settings started from (tuned, robust or paper); recorded in config.json"""
+    """the preset these settings started from (see the command's description); recorded in config.json"""
     aug_obstacles: int = 0
     """obstacle augmentation: extra random obstacles per robot, redrawn at every episode reset, that collide and
     read as blocked neighbours (0 = off; see dtradar_rl.envs.batched)"""
@@ -175,7 +175,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     "tuned": {},
     "robust": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan"},
     "memory": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan", "memory_radius": 5},
-    # The default (DEFAULT_PRESET): the memory agent that counts its visits and leaves a cell it keeps coming back to.
+    # The memory agent that counts its visits and leaves a cell it keeps coming back to.
     "memory-escape": {
         "aug_obstacles": 10,
         "aug_obstacle_size": 2,
@@ -184,7 +184,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "memory_visits": True,
         "escape_after": 2,
     },
-    # memory-escape trained on noisy measurements (dtradar_rl.task.noise): measured on every twin with seed 0 only
+    # The default (DEFAULT_PRESET): memory-escape trained on noisy measurements (dtradar_rl.task.noise), so the
+    # features it learns to rely on are the ones a receiver measures well enough (docs: Navigation).
     "memory-escape-noise": {
         "aug_obstacles": 10,
         "aug_obstacle_size": 2,
@@ -219,7 +220,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 #: What ``make train`` trains without ``--preset``: the best agent measured on every twin (docs: Navigation).
-DEFAULT_PRESET = "memory-escape"
+DEFAULT_PRESET = "memory-escape-noise"
 
 
 def config_for(preset: str = DEFAULT_PRESET, **overrides) -> DQNConfig:

@@ -4,7 +4,7 @@
     result = train(config_for("tuned", scene="synthetic", total_env_steps=100_000))
     result.checkpoint   # runs/synthetic/dqn/model.pt, with config.json, curves.csv and curves.png beside it
 
-Five presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`; the default is
+Six presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`; the default is
 :data:`~dtradar_rl.train.config.DEFAULT_PRESET`); what each reaches is measured in the docs (Navigation,
 Benchmarks), not here:
 
@@ -22,10 +22,13 @@ Benchmarks), not here:
            neighbours, with the geodesic potential replanned around them, so the agent learns to detour.
 ``memory`` ``robust`` + a window of the obstacles sensed and cells visited so far (:mod:`dtradar_rl.envs.memory`), so a
            dead end, once seen, is not revisited.
-``memory-escape`` (the default) ``memory`` + the count of the robot's earlier stands on its cell (``visits_here``)
+``memory-escape`` ``memory`` + the count of the robot's earlier stands on its cell (``visits_here``)
            in its observation, and a loop escape when acting: a robot back on a cell for the third time takes a
            random move (:class:`~dtradar_rl.agents.policy.Policy`), so a deterministic cycle cannot last until the
            step limit.
+``memory-escape-noise`` (the default) ``memory-escape`` trained on noisy radio features
+           (:mod:`dtradar_rl.task.noise`, ``realistic``): as good as ``memory-escape`` without noise on every twin
+           measured, and it keeps its path lengths under a receiver's measurement errors.
 
 The loop: every robot acts ε-greedily, the batch of transitions goes into a replay buffer, finished robots are
 reset; every ``env_steps_per_update`` environment steps one Huber-loss update on a random minibatch follows, with
