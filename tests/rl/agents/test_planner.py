@@ -25,3 +25,20 @@ def test_on_a_changed_twin_the_planner_senses_new_obstacles_and_replans_around_t
     bp, dyn = load_dataset("synthetic-16x10/blueprint"), load_dataset("synthetic-16x10/dynamic")
     metrics, _ = evaluate(FingerprintPlanner(bp), dyn, pairs=100, latency=True)
     assert metrics.success_rate > 0.9 and metrics.latency_ms > 0
+
+
+def test_one_robots_compiled_search_and_the_batched_search_give_the_same_distances():
+    import torch
+
+    planner = FingerprintPlanner(load_dataset("synthetic-16x10/blueprint"))
+    mdp, rng = planner.mdp, np.random.default_rng(0)
+    free = np.flatnonzero(mdp.free)
+    # targets on free cells and on blocked ones (a dynamic twin's target may sit where the blueprint has an object)
+    targets = np.concatenate([rng.choice(free, 10), np.flatnonzero(mdp.blocked.ravel())[:3]])
+    extra = np.zeros((targets.size, mdp.num_cells), bool)
+    for i, t in enumerate(targets):
+        extra[i, rng.choice(free, 6)] = True
+        extra[i, t] = False
+    t, ex = torch.as_tensor(targets), torch.as_tensor(extra)
+    each, batched = planner._bfs_each(t, ex), planner._bfs_batched(t, ex)
+    assert torch.equal(each, batched) and (each >= 0).sum() > targets.size
