@@ -10,7 +10,8 @@
 
 Modelled on Minari (``namespace/name-v0``) and huggingface_hub (``repo@revision``):
 
-* ``scene``    — ``[a-z0-9][a-z0-9_-]*``, e.g. ``cubicle``, ``meeting``, ``dallas-q3``;
+* ``scene``    — ``[a-z0-9][a-z0-9_-]*``, e.g. ``cubicle``, ``meeting``, ``dallas-q3``; a name ending in ``-txpose``
+  is an antenna-pose-error twin of the scene before it (``cubicle-txpose``), never a scene file's name;
 * ``variant``  — ``blueprint`` (static objects) or ``dynamic`` (blueprint + movable objects);
 * ``revision`` — optional: a tag ``v0``, ``v1``, ... or a version hash (hex, a prefix of at least 7 characters);
   without one, the newest version.
@@ -30,6 +31,9 @@ from typing import Any
 from dtradar_data.core.errors import UnknownNameError, did_you_mean, unknown_name
 
 VARIANTS: tuple[str, ...] = ("blueprint", "dynamic")
+#: The suffix of an antenna-pose-error twin's scene (``cubicle-txpose``: :mod:`dtradar_data.scenes.tx_pose`). Scene
+#: files may not use it, so such a twin never shares a name with a built-in or a user's scene.
+TX_POSE_SUFFIX = "-txpose"
 
 SCENE_RE = re.compile(r"[a-z0-9][a-z0-9_-]*")
 TAG_RE = re.compile(r"v(0|[1-9][0-9]*)")

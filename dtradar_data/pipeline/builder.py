@@ -40,6 +40,7 @@ from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
 from dtradar_data.scenes import build_targets, load_scene_spec
 from dtradar_data.scenes.model import Box
+from dtradar_data.scenes.tx_pose import check_tx_pose_error, tx_pose_error
 from dtradar_data.store import local, versions, writing
 
 REDUCTION_DOC = (
@@ -92,6 +93,12 @@ class BuildConfig:
     changed objects can affect (see dtradar_data.pipeline.differential); the card records the parent version."""
     retrace_radius_m: float = 1.0
     """With --differential: also re-trace cells within this distance of a changed object or of its line of sight."""
+    tx_pose_error: tuple[float, float] | None = None
+    """OFFSET_M ANGLE_DEG: build the antenna-pose-error twin instead, its transmitter moved this far horizontally and
+    its array turned this many degrees off its boresight (seeded by --tx-pose-seed; same pose for every variant),
+    named <scene>-txpose (e.g. cubicle-txpose/blueprint); see dtradar_data.scenes.tx_pose."""
+    tx_pose_seed: int = 0
+    """With --tx-pose-error: the seed of the move's direction and of the turn's axis."""
 
     def __post_init__(self) -> None:
         if self.coverage_samples < 1:
@@ -103,6 +110,16 @@ class BuildConfig:
             raise InvalidSettingError(f"--retrace-radius-m {self.retrace_radius_m} must be >= 0")
         if self.workers < 0:
             raise InvalidSettingError(f"--workers {self.workers} must be >= 0 (0 = one per CPU)")
+        if self.tx_pose_error is not None:
+            if len(self.tx_pose_error) != 2:
+                raise InvalidSettingError(
+                    f"--tx-pose-error takes OFFSET_M ANGLE_DEG, got {self.tx_pose_error!r}", hint="e.g. 0.5 5"
+                )
+            check_tx_pose_error(*self.tx_pose_error, self.tx_pose_seed)
+        elif self.tx_pose_seed != 0:
+            raise InvalidSettingError(
+                "--tx-pose-seed applies to --tx-pose-error only", hint="add --tx-pose-error 0.5 5"
+            )
         if self.executor == "ray":
             import_ray()  # a missing Ray is a setup error, reported before anything is traced
         elif self.ray_address or self.workers:
@@ -345,7 +362,7 @@ def _store(
             )
         if spec.prisms and "city" in spec.provenance:
             extra["city.png"] = save_city_overview_png(
-                city_quadrant_specs(spec, config), Path(tmp) / "city.png", highlight=spec.scene
+                city_quadrant_specs(spec, config), Path(tmp) / "city.png", highlight=_original_scene(spec)
             )
         num_free = int((~blocked).sum())
         meta = {
@@ -364,7 +381,7 @@ def _store(
                 "solver": "sionna.rt.PathSolver",
                 "mitsuba_variant": active_variant() or "(reused cached batches)",
             },
-            "transmitter": dataclasses.asdict(spec.tx),
+            "transmitter": spec.tx.to_dict(),
             "grid": spec.grid.to_dict(),
             "rx_height_m": spec.rx_height_m,
             "robot_height_m": spec.robot_height_m,
@@ -373,7 +390,8 @@ def _store(
             "licence": spec.licence,
             "attribution": spec.attribution,
             "source": spec.source,
-            **({"city": spec.provenance} if spec.provenance else {}),
+            **({"city": city} if (city := _provenance(spec)) else {}),
+            **({"tx_pose_error": spec.provenance["tx_pose_error"]} if "tx_pose_error" in spec.provenance else {}),
             **extra_meta,
             "build_inputs_hash": version,
             "stats": {
@@ -392,21 +410,54 @@ def _store(
     return local.load(name, revision=version)
 
 
+def _original_scene(spec) -> str:
+    """The scene an antenna-pose-error twin was made from; ``spec.scene`` for any other twin."""
+    return (spec.provenance.get("tx_pose_error") or {}).get("scene", spec.scene)
+
+
+def _provenance(spec) -> dict:
+    """What ``meta["city"]`` records: the scene's provenance without the pose error (recorded on its own)."""
+    return {k: v for k, v in spec.provenance.items() if k != "tx_pose_error"}
+
+
 def city_quadrant_specs(spec, config: BuildConfig) -> list:
-    """The blueprint specs of every quadrant of ``spec``'s city (for the overview plot)."""
+    """The blueprint specs of every quadrant of ``spec``'s city (for the overview plot); a pose twin's quadrant
+    carries the twin's transmitter."""
     city = spec.provenance["city"]
-    return [
+    specs = [
         load_scene_spec(s, "blueprint", footprints=config.osm, cell_m=config.cell_m)
         for s, _ in build_targets(city, "blueprint")
     ]
+    if _original_scene(spec) == spec.scene:
+        return specs
+    return [dataclasses.replace(q, tx=spec.tx) if q.scene == _original_scene(spec) else q for q in specs]
 
 
-def build(config: BuildConfig) -> list[Dataset]:
-    """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
+def build_specs(config: BuildConfig) -> list:
+    """The scene specs ``build(config)`` traces, in order: the requested variants, each made an antenna-pose-error
+    twin with ``--tx-pose-error`` (every variant with the same transmitter pose)."""
     specs = [
         load_scene_spec(scene, v, footprints=config.osm, cell_m=config.cell_m, grid=config.grid, tx=config.tx)
         for scene, v in build_targets(config.scene, config.variant)
     ]
+    if config.tx_pose_error is None:
+        return specs
+    offset_m, angle_deg = config.tx_pose_error
+    specs = [tx_pose_error(s, offset_m=offset_m, angle_deg=angle_deg, seed=config.tx_pose_seed) for s in specs]
+    poses: dict[str, object] = {}
+    for s in specs:  # the draw skips places inside objects, and the variants' objects differ: never in practice
+        if poses.setdefault(s.scene, s.tx) != s.tx:
+            raise InvalidCoordinatesError(
+                f"--tx-pose-error: the seeded pose of {s.name} differs from that of its other variant (an object of "
+                "one variant stands where the other's transmitter moved)",
+                hint="build with another --tx-pose-seed",
+            )
+    return specs
+
+
+def build(config: BuildConfig) -> list[Dataset]:
+    """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
+    specs = build_specs(config)
     for spec in specs:  # every variant before the first is traced, so `all` does not fail after the blueprint
         scene_config(config, spec).check_scene(spec)
         cfg = scene_config(config, spec)

@@ -9,6 +9,7 @@ without the ray tracer.
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from dataclasses import dataclass
@@ -105,7 +106,10 @@ class RayTracer:
         self.scene.rx_array = rt.PlanarArray(
             num_rows=1, num_cols=1, pattern=settings.rx_pattern, polarization=settings.rx_polarization
         )
-        kwargs = {"look_at": list(tx.look_at_m)} if tx.look_at_m is not None else {}
+        if tx.orientation_deg is not None:  # an exact orientation (a pose-error twin) wins over the look-at point
+            kwargs = {"orientation": [math.radians(v) for v in tx.orientation_deg]}
+        else:
+            kwargs = {"look_at": list(tx.look_at_m)} if tx.look_at_m is not None else {}
         self.scene.add(rt.Transmitter("tx", position=list(tx.position_m), power_dbm=tx.power_dbm, **kwargs))
         self._solver = rt.PathSolver(deterministic=settings.deterministic and self.variant.startswith("cuda"))
         self._rx_names: list[str] = []

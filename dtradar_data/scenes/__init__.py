@@ -5,7 +5,8 @@ city quadrants ``dallas-q1`` ... ``houston-q4``: one TOML file per city in :mod:
 path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A build may also name a whole city
 (``dallas``): :func:`build_targets` expands it to its quadrants. Scenes built on a Mitsuba/Sionna XML
 (:mod:`dtradar_data.scenes.xml_scene`): Sionna's bundled cities (``sionna:munich``, dataset ``sionna-munich``), a
-user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section.
+user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section. :func:`tx_pose_error` makes
+the antenna-pose-error twin of any of them (``<scene>-txpose``: the transmitter moved and turned a little).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from dtradar_data.scenes.city.reader import (
 from dtradar_data.scenes.indoor.reader import load_room_file
 from dtradar_data.scenes.model import SceneSpec
 from dtradar_data.scenes.sionna_scenes import is_sionna_name, sionna_dataset_scenes, sionna_scene_names
+from dtradar_data.scenes.tx_pose import tx_pose_error
 from dtradar_data.scenes.xml_scene import is_mesh_scene_file, load_mesh_scene_file, load_sionna_spec, load_xml_spec
 
 __all__ = [
@@ -37,6 +39,7 @@ __all__ = [
     "scene_file",
     "is_scene_path",
     "load_scene_spec",
+    "tx_pose_error",
 ]
 
 

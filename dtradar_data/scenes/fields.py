@@ -18,6 +18,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict
 from pydantic_core import PydanticCustomError
 
 from dtradar_data.core.errors import did_you_mean
+from dtradar_data.core.ids import TX_POSE_SUFFIX
 from dtradar_data.scenes.materials import ITU_MATERIALS
 
 __all__ = [
@@ -118,6 +119,18 @@ Pos = Annotated[float, BeforeValidator(_positive)]
 PosInt = Annotated[int, BeforeValidator(_positive_int)]
 Text = Annotated[str, BeforeValidator(_text)]
 Material = Annotated[str, BeforeValidator(choice(ITU_MATERIALS, "an ITU material"))]
-SceneName = Annotated[str, BeforeValidator(name_check("scene name", allow_dash=True))]
+
+
+def _scene_name(value: Any) -> str:
+    value = name_check("scene name", allow_dash=True)(value)
+    if value.endswith(TX_POSE_SUFFIX):  # reserved: <scene>-txpose is the antenna-pose-error twin of <scene>
+        raise fail(
+            f"{value!r} ends in {TX_POSE_SUFFIX!r}, which names antenna-pose-error twins",
+            "pick another name; build a pose twin with --tx-pose-error OFFSET_M ANGLE_DEG",
+        )
+    return value
+
+
+SceneName = Annotated[str, BeforeValidator(_scene_name)]
 ObjName = Annotated[str, BeforeValidator(name_check("name", allow_dash=False))]
 Vec3 = Annotated[tuple[float, float, float], BeforeValidator(_vec3)]

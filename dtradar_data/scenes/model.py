@@ -134,6 +134,21 @@ class TxSpec:
     pattern: str = "tr38901"
     polarization: str = "VH"
     power_dbm: float = 0.0
+    orientation_deg: tuple[float, float, float] | None = None
+    """The array's orientation as Sionna's (yaw about z, pitch about y, roll about x) in degrees; when set it orients
+    the array instead of ``look_at_m`` (which then only records where the boresight points). Set by an
+    antenna-pose-error twin (:mod:`dtradar_data.scenes.tx_pose`), whose turn a look-at point cannot express."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able; ``orientation_deg`` only when set, so the digests of scenes written before it stay valid."""
+        d = asdict(self)
+        d["position_m"] = list(self.position_m)
+        d["look_at_m"] = None if self.look_at_m is None else list(self.look_at_m)
+        if self.orientation_deg is None:
+            d.pop("orientation_deg")
+        else:
+            d["orientation_deg"] = list(self.orientation_deg)
+        return d
 
 
 @dataclass(frozen=True)
@@ -202,8 +217,7 @@ class SceneSpec:
             d["base"] = self.base.to_dict()
         else:
             d.pop("base")
-        d["tx"]["position_m"] = list(self.tx.position_m)
-        d["tx"]["look_at_m"] = None if self.tx.look_at_m is None else list(self.tx.look_at_m)
+        d["tx"] = self.tx.to_dict()
         return d
 
     def canonical_json(self) -> str:

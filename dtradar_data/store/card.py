@@ -250,11 +250,33 @@ def render_card(
         city=_city_section(rec),
         city_png=CITY_FILE if CITY_FILE in rec.files else None,
         differential=(rec.model_extra or {}).get("differential"),
+        tx_pose=_tx_pose_section(rec),
     )
     return str(card).rstrip("\n") + "\n"
 
 
 CITY_FILE = "city.png"
+
+
+def _tx_pose_section(rec: VersionRecord) -> dict[str, Any] | None:
+    """What the card says about an antenna-pose-error twin (``meta["tx_pose_error"]``), numbers rounded for reading."""
+    pose = (rec.model_extra or {}).get("tx_pose_error")
+    if not pose:
+        return None
+
+    def side(d: dict[str, Any]) -> dict[str, str]:
+        return {
+            k: "(" + ", ".join(f"{round(float(x), 3) + 0.0:g}" for x in v) + ")" if v else "none" for k, v in d.items()
+        }
+
+    return {
+        **pose,
+        "move_azimuth": f"{float(pose.get('move_azimuth_deg', 0.0)):.1f}",
+        "original": side(pose.get("original") or {}),
+        "perturbed": side(pose.get("perturbed") or {}),
+    }
+
+
 _PLURALS = {"building": "buildings", "parking": "parking lots", "road": "roads"}
 
 
