@@ -324,14 +324,19 @@ class BatchedNavEnv:
 
     def observe(self) -> torch.Tensor:
         """``float32[num_envs, obs_dim]`` observations of the current cells."""
+        obs = torch.cat(self._table_rows(), 1)
+        return obs if self.noise is None else self.noise.apply(obs, self.cell, self.errors)
+
+    def _table_rows(self) -> list[torch.Tensor]:
+        """The observation's two parts looked up in the tables, before any noise: the current cells' rows (with
+        the extra obstacles) and the targets' rows."""
         cell_part = self.cell_part[self.cell]
         if self.aug_obstacles and self._nbr_cols is not None:
             # An extra-blocked neighbour reads like a blocked one: radio features 0 (missing) and flag 0.
             hidden = self.extra.gather(1, self.next_cell[self.cell])  # [N, 4]
             cols = self._nbr_cols.to(self.device)
             cell_part[:, cols.reshape(-1)] *= (~hidden).float().repeat_interleave(cols.shape[1], 1)
-        obs = torch.cat([cell_part, self.target_part[self.target]], 1)
-        return obs if self.noise is None else self.noise.apply(obs, self.cell, self.errors)
+        return [cell_part, self.target_part[self.target]]
 
     def _potential(self, cell: torch.Tensor) -> torch.Tensor:
         if self.potential == "geodesic" and self.aug_obstacles and self.aug_potential == "replan":

@@ -82,6 +82,16 @@ class MemoryLayout:
     def dim(self) -> int:
         return len(self.channels) * (2 * self.radius + 1) ** 2 + int(self.visits)
 
+    def stacked_window(self) -> np.ndarray:
+        """``int64[cells, dim]``: each cell's memory observation as indices into the maps laid end to end (the
+        channels in order, then the visit counts), so one gather reads it; the last column (with ``visits``) is
+        the cell's own visit count, still to be turned into ``visits_here``."""
+        p = self.padded_cells
+        cols = [self.window + c * p for c in range(len(self.channels))]
+        if self.visits:
+            cols.append(self.pad[:, None] + len(self.channels) * p)
+        return np.concatenate(cols, 1)
+
     @property
     def names(self) -> tuple[str, ...]:
         r = self.radius
@@ -98,8 +108,32 @@ def _require_neighbors(obs_table: ObservationTable) -> None:
         )
 
 
+class _Map:
+    """A memory map of :class:`MemoryNavEnv`: a view of its channel in the stacked ``_maps`` (None when the env
+    keeps no such map). Assigning copies into that channel, so state restored by ``setattr`` (a resumed training
+    run, :attr:`MemoryNavEnv.state_keys`) lands where the observation reads it."""
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, env, owner=None):
+        if env is None:
+            return self
+        channel = env._channel.get(self.name)
+        return None if channel is None else env._maps[:, channel]
+
+    def __set__(self, env, value) -> None:
+        env._maps[:, env._channel[self.name]] = value
+
+
 class MemoryNavEnv(BatchedNavEnv):
-    """:class:`~dtradar_rl.envs.batched.BatchedNavEnv` whose observation carries each robot's memory window."""
+    """:class:`~dtradar_rl.envs.batched.BatchedNavEnv` whose observation carries each robot's memory window.
+
+    The maps of all robots live in one ``float32[num_envs, maps, padded cells]`` tensor, so a robot's whole memory
+    window (every map, and its visit count) is a single gather: a batch-1 decision's observation is a handful of
+    tensor ops (each ~2 us of dispatch, far more than the arithmetic)."""
+
+    sensed, visited, bumped, visits = _Map(), _Map(), _Map(), _Map()
 
     def __init__(
         self,
@@ -117,13 +151,17 @@ class MemoryNavEnv(BatchedNavEnv):
         super().__init__(mdp, obs_table, num_envs, **kw)
         lay, dev = self.layout, self.device
         t = lambda a: torch.as_tensor(a, device=dev)
-        self._pad, self._nbr, self._win = t(lay.pad), t(lay.neighbor), t(lay.window)
-        self._sensed_init = t(lay.sensed_init)
+        self._pad, self._nbr = t(lay.pad), t(lay.neighbor)
         self._flags = torch.as_tensor(flag_columns(), device=dev)
-        self.sensed = self._sensed_init.repeat(self.num_envs, 1)
-        self.visited = torch.zeros_like(self.sensed)
-        self.bumped = torch.zeros_like(self.sensed) if memory_bumps else None
-        self.visits = torch.zeros_like(self.sensed) if memory_visits else None
+        names = lay.channels + (("visits",) if memory_visits else ())
+        self._channel = {name: c for c, name in enumerate(names)}
+        #: ``float32[maps, padded]``: an empty memory (only the padding of ``sensed`` set)
+        self._maps_init = torch.zeros((len(names), lay.padded_cells), device=dev)
+        self._maps_init[0] = t(lay.sensed_init)
+        self._maps = self._maps_init.repeat(self.num_envs, 1, 1)
+        self._maps_flat = self._maps.view(self.num_envs, -1)  # the same storage, one row per robot
+        self._window = t(lay.stacked_window())
+        self._one = torch.ones((), device=dev)
 
     @classmethod
     def from_dataset(
@@ -163,12 +201,7 @@ class MemoryNavEnv(BatchedNavEnv):
         super().reset_where(mask, starts=starts, targets=targets)
         idx = torch.nonzero(mask.to(self.device), as_tuple=True)[0]
         if idx.numel():
-            self.sensed[idx] = self._sensed_init
-            self.visited[idx] = 0.0
-            if self.bumped is not None:
-                self.bumped[idx] = 0.0
-            if self.visits is not None:
-                self.visits[idx] = 0.0
+            self._maps[idx] = self._maps_init
             self._sense(idx)
 
     def step(self, actions: torch.Tensor):
@@ -182,15 +215,14 @@ class MemoryNavEnv(BatchedNavEnv):
         return self.observe(), reward, terminated, truncated, info
 
     def memory_window(self) -> torch.Tensor:
-        win = self._win[self.cell]
-        maps = [self.sensed, self.visited] + ([self.bumped] if self.bumped is not None else [])
-        parts = [m.gather(1, win) for m in maps]
-        if self.visits is not None:
-            here = self.visits.gather(1, self._pad[self.cell][:, None])
-            parts.append((here - 1.0).clamp(0.0, VISITS_CAP))
-        return torch.cat(parts, 1)
+        win = self._maps_flat.gather(1, self._window[self.cell])
+        if self.layout.visits:  # the visit count of the cell stood on -> the earlier stands, capped
+            win.select(1, -1).sub_(self._one).clamp_(0.0, VISITS_CAP)  # (a tensor 1: no scalar to wrap, 1.5 us)
+        return win
 
     def observe(self) -> torch.Tensor:
+        if self.noise is None:  # one cat for the table rows and the window (a batch-1 decision is mostly op overhead)
+            return torch.cat([*self._table_rows(), self.memory_window()], 1)
         return torch.cat([super().observe(), self.memory_window()], 1)
 
 

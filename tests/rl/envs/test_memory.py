@@ -140,3 +140,20 @@ def test_visits_here_counts_the_earlier_stands_on_the_current_cell_in_this_episo
     assert seen == [0, 0, 1, 1, 2] and env.layout.names[-1] == "visits_here"
     obs, _ = env.reset(options={"start": (x, y), "target": target})
     assert obs[-1] == 0  # a new episode forgets
+
+
+def test_memory_state_restored_by_setattr_as_a_resumed_run_does_gives_the_same_observations(dyn, tmp_path):
+    kw = {"normalizer": Normalizer.fit(dyn), "memory_radius": 3, "memory_bumps": True, "memory_visits": True}
+    a, b = MemoryNavEnv.from_dataset(dyn, 5, seed=1, **kw), MemoryNavEnv.from_dataset(dyn, 5, seed=2, **kw)
+    a.reset()
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(12):
+        a.step(torch.randint(4, (5,), generator=gen))
+    torch.save({k: getattr(a, k) for k in a.state_keys}, tmp_path / "state.pt")  # what a training checkpoint saves
+    b.reset()
+    for k, v in torch.load(tmp_path / "state.pt").items():
+        setattr(b, k, v)
+    assert torch.equal(a.observe(), b.observe())
+    actions = torch.randint(4, (5,), generator=gen)
+    assert torch.equal(a.step(actions)[0], b.step(actions)[0])
+    assert all(torch.equal(getattr(a, k), getattr(b, k)) for k in a.state_keys)
