@@ -267,9 +267,17 @@ def markdown(result) -> str:
         f"## Navigation on every twin ({a['pairs']} seeded pairs per twin, seeds {' '.join(map(str, a['seeds']))}, "
         f"{a['steps']:,} training steps; {describe(result['machine']['start'])})",
         "",
-        f"`{result.get('command', 'python bench/bench_nav.py')}`. `{POSE}`: the twin re-traced with its transmitter "
-        "0.5 m and 5° off (no noise). SB3 DQN: seed 0, Stable-Baselines3 defaults, its training capped at "
-        f"{a.get('sb3_seconds', 300):.0f} s of wall time.",
+        f"`{result.get('command', 'python bench/bench_nav.py')}`."
+        + (
+            f" `{POSE}`: the twin re-traced with its transmitter 0.5 m and 5° off (no noise)."
+            if any(r["noise"] == POSE for r in result["rows"])
+            else ""
+        )
+        + (
+            f" {SB3}: seed 0, Stable-Baselines3 defaults, its training capped at {a['sb3_seconds']:.0f} s of wall time."
+            if any(r["agent"] == SB3 for r in result["rows"])
+            else ""
+        ),
         "",
         "| twin | agent | noise | blueprint: success / SPL | dynamic: success / SPL / collisions | decision p50 / p99 "
         "(ms) | training (s) |",
