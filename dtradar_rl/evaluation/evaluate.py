@@ -158,7 +158,9 @@ def decision_latency_ms(
     """p50 and p99 (ms) of one greedy decision for one robot (observation lookup + forward pass + argmax) over
     ``repeats`` decisions after a short warm-up, with ``threads`` torch threads (batch-1 decisions run
     single-threaded by default: steadier and as fast, see :data:`~dtradar_rl.task.runtime.DECISION_THREADS`)."""
-    env = policy.env_for(ds, 1)  # the policy's own env, so memory agents and the planner observe as they act
+    # the policy's own env, so memory agents and the planner observe as they act; no shaped reward (its table of
+    # breadth-first distances took minutes to build on Munich, and a decision never reads it)
+    env = policy.env_for(ds, 1, reward="paper")
     env.reset()
     times = np.empty(repeats)
     with torch_threads(threads):
