@@ -141,6 +141,6 @@ bench-ray:
 bench-latency:
 	$(PY) bench/bench_latency.py --scene $(SCENE) $(ARGS)
 
-# The default agent and the planner on every twin, with and without measurement noise -> results/bench_nav.*
+# The default agent, SB3 DQN and the planner on every twin, with and without noise and a tx pose error -> results/bench_nav.*
 bench-nav:
 	$(PY) bench/bench_nav.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
