@@ -77,7 +77,7 @@ def sb3_trained(scene: str, seed: int, steps: int, seconds: float, runs: str) ->
     """Stable-Baselines3 DQN (its defaults; our ``tuned`` preset's observations, reward, network and gamma) on
     ``scene``'s blueprint for ``steps`` or ``seconds``, whichever ends first, saved as one of our checkpoints so it
     is evaluated (and timed) exactly like ours."""
-    from stable_baselines3 import DQN
+    from bench_rl import sb3_dqn  # the same SB3 set-up as make bench-rl (bench/ is on the path of these scripts)
     from stable_baselines3.common.callbacks import BaseCallback
 
     out = Path(runs) / "sb3" / scene / f"s{seed}"
@@ -100,16 +100,7 @@ def sb3_trained(scene: str, seed: int, steps: int, seconds: float, runs: str) ->
         def _on_step(self) -> bool:
             return time.perf_counter() - self.t0 < seconds
 
-    model = DQN(
-        "MlpPolicy",
-        env,
-        gamma=cfg.gamma,
-        learning_starts=cfg.learning_starts,
-        policy_kwargs={"net_arch": list(cfg.hidden)},
-        seed=seed,
-        device="cpu",
-        verbose=0,
-    )
+    model = sb3_dqn(env, cfg, seed)
     t0 = time.perf_counter()
     model.learn(total_timesteps=steps, callback=Cap())
     wall = time.perf_counter() - t0

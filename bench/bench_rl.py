@@ -113,9 +113,25 @@ def env_throughput(ds, counts, seconds, obs="neighbors", reward="geodesic") -> d
     return out
 
 
+def sb3_dqn(env, ours_cfg, seed: int = 0):
+    """Stable-Baselines3's DQN with its defaults on ``env``, given our config's network, gamma and warm-up: what a
+    user would otherwise run (here and in ``bench_nav.py``)."""
+    from stable_baselines3 import DQN
+
+    return DQN(
+        "MlpPolicy",
+        env,
+        gamma=ours_cfg.gamma,
+        learning_starts=ours_cfg.learning_starts,
+        policy_kwargs={"net_arch": list(ours_cfg.hidden)},
+        seed=seed,
+        device="cpu",
+        verbose=0,
+    )
+
+
 def run_sb3(ds, dyn, cfg, ours_cfg, threads) -> dict:
     try:
-        from stable_baselines3 import DQN
         from stable_baselines3.common.callbacks import BaseCallback
     except ImportError as e:
         return {"skipped": f"stable-baselines3 not installed ({e}); pip install 'dtradar[bench]'"}
@@ -131,16 +147,7 @@ def run_sb3(ds, dyn, cfg, ours_cfg, threads) -> dict:
             return time.perf_counter() - self.t0 < self.seconds
 
     torch.set_num_threads(threads)
-    model = DQN(
-        "MlpPolicy",
-        env,
-        gamma=ours_cfg.gamma,
-        learning_starts=ours_cfg.learning_starts,
-        policy_kwargs={"net_arch": list(ours_cfg.hidden)},
-        seed=0,
-        device="cpu",
-        verbose=0,
-    )
+    model = sb3_dqn(env, ours_cfg)
     t0 = time.perf_counter()
     model.learn(total_timesteps=cfg.budget, callback=Cap(cfg.sb3_max_seconds))
     wall = time.perf_counter() - t0
