@@ -13,6 +13,53 @@ def root(tmp_path, monkeypatch):
     return tmp_path / "root"
 
 
+#: A user's 2 m x 1.5 m room file with one box: the smallest scene the tracer builds in seconds.
+TINY_ROOM = """
+format = 1
+[scene]
+name = "tiny-room"
+title = "Tiny room"
+description = "A user's own 2 m x 1.5 m room with one box"
+source = "test"
+licence = "CC0-1.0"
+attribution = "nobody"
+[room]
+width_m = 2.0
+length_m = 1.5
+height_m = 2.5
+wall_thickness_m = 0.2
+wall_material = "brick"
+floor_material = "concrete"
+floor_thickness_m = 0.1
+ceiling_material = "concrete"
+ceiling_thickness_m = 0.1
+[grid]
+cell_m = 0.5
+nx = 4
+ny = 3
+[tx]
+position_m = [1.0, 0.75, 2.4]
+[robot]
+rx_height_m = 1.0
+robot_height_m = 1.0
+[[objects]]
+name = "box_01"
+kind = "box"
+material = "wood"
+x_m = 0.25
+y_m = 0.25
+width_m = 0.4
+length_m = 0.4
+height_m = 0.8
+"""
+
+
+@pytest.fixture()
+def tiny_room() -> str:
+    """The text of a tiny user's room file (``TINY_ROOM``), for tests that read or trace a scene file."""
+    return TINY_ROOM
+
+
 def pytest_sessionfinish(session, exitstatus):
     session.config._dtradar_exitstatus = int(exitstatus)
 

@@ -92,52 +92,12 @@ def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, 
     np.testing.assert_array_equal(ds.blocked, occupancy(small_cubicle))
 
 
-TINY_ROOM = """
-format = 1
-[scene]
-name = "tiny-room"
-title = "Tiny room"
-description = "A user's own 2 m x 1.5 m room with one box"
-source = "test"
-licence = "CC0-1.0"
-attribution = "nobody"
-[room]
-width_m = 2.0
-length_m = 1.5
-height_m = 2.5
-wall_thickness_m = 0.2
-wall_material = "brick"
-floor_material = "concrete"
-floor_thickness_m = 0.1
-ceiling_material = "concrete"
-ceiling_thickness_m = 0.1
-[grid]
-cell_m = 0.5
-nx = 4
-ny = 3
-[tx]
-position_m = [1.0, 0.75, 2.4]
-[robot]
-rx_height_m = 1.0
-robot_height_m = 1.0
-[[objects]]
-name = "box_01"
-kind = "box"
-material = "wood"
-x_m = 0.25
-y_m = 0.25
-width_m = 0.4
-length_m = 0.4
-height_m = 0.8
-"""
-
-
-def test_a_users_scene_file_builds_by_path_and_loads_by_its_name(root, tmp_path, config):
+def test_a_users_scene_file_builds_by_path_and_loads_by_its_name(root, tmp_path, config, tiny_room):
     import dtradar_data
     from dtradar_data.pipeline.builder import build
 
     path = tmp_path / "my-room.toml"
-    path.write_text(TINY_ROOM)
+    path.write_text(tiny_room)
     (ds,) = build(replace(config, scene=str(path), variant="blueprint", coverage_map=False))
     assert ds.name == "tiny-room/blueprint" and ds.table.num_rows == 12
     assert ds.blocked[0, 0] and ds.blocked.sum() == 1

@@ -8,44 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-ROOM = """
-format = 1
-[scene]
-name = "pose-room"
-title = "Pose room"
-description = "A 2 m x 1.5 m room with a ceiling access point"
-source = "test"
-licence = "CC0-1.0"
-attribution = "nobody"
-[room]
-width_m = 2.0
-length_m = 1.5
-height_m = 2.5
-wall_thickness_m = 0.2
-wall_material = "brick"
-floor_material = "concrete"
-floor_thickness_m = 0.1
-ceiling_material = "concrete"
-ceiling_thickness_m = 0.1
-[grid]
-cell_m = 0.5
-nx = 4
-ny = 3
-[tx]
-position_m = [1.0, 0.75, 2.4]
-look_at_m = [1.0, 0.75, 0.0]
-[robot]
-rx_height_m = 1.0
-robot_height_m = 1.0
-[[objects]]
-name = "box_01"
-kind = "box"
-material = "wood"
-x_m = 0.25
-y_m = 0.25
-width_m = 0.4
-length_m = 0.4
-height_m = 0.8
+#: What the shared tiny room gets here: a ceiling access point looking straight down, and a dynamic twin.
+DYNAMIC = """
 [dynamic]
 description = "a second box"
 [[dynamic.add]]
@@ -61,12 +25,16 @@ height_m = 0.8
 
 
 @pytest.fixture
-def config(tmp_path):
+def config(tmp_path, tiny_room):
     from dtradar_data.pipeline.builder import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     path = tmp_path / "pose-room.toml"
-    path.write_text(ROOM)
+    room = tiny_room.replace('name = "tiny-room"', 'name = "pose-room"')
+    room = room.replace(
+        "position_m = [1.0, 0.75, 2.4]\n", "position_m = [1.0, 0.75, 2.4]\nlook_at_m = [1.0, 0.75, 0.0]\n"
+    )
+    path.write_text(room + DYNAMIC)
     return BuildConfig(
         scene=str(path),
         rt=RTSettings(max_depth=1, samples_per_src=2_000, device="cpu"),

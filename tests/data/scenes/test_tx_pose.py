@@ -77,8 +77,8 @@ def test_a_city_transmitter_is_moved_and_turned_and_stays_out_of_every_building(
     assert twin.rt_defaults == spec.rt_defaults, "the outdoor ray-tracing defaults travel with the twin"
 
 
-def test_a_transmitter_with_sionnas_default_orientation_turns_away_from_plus_x():
-    room = _tiny_room()
+def test_a_transmitter_with_sionnas_default_orientation_turns_away_from_plus_x(tiny_room):
+    room = _tiny_room(tiny_room)
     assert room.tx.look_at_m is None
     twin = tx_pose_error(room, offset_m=0.3, angle_deg=5.0, seed=0)
     assert _angle_deg(_boresight(twin.tx), np.array([1.0, 0.0, 0.0])) == pytest.approx(5.0, abs=TOL)
@@ -122,9 +122,9 @@ def test_the_twin_is_named_scene_txpose_and_can_never_take_a_built_in_name(cubic
     assert not any(n.split("/")[0].endswith(TX_POSE_SUFFIX) for n in builtin_names())
 
 
-def test_a_scene_file_may_not_take_the_reserved_suffix():
+def test_a_scene_file_may_not_take_the_reserved_suffix(tiny_room):
     with pytest.raises(SceneFileError, match="txpose") as err:
-        _tiny_room(_TINY_ROOM.replace('name = "tiny-room"', 'name = "cubicle-txpose"'))
+        _tiny_room(tiny_room.replace('name = "tiny-room"', 'name = "cubicle-txpose"'))
     assert "--tx-pose-error" in str(err.value)
 
 
@@ -140,8 +140,8 @@ def test_the_description_and_provenance_say_how_the_twin_was_made(cubicle):
     assert cubicle.provenance == {}, "the original spec is untouched"
 
 
-def test_a_move_that_would_leave_the_room_tries_the_next_seeded_direction():
-    room = _tiny_room()  # 2 x 1.5 m, TX at its centre (1.0, 0.75)
+def test_a_move_that_would_leave_the_room_tries_the_next_seeded_direction(tiny_room):
+    room = _tiny_room(tiny_room)  # 2 x 1.5 m, TX at its centre (1.0, 0.75)
     for seed in range(20):
         twin = tx_pose_error(room, offset_m=0.9, angle_deg=1.0, seed=seed)
         x, y, _ = twin.tx.position_m
@@ -152,8 +152,8 @@ def test_a_move_that_would_leave_the_room_tries_the_next_seeded_direction():
     assert max(tried) > 1, "some seeds' first direction leaves the 1.5 m deep room"
 
 
-def test_a_move_that_always_leaves_the_room_is_a_typed_error():
-    room = _tiny_room()
+def test_a_move_that_always_leaves_the_room_is_a_typed_error(tiny_room):
+    room = _tiny_room(tiny_room)
     with pytest.raises(InvalidCoordinatesError, match="outside the room") as err:
         tx_pose_error(room, offset_m=3.0)
     assert "smaller offset" in err.value.hint
@@ -191,45 +191,5 @@ def test_the_orientation_matches_what_sionnas_look_at_gives_an_unperturbed_trans
     assert _angle_deg(_boresight(spec.tx), d) < 1e-9
 
 
-def _tiny_room(text: str | None = None):
-    return parse_room(tomllib.loads(text or _TINY_ROOM), "blueprint", origin="tiny.toml")
-
-
-_TINY_ROOM = """
-format = 1
-[scene]
-name = "tiny-room"
-title = "Tiny room"
-description = "A 2 m x 1.5 m room"
-source = "test"
-licence = "CC0-1.0"
-attribution = "nobody"
-[room]
-width_m = 2.0
-length_m = 1.5
-height_m = 2.5
-wall_thickness_m = 0.2
-wall_material = "brick"
-floor_material = "concrete"
-floor_thickness_m = 0.1
-ceiling_material = "concrete"
-ceiling_thickness_m = 0.1
-[grid]
-cell_m = 0.5
-nx = 4
-ny = 3
-[tx]
-position_m = [1.0, 0.75, 2.4]
-[robot]
-rx_height_m = 1.0
-robot_height_m = 1.0
-[[objects]]
-name = "box_01"
-kind = "box"
-material = "wood"
-x_m = 0.25
-y_m = 0.25
-width_m = 0.4
-length_m = 0.4
-height_m = 0.8
-"""
+def _tiny_room(text: str):
+    return parse_room(tomllib.loads(text), "blueprint", origin="tiny.toml")
