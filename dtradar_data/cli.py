@@ -8,7 +8,11 @@ and exits with status 3 (``--debug`` shows its traceback): see :mod:`dtradar_dat
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
+import io
 import json
+import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +21,7 @@ from typing import Annotated
 import tyro
 
 from dtradar_data.core.boundary import DEBUG_HELP, EXIT_FAILED_CHECK, run_cli
+from dtradar_data.core.errors import DtradarError, InvalidSettingError
 from dtradar_data.core.files import human_size
 from dtradar_data.core.layout import data_root
 from dtradar_data.pipeline import builder
@@ -25,7 +30,23 @@ from dtradar_data.publish import cards, hub, logged_hub
 from dtradar_data.rt import llvm
 from dtradar_data.rt.tracer import smoke_test
 from dtradar_data.store import listing, local
-from dtradar_data.store.logged import is_logged_name, list_logged, verify_logged
+from dtradar_data.store.catalog import as_any_id
+from dtradar_data.store.logged import (
+    LoggedId,
+    is_logged_name,
+    list_logged,
+    local_versions,
+    log_commands,
+    logged_dir,
+    minari_id,
+    minari_root,
+    parse_logged_id,
+    read_meta,
+    refs_path,
+    relog_hint,
+    resolve_logged,
+)
+from dtradar_data.store.versions import read_refs
 
 #: A positional dataset id argument, shown as NAME in --help (the Makefile passes it positionally).
 Name = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="NAME")]
@@ -65,7 +86,8 @@ class ListCmd:
                             ],
                         }
                         for r in rows
-                    ],
+                    ]
+                    + _logged_json(),
                     indent=2,
                 )
             )
@@ -82,23 +104,98 @@ class ListCmd:
                 f"{human_size(latest.size_bytes) if latest else '-':>10}"
             )
         logged = list_logged()
-        if logged:  # offline-RL datasets logged on the twins (scene/variant/behaviour)
+        healthy = [e for e in logged if e.problem is None]
+        if healthy:  # offline-RL datasets logged on the twins (scene/variant/behaviour)
             print(f"\n{'logged dataset':<40} {'tag':<5} {'version':<18} {'steps':>8} {'episodes':>8} {'success':>8}")
-            for e in logged:
+            for e in healthy:
                 ok = f"{e.success_rate:.3f}" if e.success_rate is not None else "-"
                 print(
                     f"{e.name:<40} {e.tag or '-':<5} {e.version:<18} {e.steps or '-':>8} {e.episodes or '-':>8} {ok:>8}"
                 )
-        damaged = [(r.name, v) for r in rows for v in r.damaged]
-        for name, v in damaged:
-            print(f"DAMAGED {name}@{v.tag or v.version}: {v.problem}")
+        damaged = [(r.name, v.tag, v.version, v.problem) for r in rows for v in r.damaged]
+        damaged += [(e.name, e.tag, e.version, e.problem) for e in logged if e.problem is not None]
+        for name, tag, version, problem in damaged:
+            print(f"DAMAGED {name}@{tag or version}: {problem}")
         if damaged:  # listed, not fatal: the healthy versions stay usable
             print(
-                f"{len(damaged)} damaged version(s): `python -m dtradar_data verify NAME` shows every problem; "
-                "remove or re-pull them",
+                f"{len(damaged)} damaged version(s): `python -m dtradar_data verify NAME` shows every problem and "
+                "the command that makes each again; remove, rebuild (log) or re-pull them",
                 file=sys.stderr,
             )
         return 0
+
+
+def _logged_json() -> list[dict]:
+    """The logged datasets of ``list --json``: one row per name, shaped like an RT dataset's row."""
+    out: dict[str, dict] = {}
+    for e in list_logged():
+        row = out.setdefault(
+            e.name,
+            {
+                "name": e.name,
+                "kind": "logged",
+                "parent": e.parent,
+                "builtin": False,
+                "latest": read_refs(refs_path(parse_logged_id(e.name))).latest,
+                "versions": [],
+                "damaged": [],
+            },
+        )
+        if e.problem is None:
+            row["versions"].append(
+                {
+                    "tag": e.tag,
+                    "version": e.version,
+                    "created_utc": e.created_utc,
+                    "rows": e.steps,
+                    "bytes": e.size_bytes,
+                    "episodes": e.episodes,
+                    "success_rate": e.success_rate,
+                }
+            )
+        else:
+            row["damaged"].append({"tag": e.tag, "version": e.version, "path": str(e.path), "problem": e.problem})
+    for row in out.values():
+        if row["latest"] not in {v["version"] for v in row["versions"]}:
+            row["latest"] = row["versions"][-1]["version"] if row["versions"] else None
+    return list(out.values())
+
+
+def _logged_info(name: str, revision: str | None) -> int:
+    """``info`` of a logged dataset: its card's key facts, its Minari copy, every version (damaged ones flagged)."""
+    lid = as_any_id(name)
+    # a named revision, or a dataset whose versions are all damaged: resolve among the damaged ones too, so the
+    # error names the damaged file instead of "not in the store"
+    damaged = bool(revision or lid.revision) or not local_versions(lid)
+    lid, version, vdir = resolve_logged(lid, revision, damaged=damaged)
+    meta = read_meta(vdir)
+    tag = read_refs(refs_path(lid)).tag_of(version)
+    stats, settings, beh = meta.get("stats") or {}, meta.get("settings") or {}, meta.get("behaviour") or {}
+    print(f"{lid.name}@{tag or version}  (version {version}, logged dataset, format v{meta.get('format')})")
+    print(f"  parent:      {meta.get('parent')} @ {meta.get('parent_version')}")
+    print(f"  behaviour:   {json.dumps(beh, sort_keys=True)}")
+    print(f"  created:     {meta.get('created_utc', '-')}")
+    print(
+        f"  steps:       {stats.get('steps', '-')} in {stats.get('episodes', '-')} episodes "
+        f"({stats.get('terminated', '-')} reached the target, {stats.get('truncated', '-')} truncated)"
+    )
+    success = stats.get("success_rate")
+    print(f"  success:     {'-' if success is None else f'{success:.3f}'} (behaviour, finished episodes)")
+    print("  settings:    " + ", ".join(f"{k}={v}" for k, v in sorted(settings.items())) + f", seed={meta.get('seed')}")
+    print(f"  path:        {vdir}")
+    for fname, rec in sorted((meta.get("files") or {}).items()):
+        print(f"    {fname:<20} {human_size(int(rec.get('bytes', 0))):>10}  sha256 {rec.get('sha256', '')[:16]}")
+    mid = minari_id(lid, tag)
+    folder = minari_root() / mid
+    there = "written" if (folder / "data").is_dir() else f"not written (`{log_commands(lid, meta)[0]}` writes it)"
+    print(f"  minari:      {mid} in {folder.parent.parent}: {there}")
+    print("  versions:")
+    for e in list_logged():
+        if e.name == lid.name:
+            mark = "*" if e.version == version else " "
+            state = f"DAMAGED: {e.problem}" if e.problem else f"{e.created_utc or '-':<22} {e.steps or '-':>8} steps"
+            print(f"   {mark} {e.tag or '-':<4} {e.version}  {state}")
+    return 0
 
 
 @dataclass(frozen=True)
@@ -106,11 +203,13 @@ class InfoCmd:
     """Summarise one dataset: its card's key facts, every version, file sizes."""
 
     name: Name
-    """Dataset id, e.g. cubicle/blueprint or cubicle/blueprint@v0."""
+    """Dataset id, e.g. cubicle/blueprint or cubicle/blueprint@v0 (a logged one: cubicle/blueprint/noisy-shortest)."""
     revision: Revision = None
     """Tag (v0, v1, ...) or version hash; default: the newest version."""
 
     def run(self) -> int:
+        if is_logged_name(self.name):
+            return _logged_info(self.name, self.revision)
         did, version, vdir = local.resolve(self.name, self.revision)
         meta = local.read_meta(vdir)
         grid, rt, stats = meta.get("grid", {}), meta.get("rt", {}), meta.get("stats", {})
@@ -144,28 +243,39 @@ class VerifyCmd:
     """Re-hash every file of a dataset's versions against meta.json and check the Parquet schemas."""
 
     name: Name
-    """Dataset id, e.g. cubicle/blueprint (all versions) or cubicle/blueprint@v0 (one)."""
+    """Dataset id, e.g. cubicle/blueprint (all versions) or cubicle/blueprint@v0 (one); a logged one alike
+    (cubicle/blueprint/noisy-shortest)."""
     revision: Revision = None
     """Only this tag or version hash."""
 
     def run(self) -> int:
-        results = (
-            verify_logged(self.name, self.revision)
-            if is_logged_name(self.name)
-            else listing.verify(self.name, self.revision)
-        )
-        bad = 0
+        results = listing.verify(self.name, self.revision)
+        bad = [version for version, problems in results.items() if problems]
         for version, problems in results.items():
             print(f"{version}: {'ok' if not problems else 'FAILED'}")
             for p in problems:
                 print(f"  - {p}")
-            bad += bool(problems)
         if bad:
-            print(
-                f"{bad} of {len(results)} versions failed; rebuild them (`make dataset`) or re-pull them",
-                file=sys.stderr,
-            )
+            print(f"{len(bad)} of {len(results)} versions failed; {_fix_hint(self.name, bad)}", file=sys.stderr)
         return EXIT_FAILED_CHECK if bad else 0
+
+
+def _fix_hint(name: str, bad: list[str]) -> str:
+    """How to get failed versions back: the command that makes them (an RT build or a log), or a pull."""
+    parsed = as_any_id(name, check_known=False)
+    if isinstance(parsed, LoggedId):
+        lid = parsed.with_revision(None)
+        try:
+            meta = read_meta(logged_dir(lid) / bad[0])
+        except DtradarError:
+            meta = None  # no readable record: the generic command
+        pull = f"`python -m dtradar_data pull {lid.name}@<tag>`"
+        folder = str(logged_dir(lid) / bad[0]) if len(bad) == 1 else None
+        return f"{relog_hint(lid, meta, folder)}; or re-pull a published one ({pull})"
+    return (
+        f"rebuild them (`make dataset SCENE={parsed.scene}`) or re-pull them "
+        f"(`python -m dtradar_data pull {parsed.name}@<tag>`)"
+    )
 
 
 @dataclass(frozen=True)
@@ -273,10 +383,64 @@ def _parse_and_run(argv: list[str]) -> int:
         "pull": PullCmd,
         "check": CheckCmd,
     }
-    cfg = tyro.extras.subcommand_cli_from_dict(
+    cfg = parse_command(
         commands,
+        argv,
         prog="python -m dtradar_data",
-        args=argv,
         description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull. " + DEBUG_HELP,
     )
     return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()
+
+
+def parse_command(commands: dict[str, type], argv: list[str], **kwargs) -> object:
+    """tyro's parse of ``argv`` into one of ``commands``, with every refusal of a value a typed error.
+
+    A config's own check (its ``__post_init__``: :class:`~dtradar_data.rt.settings.RTSettings`, ``BuildConfig``)
+    raises a :class:`DtradarError` whose message names the flag; tyro would catch it (it is a ``ValueError``) and
+    print it in a box titled with its internal name of the config (``Error parsing __tyro-dummy-inner__.rt``,
+    ``Error parsing BuildConfig``). Here it reaches the error boundary as itself instead: one ``error: ...`` line,
+    how to fix it, exit status 2. tyro's own usage errors (an unknown flag, ``x`` for a number) and ``--help`` are
+    tyro's, printed as before. Then :func:`check_finite` refuses a NaN or an infinity in any number flag."""
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):  # tyro prints its box before it exits: held back until known
+            cfg = tyro.extras.subcommand_cli_from_dict(commands, args=argv, **kwargs)
+    except SystemExit as exc:
+        typed = _typed_cause(exc)
+        if typed is not None:
+            raise typed from None
+        sys.stderr.write(captured.getvalue())
+        raise
+    sys.stderr.write(captured.getvalue())
+    check_finite(cfg)
+    return cfg
+
+
+def _typed_cause(exc: BaseException) -> DtradarError | None:
+    """The :class:`DtradarError` a (tyro) exception was raised while handling, if any."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, DtradarError):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
+def check_finite(cfg: object, prefix: str = "--") -> None:
+    """:class:`InvalidSettingError` for a NaN or an infinity in any float flag of a parsed command (``--cell-m nan``,
+    ``--tx inf 0 20``, ``--rt.frequency-hz nan``): no flag of either command line means one, and a NaN passes every
+    range check (``nan < 0`` is false) to surface later as a wrong result or an internal error."""
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        flag = prefix + f.name.replace("_", "-")
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            check_finite(value, flag + ".")
+            continue
+        values = value if isinstance(value, tuple) else (value,)
+        if any(isinstance(v, float) and not math.isfinite(v) for v in values):
+            raise InvalidSettingError(
+                f"{flag} {' '.join(str(v) for v in values)}: not a finite number (nan and inf are no flag's value)",
+                hint=f"give {flag} finite numbers; `--help` after the command lists what each flag takes",
+            )

@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Annotated
 
@@ -28,6 +29,7 @@ from dtradar_rl.experiments.paper import PaperConfig, run_paper
 from dtradar_rl.experiments.sweep import SweepConfig, sweep
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.logged import LogConfig
+from dtradar_rl.task.config import Config, deferred_checks
 from dtradar_rl.train.config import DEFAULT_PRESET, PRESETS, DQNConfig, config_for
 from dtradar_rl.train.dqn import train
 
@@ -130,20 +132,39 @@ def _parse_and_run(argv: list[str]) -> int:
         and PNGs): Tables II, V, VI, VII, coverage maps, training curves, inference paths, cross-quadrant bars."""
         run_paper(cfg.validate())
 
-    tyro.extras.subcommand_cli_from_dict(
-        {
-            "train": train_cmd,
-            "eval": eval_cmd,
-            "cross": cross_cmd,
-            "offline": offline_cmd,
-            "adapt": adapt_cmd,
-            "log": log_cmd,
-            "offline-bench": offline_bench_cmd,
-            "sweep": sweep_cmd,
-            "paper": paper_cmd,
-        },
-        args=argv,
-        prog="python -m dtradar_rl",
-        description="Navigation agents on dtradar datasets. " + DEBUG_HELP,
-    )
+    commands = {
+        "train": train_cmd,
+        "eval": eval_cmd,
+        "cross": cross_cmd,
+        "offline": offline_cmd,
+        "adapt": adapt_cmd,
+        "log": log_cmd,
+        "offline-bench": offline_bench_cmd,
+        "sweep": sweep_cmd,
+        "paper": paper_cmd,
+    }
+    # tyro would turn a config's own check (made while parsing) into its usage box: the checks wait for the
+    # command's validate(), which raises the boundary's one-line error (exit 2), and run again inside the command.
+    with deferred_checks():
+        tyro.extras.subcommand_cli_from_dict(
+            {name: _checked(cmd) for name, cmd in commands.items()},
+            args=argv,
+            prog="python -m dtradar_rl",
+            description="Navigation agents on dtradar datasets. " + DEBUG_HELP,
+        )
     return 0
+
+
+def _checked(command):
+    """``command`` with the configs' checks on again while it runs (they are deferred only while tyro parses): the
+    parsed config's own checks first, whatever its ``validate()`` does."""
+
+    @functools.wraps(command)
+    def run(*args, **kwargs):
+        with deferred_checks(False):
+            for value in (*args, *kwargs.values()):
+                if isinstance(value, Config):
+                    value.check_ranges()
+            return command(*args, **kwargs)
+
+    return run

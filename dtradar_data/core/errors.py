@@ -70,6 +70,10 @@ class HubError(DtradarError, RuntimeError):
     """The Hugging Face Hub could not be reached, or refused the request."""
 
 
+class RayClusterError(DtradarError, ConnectionError):
+    """A Ray cluster (``--ray-address`` or ``$RAY_ADDRESS``) where nothing answers, or not within the time allowed."""
+
+
 def did_you_mean(name: str, choices: Iterable[str], n: int = 3) -> str:
     """A "did you mean ...?" phrase, or an empty string when nothing is close."""
     close = difflib.get_close_matches(name, list(choices), n=n, cutoff=0.5)

@@ -1,19 +1,29 @@
-"""Small file helpers shared by every layer: atomic text writes, file hashes, JSON-safe values."""
+"""Small file helpers shared by every layer: atomic text writes, file hashes, JSON-safe values, and file locks whose
+waits say what they wait for (:func:`waiting_lock`)."""
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import math
 import os
+import socket
+import sys
 import tempfile
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+from filelock import FileLock, Timeout
 
 from dtradar_data.core.errors import MissingDependencyError
+
+LOCK_NOTICE_EVERY_S = 60.0
+"""While a lock is held by another process, a waiting one says so again this often (with the holder's progress)."""
 
 
 def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
@@ -92,3 +102,98 @@ def installed_file(dist: str, rel: str, what: str) -> Path:
             f"{path} is missing from the installed {dist}", hint=f"reinstall it: `pip install --force-reinstall {dist}`"
         )
     return path
+
+
+def holder_path(lock: Path) -> Path:
+    """The file beside a lock that says who holds it (pid, host, since when, doing what) while it is held."""
+    return lock.with_name(lock.name + ".holder")
+
+
+def read_holder(lock: Path) -> dict[str, Any]:
+    """What the holder of ``lock`` wrote about itself; empty when unknown (an older version of dtradar, or gone)."""
+    try:
+        info = json.loads(holder_path(lock).read_text())
+    except (OSError, ValueError):
+        return {}
+    return info if isinstance(info, dict) else {}
+
+
+def describe_holder(info: dict[str, Any]) -> str:
+    """``pid 123 (on host h, since 10:02:03 UTC)``, or ``another process`` when nothing is known."""
+    if not isinstance(info.get("pid"), int):
+        return "another process"
+    extra = []
+    if info.get("host") and info["host"] != socket.gethostname():
+        extra.append(f"on host {info['host']}")
+    if info.get("since"):
+        extra.append(f"since {str(info['since'])[11:19]} UTC")
+    return f"pid {info['pid']}" + (f" ({', '.join(extra)})" if extra else "")
+
+
+@contextlib.contextmanager
+def waiting_lock(
+    lock: Path,
+    doing: str,
+    *,
+    then: str = "",
+    progress: Callable[[], str] | None = None,
+    notice_after_s: float = 0.0,
+    every_s: float | None = None,
+) -> Iterator[None]:
+    """Hold the exclusive file lock ``lock`` for the block (``doing`` says for what, e.g. ``building x version v``).
+
+    A wait is never silent: when another process holds the lock for longer than ``notice_after_s``, one line on
+    stderr names the holder (its pid, from :func:`holder_path`), what it is doing, what happens ``then``, and that
+    Ctrl-C is safe; every ``every_s`` (default :data:`LOCK_NOTICE_EVERY_S`) another line says how long it has waited
+    and the holder's ``progress()``. The wait itself ends when the holder does (a killed holder's lock is released
+    by the system)."""
+    lock = Path(lock)
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    file_lock = FileLock(str(lock))
+    every = LOCK_NOTICE_EVERY_S if every_s is None else every_s
+    try:
+        file_lock.acquire(timeout=notice_after_s)
+    except Timeout:
+        start = time.monotonic()
+        holder = describe_holder(read_holder(lock))
+        busy = read_holder(lock).get("doing") or doing
+        print(
+            f"waiting for {holder}, which is {busy}{'; then ' + then if then else ''}. "
+            f"Ctrl-C is safe: it stops this process only, stored datasets stay as they are (lock: {lock})",
+            file=sys.stderr,
+            flush=True,
+        )
+        while True:
+            try:
+                file_lock.acquire(timeout=every)
+                break
+            except Timeout:
+                waited = time.monotonic() - start
+                status = progress() if progress is not None else ""
+                print(
+                    f"still waiting for {describe_holder(read_holder(lock))} after {_duration(waited)}"
+                    + (f": {status}" if status else ""),
+                    file=sys.stderr,
+                    flush=True,
+                )
+        print(f"the lock is free after {_duration(time.monotonic() - start)}; going on", file=sys.stderr, flush=True)
+    info = {
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "since": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "doing": doing,
+    }
+    try:
+        try:
+            write_atomic(holder_path(lock), json.dumps(info) + "\n")
+        except OSError:
+            pass  # only a waiting process's message loses the holder's pid
+        yield
+    finally:
+        if read_holder(lock).get("pid") == os.getpid():
+            holder_path(lock).unlink(missing_ok=True)
+        file_lock.release()
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min"

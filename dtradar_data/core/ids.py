@@ -6,7 +6,8 @@
   ``cubicle/blueprint/noisy-shortest``: the parent RT dataset the transitions were logged on, then the behaviour's
   name (``[a-z0-9][a-z0-9_-]*``; by default the behaviour policy's kind) (:func:`parse_logged_id`,
   :func:`format_logged_id`). Two slashes tell it from an RT dataset (one slash), so :func:`dtradar_data.load`
-  accepts both (:func:`is_logged_name`).
+  and the ``list``/``info``/``verify`` commands accept both (:func:`is_logged_name`; :func:`parse_name` and
+  :func:`format_name` are the pair for either form).
 
 Modelled on Minari (``namespace/name-v0``) and huggingface_hub (``repo@revision``):
 
@@ -105,6 +106,11 @@ def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
     scenes = sorted(set(known or ()))
     candidates = names_of(scenes)
     parts = name.split("/")
+    if len(parts) == 3 and all(SCENE_RE.fullmatch(p) for p in parts):
+        raise UnknownNameError(
+            f"{text!r} is a logged dataset id ({LOGGED_GRAMMAR}), not an RT dataset id",
+            hint=f"use {GRAMMAR} here, or open it as a logged dataset (dtradar_data.load, or parse_name)",
+        )
     if len(parts) != 2 or not SCENE_RE.fullmatch(parts[0]) or not parts[1]:
         # "cubicle" alone is the most common slip: suggest both of its variants.
         guess = [c for c in candidates if c.startswith(f"{name.lower()}/")] or None
@@ -173,10 +179,28 @@ def parse_logged_id(text: str | LoggedId) -> LoggedId:
         )
     scene, variant, behaviour = parts
     if variant not in VARIANTS:
-        raise UnknownNameError(f"unknown variant {variant!r} in {text!r}", hint=f"use one of: {', '.join(VARIANTS)}")
+        suggestion = did_you_mean(variant, VARIANTS)
+        raise UnknownNameError(
+            f"unknown variant {variant!r} in {text!r}" + (f"; {suggestion}" if suggestion else ""),
+            hint=f"use one of: {', '.join(VARIANTS)}",
+        )
     return LoggedId(scene, variant, behaviour, revision)
 
 
 def format_logged_id(lid: LoggedId) -> str:
     """The inverse of :func:`parse_logged_id`."""
     return lid.name + (f"@{lid.revision}" if lid.revision else "")
+
+
+# ------------------------------------------------------------------------------------------------- either form
+def parse_name(text: str | DatasetId | LoggedId, *, known: Iterable[str] | None = None) -> DatasetId | LoggedId:
+    """Either form of the grammar: a logged id when the name has two slashes (:func:`parse_logged_id`), else an RT
+    id (:func:`parse_id`, checked against the ``known`` scenes when given). Parsed ids pass through."""
+    if isinstance(text, (DatasetId, LoggedId)):
+        return text
+    return parse_logged_id(text) if is_logged_name(text) else parse_id(text, known=known)
+
+
+def format_name(dataset_id: DatasetId | LoggedId) -> str:
+    """The inverse of :func:`parse_name`: ``parse_name(format_name(i)) == i`` for either form."""
+    return format_logged_id(dataset_id) if isinstance(dataset_id, LoggedId) else format_id(dataset_id)

@@ -19,13 +19,18 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from filelock import FileLock
 from tqdm.auto import tqdm
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    DatasetNotFoundError,
+    InvalidCoordinatesError,
+    InvalidSettingError,
+)
+from dtradar_data.core.files import waiting_lock
 from dtradar_data.core.ids import DatasetId, format_id
-from dtradar_data.core.layout import work_root
+from dtradar_data.core.layout import PATHS_FILE, data_root, refs_path, version_dir, work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
 from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
@@ -33,7 +38,7 @@ from dtradar_data.geometry.xml_meshes import ground_height
 from dtradar_data.pipeline import differential
 from dtradar_data.pipeline.batches import batch_path, load_batch, save_batch, trace_batch
 from dtradar_data.pipeline.coverage import COVERAGE_SUBCELLS, render_coverage_png
-from dtradar_data.pipeline.executors import import_ray, trace_on_ray
+from dtradar_data.pipeline.executors import check_ray_address, import_ray, trace_on_ray
 from dtradar_data.pipeline.resources import check_resources
 from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
@@ -68,7 +73,7 @@ class BuildConfig:
     coverage_map: bool = True
     """Also render the RadioMapSolver coverage map (PNG with the obstacles drawn)."""
     coverage_samples: int = 2_000_000
-    """Rays for the coverage map."""
+    """Rays for the coverage map (none is rendered with --no-coverage-map, so then this has no effect)."""
     progress: bool = True
     """Show a progress bar."""
     osm: str | None = None
@@ -82,17 +87,22 @@ class BuildConfig:
     """XML scenes: the transmitter position X Y Z in metres."""
     executor: Literal["serial", "ray"] = "serial"
     """Where trace batches run: serial (this process, the default) or ray (Ray workers; `pip install 'dtradar[ray]'`).
-    Both give the same table and version."""
+    Both give the same table and version. A --differential re-trace always runs in this process."""
     ray_address: str | None = None
-    """With --executor ray: an existing Ray cluster (e.g. ray://head:10001 or auto); default: a local Ray started
-    for this build."""
+    """With --executor ray: an existing Ray cluster (HOST:PORT as `ray start --head` prints it, ray://HOST:10001, or
+    auto; else $RAY_ADDRESS); default: a local Ray started for this build. A cluster that does not answer within
+    seconds fails the build before anything is traced."""
     workers: int = 0
     """With --executor ray: Ray workers (one scene each); 0 = one per CPU of the cluster."""
     differential: bool = False
-    """Dynamic twins: start from the newest stored blueprint and re-trace only the cells whose radio features the
-    changed objects can affect (see dtradar_data.pipeline.differential); the card records the parent version."""
+    """Dynamic twins: start from the newest stored blueprint built with the same settings (RT settings, grid,
+    transmitter, library versions ...; any difference is refused before tracing, naming it) and re-trace only the
+    cells whose radio features the changed objects can affect (see dtradar_data.pipeline.differential); the card
+    records the parent version. With --variant all the blueprint is traced in full first and the dynamic twin
+    re-traced from it; --variant blueprint is refused (a blueprint has no parent)."""
     retrace_radius_m: float = 1.0
-    """With --differential: also re-trace cells within this distance of a changed object or of its line of sight."""
+    """With --differential (only): also re-trace cells within this distance of a changed object or of its line of
+    sight."""
     tx_pose_error: tuple[float, float] | None = None
     """OFFSET_M ANGLE_DEG: build the antenna-pose-error twin instead, its transmitter moved this far horizontally and
     its array turned this many degrees off its boresight (seeded by --tx-pose-seed; same pose for every variant),
@@ -108,6 +118,22 @@ class BuildConfig:
             )
         if self.retrace_radius_m < 0:
             raise InvalidSettingError(f"--retrace-radius-m {self.retrace_radius_m} must be >= 0")
+        if self.retrace_radius_m != BuildConfig.retrace_radius_m and not self.differential:
+            raise InvalidSettingError(
+                "--retrace-radius-m applies to --differential only", hint="add --differential, or drop it"
+            )
+        if self.differential and self.variant == "blueprint":
+            raise InvalidSettingError(
+                "--differential applies to dynamic twins only: a blueprint has no parent to start from, it is always "
+                "traced in full",
+                hint="drop --differential, or build --variant dynamic (or all) with it",
+            )
+        if self.differential and self.variant == "dynamic" and self.executor == "ray":
+            raise InvalidSettingError(
+                "--executor ray does not apply to a --differential build of the dynamic twin: its few re-traced "
+                "cells are traced in this process",
+                hint="drop --executor ray (and --ray-address, --workers), or drop --differential to trace it on Ray",
+            )
         if self.workers < 0:
             raise InvalidSettingError(f"--workers {self.workers} must be >= 0 (0 = one per CPU)")
         if self.tx_pose_error is not None:
@@ -261,8 +287,14 @@ def build_one(spec, config: BuildConfig) -> Dataset:
     work_dir = work_root() / spec.scene / spec.variant / version
     work_dir.parent.mkdir(parents=True, exist_ok=True)
     # One build of a version at a time: a second process waits here, then finds the version built and reuses it
-    # (without the lock, the first one's cleanup deleted the shared work folder under the second).
-    with FileLock(work_dir.parent / f"{version}.lock"):
+    # (without the lock, the first one's cleanup deleted the shared work folder under the second). The wait says
+    # whom it waits for, and how far that build has come, on stderr.
+    with waiting_lock(
+        work_dir.parent / f"{version}.lock",
+        f"building {name} version {version}" + (" (differential)" if parent is not None else ""),
+        then="this build reuses that version",
+        progress=lambda: _work_progress(work_dir, spec, config.rt.batch_size),
+    ):
         if local.version_exists(ds_id, version):
             print(f"{name}: version {version} already built, reusing it")
             return local.load(name, revision=version)
@@ -298,22 +330,78 @@ def build_one(spec, config: BuildConfig) -> Dataset:
         return _trace_and_store(spec, config, ds_id, version, inputs, work_dir)
 
 
+def _work_progress(work_dir: Path, spec, batch_size: int) -> str:
+    """How far the build holding a version's lock has come, from its work folder's finished batch files."""
+    done = len(list(work_dir.glob("batch_*.npz"))) if work_dir.is_dir() else 0
+    if not done:
+        return "it has finished no trace batch yet"
+    return f"it has finished {done} of {-(-int((~occupancy(spec)).sum()) // batch_size)} trace batches"
+
+
 def differential_parent(spec, config: BuildConfig):
-    """The newest stored blueprint of ``spec``'s scene (with its per-path table) and its scene, checked to differ from
-    ``spec`` only in objects: same grid, transmitter, heights and buildings."""
-    parent = local.load(f"{spec.scene}/blueprint", paths=config.per_path)
+    """The stored blueprint a differential build of ``spec`` starts from (with its per-path table when
+    ``config.per_path``), and its scene: see :func:`differential_parent_version`."""
+    version = differential_parent_version(spec, config)
+    parent = local.load(f"{spec.scene}/blueprint", revision=version, paths=config.per_path)
     recorded = parent.meta["scene_spec"]
-    here = spec.to_dict()
-    same = ("grid", "tx", "rx_height_m", "robot_height_m", "room", "prisms", "base")
-    differs = [k for k in same if recorded.get(k) != here.get(k)]
-    if differs:
-        raise InvalidSettingError(
-            f"--differential: {spec.scene}/blueprint@{parent.version} differs from "
-            f"{spec.name} in {', '.join(differs)}, not only in objects",
-            hint="build the dynamic twin in full (drop --differential)",
-        )
     parent_spec = dataclasses.replace(spec, variant="blueprint", objects=tuple(Box(**o) for o in recorded["objects"]))
     return parent, parent_spec
+
+
+def differential_parent_version(spec, config: BuildConfig) -> str:
+    """The newest stored blueprint of ``spec``'s scene whose rows a differential build may keep: every input they
+    depend on equals this build's (the scene but its objects, every hashed RT setting, the schema and library
+    versions, the per-path table: :func:`differential.inherited_differences`), even if a newer one was built with
+    other settings. Otherwise :class:`InvalidSettingError` naming what differs in the closest stored blueprint (the
+    fewest differences; the newest of equals), before anything is traced; reads ``meta.json`` files only."""
+    config = scene_config(config, spec)
+    name = f"{spec.scene}/blueprint"
+    how = (
+        f"build {name} with this build's settings first (`python -m dtradar_data build --scene <the same scene> "
+        "--variant blueprint` with the same --rt.* and scene flags; `--variant all --differential` does both), or "
+        "drop --differential to trace the dynamic twin in full"
+    )
+    did = DatasetId(spec.scene, "blueprint", None)
+    if not local.local_versions(did):  # a user's scene is not a known name: no "did you mean" another scene
+        raise DatasetNotFoundError(
+            f"--differential starts from a stored {name}, and none is in {data_root()}", hint=how
+        )
+    _, newest, _ = local.resolve(did)
+    here = spec.to_dict()
+    rt = config.rt.hashed()
+    libraries = versions.library_versions()
+    candidates = [newest] + [v for v in reversed(local.local_versions(did)) if v != newest]
+    closest: tuple[str, list[str]] | None = None
+    for version in candidates:
+        vdir = version_dir(did.scene, did.variant, version)
+        try:
+            meta = local.read_meta(vdir)
+        except CorruptDatasetError:
+            if version == newest:
+                raise
+            continue
+        differs = differential.inherited_differences(
+            meta,
+            here,
+            rt,
+            schema_version=SCHEMA_VERSION,
+            libraries=libraries,
+            per_path=config.per_path,
+            parent_has_paths=(vdir / PATHS_FILE).is_file(),
+        )
+        if not differs:
+            return version
+        if closest is None or len(differs) < len(closest[1]):
+            closest = (version, differs)
+    assert closest is not None  # the newest one's meta.json was read, or its error raised
+    version, differs = closest
+    tag = versions.read_refs(refs_path(did.scene, did.variant)).tag_of(version)
+    which = "the only one" if len(candidates) == 1 else "the newest" if version == newest else "the closest"
+    raise InvalidSettingError(
+        f"--differential: no stored {name} was built with the inputs whose rows {spec.name} would keep; "
+        f"{which} of {len(candidates)}, {name}@{tag or version} ({version}), differs in: {'; '.join(differs)}",
+        hint=how,
+    )
 
 
 def _trace_and_store(
@@ -456,10 +544,29 @@ def build_specs(config: BuildConfig) -> list:
 
 
 def build(config: BuildConfig) -> list[Dataset]:
-    """Build the requested variant(s) of ``config.scene``; returns the stored datasets."""
+    """Build the requested variant(s) of ``config.scene``; returns the stored datasets.
+
+    Everything that can refuse the build is checked before the first variant is traced, so `all` does not fail
+    after the blueprint and a refused build changes nothing on disk: each variant's scene and resources, that
+    ``--differential`` has a dynamic twin to apply to and a stored parent with the same inputs (unless this build
+    traces that blueprint first), and that a ``--ray-address`` cluster answers."""
     specs = build_specs(config)
-    for spec in specs:  # every variant before the first is traced, so `all` does not fail after the blueprint
+    if config.differential:
+        dynamic = [s for s in specs if s.variant == "dynamic"]
+        if not dynamic:
+            raise InvalidSettingError(
+                f"--differential applies to dynamic twins, and {config.scene} has none to build "
+                f"(this build traces {', '.join(s.name for s in specs)} in full)",
+                hint="drop --differential",
+            )
+        traced_first = {s.scene for s in specs if s.variant == "blueprint"}
+        for spec in dynamic:
+            if spec.scene not in traced_first:
+                differential_parent_version(spec, config)
+    for spec in specs:
         scene_config(config, spec).check_scene(spec)
         cfg = scene_config(config, spec)
         check_resources(spec.name, int((~occupancy(spec)).sum()), cfg.rt, work_root(), per_path=cfg.per_path)
+    if config.executor == "ray" and not (config.differential and all(s.variant == "dynamic" for s in specs)):
+        check_ray_address(config.ray_address)
     return [build_one(spec, config) for spec in specs]

@@ -13,6 +13,11 @@ can only change when a changed object (its old or new place) touches a path that
 Every other cell keeps the parent version's row (and its per-path rows). What this misses are weaker paths' changes
 away from these cells and second legs of reflections; the README reports the agreement with a full re-trace. The
 dataset's card records the parent version, the rule and radius, and how many cells were re-traced for each reason.
+
+The kept rows are the parent's, traced with the parent's inputs, while the card names this build's. So a parent is
+used only when every input its rows depend on equals this build's (:func:`inherited_differences`): the scene except
+its objects (grid, transmitter, heights, room, buildings, base mesh), every RT setting that feeds the version (the
+frequency, depth, samples, seed, batch size ...), the schema and library versions, and the per-path table.
 """
 
 from __future__ import annotations
@@ -28,6 +33,60 @@ from dtradar_data.rt import features
 
 RULE = 1  # bump when retrace_mask changes what it selects (it is part of the version)
 REASONS = ("occupancy", "near", "line_of_sight", "departure")
+#: Scene fields a dynamic twin may change from its blueprint: its objects, and the words that name and describe it.
+#: Every other field (grid, tx, heights, room, prisms, base, and any added later) must equal the parent's.
+MAY_DIFFER = ("objects", "scene", "variant", "title", "description", "source", "licence", "attribution")
+
+
+def inherited_differences(
+    parent_meta: dict,
+    scene_spec: dict,
+    rt: dict,
+    *,
+    schema_version: int,
+    libraries: dict,
+    per_path: bool,
+    parent_has_paths: bool,
+) -> list[str]:
+    """What the parent's rows were made with that this build would make differently, one phrase each (parent's
+    value first); empty when its kept rows are what this build would have traced. ``scene_spec`` and ``rt`` are this
+    build's ``SceneSpec.to_dict()`` and ``RTSettings.hashed()``; ``parent_meta`` is the parent's ``meta.json``."""
+    out = []
+    recorded = parent_meta.get("scene_spec") or {}
+    for key in sorted((set(recorded) | set(scene_spec)) - set(MAY_DIFFER)):
+        if recorded.get(key) != scene_spec.get(key):
+            out.append(_differs(f"scene {key}", recorded.get(key), scene_spec.get(key)))
+    parent_rt = parent_meta.get("rt") or {}
+    for key in rt:
+        if parent_rt.get(key, _MISSING) != rt[key]:
+            out.append(_differs("--rt." + key.replace("_", "-"), parent_rt.get(key, _MISSING), rt[key]))
+    if parent_meta.get("schema_version") != schema_version:
+        out.append(_differs("schema version", parent_meta.get("schema_version"), schema_version))
+    parent_libs = parent_meta.get("library_versions") or {}
+    for lib in sorted(set(parent_libs) | set(libraries)):
+        if parent_libs.get(lib, _MISSING) != libraries.get(lib, _MISSING):
+            out.append(_differs(lib, parent_libs.get(lib, _MISSING), libraries.get(lib, _MISSING)))
+    if per_path and not parent_has_paths:
+        out.append("the per-path table: the parent has none (built with --no-per-path), this build stores one")
+    return out
+
+
+class _Missing:
+    def __repr__(self) -> str:
+        return "(not recorded)"
+
+
+_MISSING = _Missing()
+
+
+def _differs(what: str, parent, here) -> str:
+    def show(v) -> str:
+        return f"{v:g}" if isinstance(v, float) else str(v) if isinstance(v, (str, _Missing)) else repr(v)
+
+    a, b = show(parent), show(here)
+    if len(a) + len(b) > 80:
+        return f"{what} differs"
+    return f"{what} {a} in the parent, {b} here"
 
 
 def changed_boxes(parent_spec, spec) -> list:

@@ -8,29 +8,27 @@ and the table is assembled from the work folder exactly as after a serial build 
 
 A worker that dies (a crash, ``kill -9``, a lost node) is restarted by Ray and its batch retried
 (``max_restarts``/``max_task_retries``); if the build stops anyway, its finished batches stay in the work folder and
-the next build resumes from them. Ray is optional: ``pip install 'dtradar[ray]'``.
+the next build resumes from them. Ray is optional: ``pip install 'dtradar[ray]'``. A cluster address
+(``--ray-address``, ``$RAY_ADDRESS``) where nothing answers fails the build within seconds, before anything is
+written (:mod:`dtradar_data.core.ray_cluster`, checked by ``build`` first), instead of Ray retrying for minutes.
 """
 
 from __future__ import annotations
 
 import os
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
-from dtradar_data.core.errors import MissingDependencyError
+from dtradar_data.core.ray_cluster import RAY_INSTALL, check_ray_address, connect_ray, import_ray, wait_for_cpus
 from dtradar_data.pipeline.batches import batch_path, save_batch, trace_batch
 
-RAY_INSTALL = "pip install 'dtradar[ray]'  (or: pip install 'ray>=2.40')"
+__all__ = ["RAY_INSTALL", "TraceWorker", "check_ray_address", "import_ray", "start_ray", "trace_on_ray"]
+
 TASK_RETRIES = 3
-
-
-def import_ray():
-    try:
-        import ray
-    except ImportError as e:
-        raise MissingDependencyError("--executor ray needs Ray, which is not installed", hint=RAY_INSTALL) from e
-    return ray
+WORKER_NOTICE_EVERY_S = 60.0
 
 
 class TraceWorker:
@@ -51,15 +49,11 @@ class TraceWorker:
 
 
 def start_ray(ray, address: str | None, workers: int) -> bool:
-    """Connect to ``address`` or start a local Ray with ``workers`` CPUs (0 = all); True when we started it."""
-    if ray.is_initialized():
-        return False
-    kwargs = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-    if address:
-        ray.init(address=address, **kwargs)
-    else:
-        ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
-    return True
+    """Connect to ``address`` (or ``$RAY_ADDRESS``), bounded: a cluster that does not answer is a
+    :class:`~dtradar_data.core.errors.RayClusterError` within seconds (see
+    :func:`~dtradar_data.core.ray_cluster.connect_ray`); else start a local Ray with ``workers`` CPUs (0 = all).
+    True when we started or connected it."""
+    return connect_ray(ray, address, num_cpus=workers or os.cpu_count() or 1)
 
 
 def trace_on_ray(
@@ -82,10 +76,12 @@ def trace_on_ray(
     ray = import_ray()
     started = start_ray(ray, address, workers)
     try:
+        wait_for_cpus(ray, 1, what="a trace worker", address=address)  # else the actors would wait for ever
         cpus = int(ray.cluster_resources().get("CPU", 1))
         n_actors = max(1, min(len(todo), workers or cpus))
         actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=TASK_RETRIES)(TraceWorker)
         actors = [actor.remote(spec, settings, per_path) for _ in range(n_actors)]
+        _wait_for_a_worker(ray, actors, spec.name, cpus)
         size = settings.batch_size
         pool = ray.util.ActorPool(actors)
 
@@ -102,3 +98,19 @@ def trace_on_ray(
     finally:
         if started:
             ray.shutdown()
+
+
+def _wait_for_a_worker(ray, actors, name: str, cpus: int) -> None:
+    """Wait until the first worker has started and loaded the scene, saying on stderr every
+    :data:`WORKER_NOTICE_EVERY_S` how long it has waited and how busy the cluster is (a cluster whose CPUs other
+    jobs hold starts none until they finish)."""
+    pending = [a.pid.remote() for a in actors]
+    start = time.monotonic()
+    while not ray.wait(pending, num_returns=1, timeout=WORKER_NOTICE_EVERY_S)[0]:
+        free = ray.available_resources().get("CPU", 0)
+        print(
+            f"{name}: waited {time.monotonic() - start:.0f} s for a Ray trace worker to start and load the scene "
+            f"({free:g} of the cluster's {cpus} CPUs free; Ctrl-C is safe, finished batches are kept)",
+            file=sys.stderr,
+            flush=True,
+        )

@@ -5,15 +5,15 @@ and token lookup this reuses): one repo per ``scene/variant/behaviour`` (default
 ``dtradar/dtradar-<scene>-<variant>-<behaviour>``), one commit per version holding ``transitions.parquet``,
 ``meta.json`` and the card ``README.md`` (its ``configs`` point the Hub viewer and ``datasets.load_dataset`` at the
 Parquet file), tagged with the local tag and the content version. A pull downloads into a temporary folder under
-``<root>/work``, checks the record, the file's sha256, the table's invariants and that the version is the hash of
-the recorded logging inputs, and only then moves it into the store.
+``<root>/work`` (held by its process: one that a killed pull left is removed by the next log or pull), checks the
+record, the file's sha256, the table's invariants and that the version is the hash of the recorded logging inputs,
+and only then moves it into the store (replacing a damaged copy of that version).
 """
 
 from __future__ import annotations
 
 import contextlib
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -26,14 +26,18 @@ from dtradar_data.core.errors import (
 from dtradar_data.core.ids import is_tag
 from dtradar_data.publish import hub
 from dtradar_data.store.logged import (
+    STAGE_PREFIXES,
     TRANSITIONS_FILE,
     LoggedId,
     check_version_dir,
+    clean_logged_stages,
     install_logged,
+    looks_like_stage,
     parse_logged_id,
     refs_path,
     resolve_logged,
 )
+from dtradar_data.store.logged.staging import held_stage
 from dtradar_data.store.versions import read_refs
 
 FILES = (TRANSITIONS_FILE, P.META_FILE, P.CARD_FILE)
@@ -99,9 +103,9 @@ def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | No
         with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
             return resolve_logged(lid.with_revision(None), revision)[2]
     repo_id = repo_id or default_repo(lid)
-    P.work_root().mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix="pull-logged-", dir=P.work_root()))
-    try:
+    # held by this process: the next log or pull removes it if this one is killed (store.logged.staging)
+    clean_logged_stages()
+    with held_stage(P.work_root(), STAGE_PREFIXES[1], lockless=looks_like_stage) as stage:
         with hub.hub_errors("pull from", repo_id):
             got = _download(repo_id, revision or "main", stage / "download", stage / "cache")
         version_dir = stage / "version"
@@ -118,8 +122,6 @@ def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | No
             ) from exc
         preferred = revision if revision and is_tag(revision) else hub._card_tag(version_dir / P.CARD_FILE)
         return install_logged(lid, version_dir, preferred_tag=preferred)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
 
 
 __all__ = ["FILES", "default_repo", "publish", "pull"]

@@ -6,6 +6,7 @@ No Sionna import here, so configs, the CLI and the store can use the settings wi
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -19,6 +20,28 @@ Device = Literal["auto", "cpu", "cuda"]
 def flag(name: str) -> str:
     """The ``build`` flag of a settings field (tyro nests them under ``--rt.``)."""
     return "--rt." + name.replace("_", "-")
+
+
+def _wrong_types(settings: RTSettings) -> list[str]:
+    """Fields whose value is not of their type (a string or a bool for a number, a fraction for a count): the Python
+    API's mistakes, since the command line converts every value (a NaN included; the range checks refuse it). Numbers
+    of another numeric type (an int frequency, a NumPy integer) are converted in place, so equal settings hash
+    equally."""
+    problems = []
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        if f.type in ("float", "int"):
+            ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
+            ok = ok and (f.type == "float" or isinstance(value, numbers.Integral))
+            if ok:
+                object.__setattr__(settings, f.name, float(value) if f.type == "float" else int(value))
+        elif f.type == "bool":
+            ok = isinstance(value, bool)
+        else:
+            ok = isinstance(value, str)
+        if not ok:
+            problems.append(f"{flag(f.name)} {value!r} is not a{'n' if f.type == 'int' else ''} {f.type}")
+    return problems
 
 
 @dataclass(frozen=True)
@@ -65,6 +88,12 @@ class RTSettings:
 
     def __post_init__(self) -> None:
         # Checked here, before the first trace; messages name the command-line flag (`build --rt.<name>`).
+        wrong_type = _wrong_types(self)
+        if wrong_type:  # the range checks below would fail on them with a TypeError, not naming the flag
+            raise InvalidSettingError(
+                "invalid ray-tracing settings: " + "; ".join(wrong_type),
+                hint="see `python -m dtradar_data build --help` for the accepted values",
+            )
         problems = []
         if not 1e8 <= self.frequency_hz <= 1e11:
             problems.append(f"{flag('frequency_hz')} {self.frequency_hz:g} is outside 100 MHz .. 100 GHz")

@@ -6,7 +6,9 @@ path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A 
 (``dallas``): :func:`build_targets` expands it to its quadrants. Scenes built on a Mitsuba/Sionna XML
 (:mod:`dtradar_data.scenes.xml_scene`): Sionna's bundled cities (``sionna:munich``, dataset ``sionna-munich``), a
 user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section. :func:`tx_pose_error` makes
-the antenna-pose-error twin of any of them (``<scene>-txpose``: the transmitter moved and turned a little).
+the antenna-pose-error twin of any of them (``<scene>-txpose``: the transmitter moved and turned a little). A user's
+scene file may not take a built-in name (:mod:`dtradar_data.scenes.names`), and the options that replace part of a
+scene are checked before any file is read (:mod:`dtradar_data.scenes.options`).
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from dtradar_data.scenes.city.reader import (
 )
 from dtradar_data.scenes.indoor.reader import load_room_file
 from dtradar_data.scenes.model import SceneSpec
+from dtradar_data.scenes.names import check_user_scene_name
+from dtradar_data.scenes.options import check_scene_options
 from dtradar_data.scenes.sionna_scenes import is_sionna_name, sionna_dataset_scenes, sionna_scene_names
 from dtradar_data.scenes.tx_pose import tx_pose_error
 from dtradar_data.scenes.xml_scene import is_mesh_scene_file, load_mesh_scene_file, load_sionna_spec, load_xml_spec
@@ -71,9 +75,9 @@ def scene_file(scene: str) -> Path:
 def is_scene_path(scene: str | Path) -> bool:
     """Whether ``scene`` names a file rather than a built-in scene (it has a suffix or a directory part)."""
     text = str(scene)
-    if not isinstance(scene, Path) and is_sionna_name(text):
-        return False
-    return isinstance(scene, Path) or text.endswith((".toml", ".xml")) or "/" in text or "\\" in text
+    if isinstance(scene, Path) or text.endswith((".toml", ".xml")):  # sionna-room.toml is a file, not a Sionna scene
+        return True
+    return not is_sionna_name(text) and ("/" in text or "\\" in text)
 
 
 def load_scene_spec(
@@ -93,6 +97,7 @@ def load_scene_spec(
     """
     if variant not in VARIANTS:
         raise unknown_name("variant", variant, VARIANTS)
+    check_scene_options(footprints=footprints, cell_m=cell_m, grid=grid, tx=tx)  # before any file is read
     mesh_options = {"grid": grid, "tx": tx, "cell_m": cell_m}
     if is_scene_path(scene):
         path = Path(scene).expanduser()
@@ -107,7 +112,9 @@ def load_scene_spec(
         if is_mesh_scene_file(path):
             return load_mesh_scene_file(path, variant, **mesh_options)
         _indoor_only(footprints, cell_m, str(path), grid, tx)
-        return load_room_file(path, variant)
+        spec = load_room_file(path, variant)
+        check_user_scene_name(spec.scene, path)
+        return spec
     scene = str(scene)
     if is_sionna_name(scene):
         _no_footprints(footprints, scene)

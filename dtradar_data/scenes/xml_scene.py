@@ -18,14 +18,16 @@ geometry; and a small scene file (TOML) with an ``[xml]`` section names the XML 
 
 from __future__ import annotations
 
+import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tomllib
 from pydantic import BeforeValidator, Field, ValidationError
 
-from dtradar_data.core.errors import SceneFileError
+from dtradar_data.core.errors import InvalidSettingError, SceneFileError
 from dtradar_data.core.grid import Grid
 from dtradar_data.core.ids import SCENE_RE
 from dtradar_data.scenes.fields import Num, Pos, PosInt, SceneFileModel, SceneName, Text
@@ -37,6 +39,8 @@ from dtradar_data.scenes.model import (
     SceneSpec,
     TxSpec,
 )
+from dtradar_data.scenes.names import check_user_scene_name
+from dtradar_data.scenes.options import check_cell_m, grid_from_option, grid_with_cell, tx_from_option
 from dtradar_data.scenes.sionna_scenes import (
     SIONNA_ATTRIBUTION,
     SIONNA_DEFAULTS,
@@ -58,9 +62,9 @@ def _vec3(value: Any) -> tuple[float, float, float]:
     if not (
         isinstance(value, (list, tuple))
         and len(value) == 3
-        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
     ):
-        raise ValueError(f"must be [x, y, z] in metres, got {value!r}")
+        raise ValueError(f"must be [x, y, z], three finite numbers of metres, got {value!r}")
     return tuple(float(v) for v in value)  # type: ignore[return-value]
 
 
@@ -141,7 +145,7 @@ def _parse(data: dict[str, Any], origin: str) -> MeshSceneDocument:
 
 def _spec(
     doc: MeshSceneDocument,
-    base: MeshScene,
+    read_base: Callable[[], MeshScene],
     variant: str,
     *,
     grid: tuple | None,
@@ -150,13 +154,12 @@ def _spec(
     origin: str,
 ) -> SceneSpec:
     g = doc.grid
-    the_grid = Grid(float(g.x0_m), float(g.y0_m), float(g.cell_m), int(g.nx), int(g.ny))
     if grid is not None:
         the_grid = grid_from_option(grid)
+    else:
+        the_grid = _file_grid(g, origin)
     if cell_m is not None:  # same area, other cells
-        x0, y0, x1, y1 = the_grid.bounds()
-        nx, ny = max(1, round((x1 - x0) / cell_m)), max(1, round((y1 - y0) / cell_m))
-        the_grid = Grid(x0 + cell_m / 2, y0 + cell_m / 2, float(cell_m), nx, ny)
+        the_grid = grid_with_cell(the_grid, check_cell_m(cell_m))
     t = doc.tx
     position = t.position_m if tx is None else tx_from_option(tx)
     if variant != "blueprint":
@@ -164,6 +167,7 @@ def _spec(
             f"{origin} has no {variant} twin: only its blueprint",
             hint="build it with --variant blueprint (the default `all` does this for XML scenes)",
         )
+    base = read_base()  # reads and hashes the meshes: only once the cheap checks above have passed
     return SceneSpec(
         scene=doc.scene.name,
         variant=variant,
@@ -175,7 +179,7 @@ def _spec(
         grid=the_grid,
         tx=TxSpec(
             position_m=tuple(position),
-            look_at_m=t.look_at_m or _grid_centre(the_grid, doc.robot.rx_height_m),
+            look_at_m=_grid_centre(the_grid, doc.robot.rx_height_m) if t.look_at_m is None else t.look_at_m,
             num_rows=t.num_rows,
             num_cols=t.num_cols,
             pattern=t.pattern,
@@ -191,35 +195,22 @@ def _spec(
     )
 
 
+def _file_grid(g: GridSection, origin: str) -> Grid:
+    """The scene file's [grid]; too many cells is the file's mistake, named with its section."""
+    try:
+        return Grid(float(g.x0_m), float(g.y0_m), float(g.cell_m), int(g.nx), int(g.ny))
+    except InvalidSettingError as e:
+        raise SceneFileError(
+            f"{origin}: [grid]: {e.message.removeprefix('invalid receiver grid: ')}",
+            hint="use larger cells (cell_m) or fewer of them (nx, ny)",
+        ) from e
+
+
 def _grid_centre(grid: Grid, height_m: float) -> tuple[float, float, float]:
     """Where a transmitter without ``look_at_m`` points: the grid's centre at receiver height (a tr38901 array
     otherwise faces +x and leaves the cells behind it in its back lobe), as for the city quadrants."""
     x0, y0, x1, y1 = grid.bounds()
     return (round((x0 + x1) / 2, 3), round((y0 + y1) / 2, 3), float(height_m))
-
-
-def grid_from_option(grid: tuple) -> Grid:
-    """``--grid X0 Y0 CELL NX NY`` as a :class:`Grid` (checked)."""
-    try:
-        x0, y0, cell, nx, ny = grid
-        out = Grid(float(x0), float(y0), float(cell), int(nx), int(ny))
-    except (TypeError, ValueError) as e:
-        raise SceneFileError(
-            f"--grid {grid!r}: expected X0 Y0 CELL_M NX NY", hint="e.g. --grid -100 -100 5 40 40"
-        ) from e
-    if not (out.cell_m > 0 and out.nx > 0 and out.ny > 0 and out.nx == nx and out.ny == ny):
-        raise SceneFileError(
-            f"--grid {grid!r}: CELL_M must be positive, NX and NY positive integers",
-            hint="e.g. --grid -100 -100 5 40 40",
-        )
-    return out
-
-
-def tx_from_option(tx: tuple) -> tuple[float, float, float]:
-    try:
-        return _vec3(list(tx))
-    except ValueError as e:
-        raise SceneFileError(f"--tx {tx!r}: expected X Y Z in metres", hint="e.g. --tx 0 0 20") from e
 
 
 def load_mesh_scene_file(path: str | Path, variant: str, *, grid=None, tx=None, cell_m=None) -> SceneSpec:
@@ -232,10 +223,14 @@ def load_mesh_scene_file(path: str | Path, variant: str, *, grid=None, tx=None, 
     except tomllib.TOMLDecodeError as e:
         raise SceneFileError(f"{path}: not valid TOML: {e}", hint="fix the syntax at the reported line") from e
     doc = _parse(data, str(path))
+    check_user_scene_name(doc.scene.name, path)  # before the meshes are read and hashed
     ref = doc.xml.path
     if is_sionna_name(ref):
         key = sionna_key(ref)
-        base = mesh_scene(sionna_xml(key), SIONNA_PREFIX + key, doc.xml.ground)
+
+        def base() -> MeshScene:
+            return mesh_scene(sionna_xml(key), SIONNA_PREFIX + key, doc.xml.ground)
+
     else:
         xml = Path(ref).expanduser()
         xml = xml if xml.is_absolute() else path.parent / xml
@@ -244,7 +239,10 @@ def load_mesh_scene_file(path: str | Path, variant: str, *, grid=None, tx=None, 
                 f"{path}: [xml] path: {ref!r} does not exist ({xml})",
                 hint="a relative path is relative to the scene file; or use sionna:<name>",
             )
-        base = mesh_scene(xml, xml.name, doc.xml.ground)
+
+        def base() -> MeshScene:
+            return mesh_scene(xml, xml.name, doc.xml.ground)
+
     return _spec(doc, base, variant, grid=grid, tx=tx, cell_m=cell_m, origin=str(path))
 
 
@@ -268,8 +266,15 @@ def load_sionna_spec(scene: str, variant: str, *, grid=None, tx=None, cell_m=Non
         },
         f"sionna:{key}",
     )
-    base = mesh_scene(sionna_xml(key), SIONNA_PREFIX + key)
-    return _spec(doc, base, variant, grid=grid, tx=tx, cell_m=cell_m, origin=f"sionna:{key}")
+    return _spec(
+        doc,
+        lambda: mesh_scene(sionna_xml(key), SIONNA_PREFIX + key),
+        variant,
+        grid=grid,
+        tx=tx,
+        cell_m=cell_m,
+        origin=f"sionna:{key}",
+    )
 
 
 def load_xml_spec(path: str | Path, variant: str, *, grid=None, tx=None, cell_m=None) -> SceneSpec:
@@ -282,9 +287,15 @@ def load_xml_spec(path: str | Path, variant: str, *, grid=None, tx=None, cell_m=
             hint="pass --grid X0 Y0 CELL_M NX NY and --tx X Y Z, or write a small scene file "
             "with [xml] path = ... (README, 'Sionna scenes')",
         )
-    base = mesh_scene(path, path.name)
     stem = re.sub(r"[^a-z0-9_-]+", "-", path.stem.lower()).strip("-_") or "xml-scene"
     name = stem if SCENE_RE.fullmatch(stem) else f"xml-{stem}"
+    check_user_scene_name(
+        name,
+        path,
+        where="the scene name taken from the file name",
+        rename="rename the .xml file (the dataset is named after it), or write a scene file with [xml] path = ... "
+        "and a [scene] name of your own (README, 'Sionna scenes')",
+    )
     doc = _parse(
         {
             "scene": {"name": name, "title": f"XML scene {path.name}"},
@@ -294,4 +305,4 @@ def load_xml_spec(path: str | Path, variant: str, *, grid=None, tx=None, cell_m=
         },
         str(path),
     )
-    return _spec(doc, base, variant, grid=grid, tx=tx, cell_m=cell_m, origin=str(path))
+    return _spec(doc, lambda: mesh_scene(path, path.name), variant, grid=grid, tx=tx, cell_m=cell_m, origin=str(path))

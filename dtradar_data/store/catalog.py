@@ -7,7 +7,7 @@ Every public function of the store takes a name as text or as a parsed :class:`~
 from __future__ import annotations
 
 from dtradar_data.core import layout
-from dtradar_data.core.ids import SCENE_RE, DatasetId, names_of, parse_id
+from dtradar_data.core.ids import SCENE_RE, DatasetId, LoggedId, names_of, parse_id, parse_name
 from dtradar_data.scenes import available_scenes
 
 
@@ -38,3 +38,12 @@ def as_id(name: str | DatasetId, *, check_known: bool = True) -> DatasetId:
     if isinstance(name, DatasetId):
         return name
     return parse_id(name, known=known_scenes() if check_known else None)
+
+
+def as_any_id(name: str | DatasetId | LoggedId, *, check_known: bool = True) -> DatasetId | LoggedId:
+    """Either form of the grammar (:func:`~dtradar_data.core.ids.parse_name`): an RT id, its scene checked against
+    the known ones, or a logged id (any parent: logged datasets may sit on synthetic twins; a name that is not
+    stored gets its "did you mean" from the logged store when it is resolved)."""
+    if isinstance(name, (DatasetId, LoggedId)):
+        return name
+    return parse_name(name, known=known_scenes() if check_known else None)

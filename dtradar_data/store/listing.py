@@ -1,4 +1,7 @@
-"""What the store holds: every dataset with its versions (listing), full verification, version history."""
+"""What the store holds: every dataset with its versions (listing), full verification, version history.
+
+Logged datasets (``scene/variant/behaviour``) go through the same paths: :func:`verify` takes either form of the
+id, and their listing is :func:`dtradar_data.store.logged.list_logged` (damaged versions flagged the same way)."""
 
 from __future__ import annotations
 
@@ -8,7 +11,7 @@ from typing import Any
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import CorruptDatasetError
-from dtradar_data.core.ids import VARIANTS, DatasetId
+from dtradar_data.core.ids import VARIANTS, DatasetId, LoggedId, is_logged_name
 from dtradar_data.scenes import builtin_names
 from dtradar_data.store.catalog import as_id, builtin_scenes
 from dtradar_data.store.local import (
@@ -18,6 +21,7 @@ from dtradar_data.store.local import (
     resolve,
     verify_dir,
 )
+from dtradar_data.store.logged import verify_logged
 from dtradar_data.store.versions import read_refs
 
 
@@ -131,8 +135,11 @@ def list_datasets() -> list[DatasetEntry]:
     return rows
 
 
-def verify(name: str | DatasetId, revision: str | None = None) -> dict[str, list[str]]:
-    """``{version: problems}`` for one version (``revision`` or ``@rev`` in ``name``) or, without one, all."""
+def verify(name: str | DatasetId | LoggedId, revision: str | None = None) -> dict[str, list[str]]:
+    """``{version: problems}`` for one version (``revision`` or ``@rev`` in ``name``) or, without one, all; an RT
+    dataset or a logged one (:func:`~dtradar_data.store.logged.verify_logged`), damaged versions included."""
+    if is_logged_name(name):
+        return verify_logged(name, revision)
     did = as_id(name)
     # damaged=True: a version folder without meta.json is reported as damaged, not as "not built"
     if revision or did.revision:

@@ -24,11 +24,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from filelock import FileLock
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import CorruptDatasetError, DtradarError, SchemaMismatchError
-from dtradar_data.core.files import json_safe, sha256_file
+from dtradar_data.core.files import json_safe, sha256_file, waiting_lock
 from dtradar_data.core.ids import HASH_RE, DatasetId
 from dtradar_data.core.record import RECORD_FORMAT
 from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, SCHEMA_VERSION
@@ -131,10 +130,11 @@ def _write_parquet(table: pa.Table, path: Path, meta_json: bytes) -> None:
     )
 
 
-def _locked(directory: Path) -> FileLock:
-    """An exclusive lock per dataset (a ``.lock`` file in its folder), so two processes cannot hand out one tag."""
+def _locked(directory: Path, name: str):
+    """An exclusive lock per dataset (a ``.lock`` file in its folder), so two processes cannot hand out one tag. It
+    is held for the moment of an install only; a wait longer than a couple of seconds says whom it waits for."""
     directory.mkdir(parents=True, exist_ok=True)
-    return FileLock(directory / ".lock")
+    return waiting_lock(directory / ".lock", f"storing a version of {name}", notice_after_s=2.0)
 
 
 # ------------------------------------------------------------------------------------------------------- writing
@@ -229,7 +229,7 @@ def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], pr
     """Under the dataset lock: tag, write meta.json and the card into ``stage``, rename it into place."""
     ddir = P.dataset_dir(did.scene, did.variant)
     final = ddir / version
-    with _locked(ddir):
+    with _locked(ddir, did.name):
         if (final / P.META_FILE).is_file():  # another process finished the same version meanwhile
             return final
         refs = read_refs(ddir / P.REFS_FILE)

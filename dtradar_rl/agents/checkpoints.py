@@ -12,17 +12,29 @@ from typing import Any
 import torch
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.errors import DtradarError, InvalidSettingError
 from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_rl.agents.policy import QNetwork
 from dtradar_rl.task.config import TwinConfig
 from dtradar_rl.task.observations import Normalizer
 
 CHECKPOINT_FORMAT = "dtradar-dqn/1"
+#: ``kind`` of a run's ``last.pt`` (weights plus optimiser, replay and random states, to resume); a ``model.pt`` is
+#: ``"model"``. Checkpoints written before ``kind`` was recorded have none (see ``train.checkpoints``).
+TRAINING_STATE = "training-state"
 
 
 class CheckpointError(DtradarError, FileNotFoundError):
     """A checkpoint that is missing or not a dtradar DQN checkpoint."""
+
+
+class WrongTwinError(InvalidSettingError):
+    """A checkpoint trained on another twin (another scene, variant or stored version) than the job works on."""
+
+
+def twin_record(ds: Dataset) -> dict[str, Any]:
+    """What a checkpoint records of the twin it was trained on: ``{"name": "<scene>/<variant>", "version"}``."""
+    return {"name": ds.name, "version": ds.version}
 
 
 # -- files: every write goes to a temporary file first, so a kill leaves the old file or the new one --------------
@@ -79,11 +91,12 @@ def save_checkpoint(
     save_torch_atomic(
         {
             "format": CHECKPOINT_FORMAT,
+            "kind": "model",
             "config": json.dumps(cfg.to_dict()),
             "arch": {"in_dim": len(obs_names), "hidden": list(cfg.hidden), "n_actions": 4},
             "obs": {"preset": cfg.obs, "names": list(obs_names)},
             "normalizer": normalizer.to_dict(),
-            "dataset": {"name": ds.name, "version": ds.version},
+            "dataset": twin_record(ds),
             "stats": stats or {},
             "q": {k: v.detach().cpu() for k, v in q.state_dict().items()},
         },

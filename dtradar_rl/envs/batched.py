@@ -43,7 +43,14 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
-from dtradar_rl.task.mdp import GridMDP, NoConnectedPairError, check_reward, potential_kind, reward_fn
+from dtradar_rl.task.mdp import (
+    GridMDP,
+    NoConnectedPairError,
+    check_max_steps,
+    check_reward,
+    potential_kind,
+    reward_fn,
+)
 from dtradar_rl.task.noise import ERRORS, NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
 from dtradar_rl.task.observations import Normalizer, ObservationTable, build_observations, check_preset
 
@@ -89,7 +96,7 @@ class BatchedNavEnv:
         self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
         self.reward_name = check_reward(reward)
         self.potential = potential_kind(reward)
-        self.max_steps = int(max_steps or mdp.max_steps)
+        self.max_steps = check_max_steps(max_steps) or mdp.max_steps
         self.device = torch.device(device)
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(int(seed))
@@ -213,13 +220,21 @@ class BatchedNavEnv:
         k = idx.numel()
         if k == 0:
             return
+        if starts is not None and targets is None:
+            raise InvalidCoordinatesError(
+                "reset_where got starts without targets", hint="pass both (cell indices), or targets alone"
+            )
         if targets is None:
             tp = torch.randint(self.pool.numel(), (k,), generator=self.gen, device=self.device)
             tgt = self.pool[tp]
         else:
-            tgt = torch.as_tensor(targets, dtype=torch.long, device=self.device).reshape(k)
+            tgt = self._cells("targets", targets, k)
             tp = self._pool_rows(tgt)
-        st = None if starts is None else torch.as_tensor(starts, dtype=torch.long, device=self.device).reshape(k)
+        st = None if starts is None else self._cells("starts", starts, k)
+        if st is not None and not bool(((st != tgt) & (self.component[st] == self.component[tgt])).all()):
+            raise InvalidCoordinatesError(
+                "reset_where: a start is its target's cell, or cannot reach it", hint="pass connected, distinct cells"
+            )
         if self.aug_obstacles:
             st = self._augment(idx, tgt, st)
         elif st is None:
@@ -230,6 +245,29 @@ class BatchedNavEnv:
         self.cell[idx], self.target[idx], self.tpool[idx] = st, tgt, tp
         self.steps[idx] = 0
         self._draw_errors(idx)
+
+    def _cells(self, name: str, cells, k: int) -> torch.Tensor:
+        """``cells`` (``k`` free cell indices, one per robot reset) as a long tensor, or
+        :class:`InvalidCoordinatesError` naming ``name`` (fractions, a wrong count, an index off the grid or a blocked
+        cell)."""
+        t = torch.as_tensor(cells, device=self.device)
+        if t.dtype.is_floating_point or t.dtype == torch.bool or t.is_complex():
+            raise InvalidCoordinatesError(
+                f"reset_where {name} must be integer cell indices (iy * nx + ix), got {t.dtype}",
+                hint=f"pass {k} ints",
+            )
+        if t.numel() != k:
+            raise InvalidCoordinatesError(
+                f"reset_where {name}: {t.numel()} cells for {k} robots", hint=f"pass one cell per robot reset ({k})"
+            )
+        t = t.reshape(k).long()
+        inside = (t >= 0) & (t < self.mdp.num_cells)
+        if not bool((inside & (self.component[t.clamp(0, self.mdp.num_cells - 1)] >= 0)).all()):  # -1: blocked
+            raise InvalidCoordinatesError(
+                f"reset_where {name}: a cell is off the {self.mdp.nx} x {self.mdp.ny} grid or not free",
+                hint=f"pass free cell indices in 0..{self.mdp.num_cells - 1}",
+            )
+        return t
 
     # -- obstacle augmentation -------------------------------------------------------------------------------------
     def _draw_obstacles(self, k: int) -> torch.Tensor:

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import math
+import numbers
+from collections.abc import Mapping
+
 import gymnasium as gym
 import numpy as np
 import torch
@@ -9,7 +13,7 @@ from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError
-from dtradar_rl.task.mdp import ACTIONS, GridMDP, check_reward, potential_kind, reward_fn
+from dtradar_rl.task.mdp import ACTIONS, GridMDP, check_max_steps, check_reward, potential_kind, reward_fn
 from dtradar_rl.task.noise import NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
 from dtradar_rl.task.observations import Normalizer, build_observations, check_preset
 from dtradar_rl.task.twins import load_dataset
@@ -17,6 +21,47 @@ from dtradar_rl.task.twins import load_dataset
 
 class InvalidActionError(DtradarError, ValueError):
     """An action that is not one of the environment's moves (gymnasium raises on invalid actions)."""
+
+
+#: The keys ``reset(options=...)`` reads; both cells together, as ``(ix, iy)`` integer pairs.
+RESET_OPTIONS = ("start", "target")
+CELL_FORM = "a pair of integers (ix, iy), e.g. (3, 2)"
+
+
+def parse_cell(key: str, value, nx: int, ny: int) -> tuple[int, int]:
+    """``value`` of the option ``key`` as an ``(ix, iy)`` cell inside an ``nx`` x ``ny`` grid, or
+    :class:`InvalidCoordinatesError` naming the key and the accepted form (a fraction, NaN, a bool, a string, a
+    wrong length or a cell outside the grid)."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise InvalidCoordinatesError(
+            f"reset option {key!r} is {value!r}, not a cell",
+            hint=f"pass {key}={CELL_FORM}, inside the {nx} x {ny} grid",
+        )
+    items = list(np.asarray(value, dtype=object).ravel()) if isinstance(value, np.ndarray) else list(value)
+    cell = []
+    for v in items:
+        if isinstance(v, (bool, np.bool_)):
+            cell = None
+            break
+        if isinstance(v, numbers.Integral):
+            cell.append(int(v))
+        elif isinstance(v, numbers.Real) and math.isfinite(v) and float(v).is_integer():
+            cell.append(int(v))  # 3.0 is the cell 3; 2.5 or NaN is no cell
+        else:
+            cell = None
+            break
+    if cell is None or len(cell) != 2:
+        raise InvalidCoordinatesError(
+            f"reset option {key!r} is {value!r}, not a cell",
+            hint=f"pass {key}={CELL_FORM}, inside the {nx} x {ny} grid",
+        )
+    ix, iy = cell
+    if not (0 <= ix < nx and 0 <= iy < ny):
+        raise InvalidCoordinatesError(
+            f"reset option {key!r} is ({ix}, {iy}), outside the {nx} x {ny} grid",
+            hint=f"pass {key}=(ix, iy) with 0 <= ix < {nx} and 0 <= iy < {ny}",
+        )
+    return ix, iy
 
 
 class DtradarNavEnv(gym.Env):
@@ -45,7 +90,9 @@ class DtradarNavEnv(gym.Env):
 
     ## Starting State
     Start and target are drawn uniformly at random among connected free cells (distinct), or given with
-    ``reset(options={"start": (ix, iy), "target": (ix, iy)})``.
+    ``reset(options={"start": (ix, iy), "target": (ix, iy)})``: both keys, each a pair of integers (a float only when
+    whole) naming distinct, free, connected cells; anything else (a fraction, NaN, another length, an unknown key)
+    is an :class:`~dtradar_data.core.errors.InvalidCoordinatesError` naming the key, before the episode changes.
 
     ## Episode End
     Termination: the robot reaches the target. Truncation: ``max_steps`` steps taken (default ``4 · (nx + ny)``).
@@ -53,8 +100,9 @@ class DtradarNavEnv(gym.Env):
     ## Arguments
     ``dataset``: a :class:`dtradar_data.Dataset` or a dataset name (``"cubicle/blueprint"``,
     ``"synthetic/blueprint"``); ``obs``: observation preset (default ``"goal"``); ``reward``: reward name (default
-    ``"paper"``); ``max_steps``: step limit; ``normalizer``: feature statistics (default: fitted on ``dataset``;
-    pass the training twin's when evaluating on another twin); ``render_mode``: ``None``, ``"ansi"`` or
+    ``"paper"``); ``max_steps``: step limit, a positive int (None or 0: the default; anything else is an
+    :class:`~dtradar_data.core.errors.InvalidSettingError`); ``normalizer``: feature statistics (default: fitted on
+    ``dataset``; pass the training twin's when evaluating on another twin); ``render_mode``: ``None``, ``"ansi"`` or
     ``"rgb_array"``; ``noise``: measurement noise level (``"none"``, ``"realistic"``, ``"2x"``; see
     :mod:`dtradar_rl.task.noise`), drawn anew at every reset and step from a generator seeded by ``reset(seed=...)``.
 
@@ -86,7 +134,7 @@ class DtradarNavEnv(gym.Env):
         self.normalizer = normalizer or Normalizer.fit(ds)
         self.mdp = GridMDP.from_dataset(ds)
         self.table = build_observations(ds, obs, self.normalizer)
-        self.max_steps = int(max_steps or self.mdp.max_steps)
+        self.max_steps = check_max_steps(max_steps) or self.mdp.max_steps
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise InvalidCoordinatesError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
@@ -120,27 +168,59 @@ class DtradarNavEnv(gym.Env):
             self._errors = self.noise.draw(1, self.noise_gen)
 
     # ---------------------------------------------------------------------------------------------------------
-    def _cell_of(self, xy) -> int:
-        c = self.mdp.cell(int(xy[0]), int(xy[1]))
+    def _cell_of(self, key: str, value) -> int:
+        ix, iy = parse_cell(key, value, self.mdp.nx, self.mdp.ny)
+        c = self.mdp.cell(ix, iy)
         if self.mdp.blocked.ravel()[c]:
-            raise InvalidCoordinatesError(f"cell {tuple(xy)} is blocked in {self.dataset_name}")
+            raise InvalidCoordinatesError(
+                f"reset option {key!r}: cell ({ix}, {iy}) is blocked in {self.dataset_name}", hint="pick a free cell"
+            )
         return c
 
+    def _pair_from(self, options) -> tuple[int, int] | None:
+        """The (start, target) cells that ``reset(options=...)`` asks for, None for a random pair; every key and
+        value is checked before the episode changes."""
+        if options is None:
+            return None
+        if not isinstance(options, Mapping):
+            raise InvalidCoordinatesError(
+                f"reset options must be a dict, got {type(options).__name__}",
+                hint="pass options={'start': (ix, iy), 'target': (ix, iy)}, or none for a random pair",
+            )
+        unknown = [k for k in options if k not in RESET_OPTIONS]
+        if unknown:
+            raise InvalidCoordinatesError(
+                f"unknown reset option(s) {', '.join(map(repr, unknown))}",
+                hint=f"the env reads {' and '.join(map(repr, RESET_OPTIONS))}, each {CELL_FORM}",
+            )
+        if not options:
+            return None
+        missing = [k for k in RESET_OPTIONS if k not in options]
+        if missing:
+            raise InvalidCoordinatesError(
+                f"reset options give {next(k for k in RESET_OPTIONS if k in options)!r} without {missing[0]!r}",
+                hint="pass both 'start' and 'target', each " + CELL_FORM,
+            )
+        start, target = self._cell_of("start", options["start"]), self._cell_of("target", options["target"])
+        if start == target:
+            raise InvalidCoordinatesError(
+                f"reset options: start and target are the same cell {self.mdp.xy(start)}",
+                hint="pick two different cells",
+            )
+        if not self.mdp.connected(start, target):
+            raise InvalidCoordinatesError(
+                f"start {tuple(int(v) for v in self.mdp.xy(start))} and target "
+                f"{tuple(int(v) for v in self.mdp.xy(target))} are not connected in {self.dataset_name}",
+                hint="pick a target the start can reach",
+            )
+        return start, target
+
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        pair = self._pair_from(options)  # checked first: a refused reset leaves the episode and the seed as they were
         super().reset(seed=seed)
         if seed is not None:
             self.noise_gen.manual_seed(int(seed) + NOISE_SEED_OFFSET)
-        options = options or {}
-        if "start" in options or "target" in options:
-            if not ("start" in options and "target" in options):
-                raise InvalidCoordinatesError("reset options need both 'start' and 'target' as (ix, iy)")
-            start, target = self._cell_of(options["start"]), self._cell_of(options["target"])
-            if not self.mdp.connected(start, target):
-                raise InvalidCoordinatesError(
-                    f"start {options['start']} and target {options['target']} are not connected in {self.dataset_name}"
-                )
-        else:
-            start, target = self.mdp.sample_pairs(1, self.np_random)[0]
+        start, target = pair if pair is not None else self.mdp.sample_pairs(1, self.np_random)[0]
         self._cell, self._target, self._steps = int(start), int(target), 0
         self._dist = self.mdp.bfs_distances(self._target)
         self._measure()

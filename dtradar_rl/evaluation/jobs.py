@@ -12,13 +12,14 @@ import numpy as np
 
 from dtradar_data.core.errors import DatasetNotFoundError, unknown_name
 from dtradar_data.core.ids import VARIANTS
+from dtradar_rl.agents.checkpoints import TRAINING_STATE
 from dtradar_rl.agents.planner import planner_for_scene
 from dtradar_rl.evaluation.evaluate import cross_matrix, evaluate_twins, write_results
 from dtradar_rl.evaluation.fixed_pair import evaluate_pair
-from dtradar_rl.task.config import Config, ConfigError, check_device
+from dtradar_rl.task.config import Config, ConfigError, check_device, check_unique
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import dqn_checkpoint, run_dir
-from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.task.twins import check_scenes, load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.viz.figures import plot_bars
 from dtradar_rl.viz.plots import plot_matrix, plot_paths
@@ -56,15 +57,20 @@ class EvalConfig(Config):
     device: str = "cpu"
     """torch device"""
 
+    def check_ranges(self) -> None:
+        super().check_ranges()
+        self.check_at_least(1, "pairs")
+        self.check_at_least(0, "max_steps", "plot_paths", "seed")
+
     def validate(self) -> EvalConfig:
         """Every setting, before a policy is loaded or a file written; messages name the --flag."""
-        self.check_at_least(1, "pairs")
-        self.check_at_least(0, "max_steps", "plot_paths")
+        super().validate()
         if not self.variants:
             raise ConfigError("--variants is empty", hint="e.g. --variants blueprint dynamic")
         for v in self.variants:
             if v not in VARIANTS:
                 raise unknown_name("variant (--variants)", v, VARIANTS)
+        check_unique(self.variants, "variants")
         check_device(self.device)
         noise_model(self.noise)
         return self
@@ -87,10 +93,16 @@ class CrossConfig(Config):
     out: str = str(run_dir("cross"))
     """output directory"""
 
-    def validate(self) -> CrossConfig:
+    def check_ranges(self) -> None:
+        super().check_ranges()
         self.check_at_least(1, "pairs")
+        self.check_at_least(0, "seed")
+
+    def validate(self) -> CrossConfig:
+        super().validate()
         if not self.scenes:
             raise ConfigError("--scenes is empty", hint="name at least one scene with a trained policy")
+        check_unique(self.scenes, "scenes")
         if len(self.scenes) > 1 and "{scene}" not in self.checkpoint_pattern:
             raise ConfigError(
                 f"--checkpoint-pattern {self.checkpoint_pattern!r} has no {{scene}}: every scene "
@@ -99,6 +111,7 @@ class CrossConfig(Config):
             )
         if self.variant not in VARIANTS:
             raise unknown_name("variant (--variant)", self.variant, VARIANTS)
+        check_scenes(self.scenes, "scenes", self.variant)  # before any policy is loaded
         return self
 
 
@@ -106,6 +119,8 @@ def run_eval(cfg: EvalConfig) -> str:
     ckpt = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
     out = Path(cfg.out or run_dir(cfg.scene, "eval"))
     policy = load_policy(ckpt, cfg.device)
+    for line in describe_checkpoint(policy, ckpt):
+        print(line)
     if getattr(policy.config, "fixed_pair", False):
         return _eval_pair(cfg, policy, ckpt, out)
     rows = []
@@ -148,11 +163,35 @@ def run_eval(cfg: EvalConfig) -> str:
                 noise=cfg.noise,
             )
         ]
-    config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
+    config = {
+        "eval": dataclasses.asdict(cfg),
+        "checkpoint": str(ckpt),
+        "train": policy.config.to_dict(),
+        "train_stats": policy.meta.get("stats", {}),
+    }
     md = write_results(rows, out, config)
     print(md, end="")
     print(f"results: {out / 'results.json'}, {out / 'results.md'}")
     return md
+
+
+def describe_checkpoint(policy, ckpt: Path) -> list[str]:
+    """What ``eval`` says about the checkpoint before its table: a run's training state (``last.pt``) when it is one,
+    and the torch threads the run trained with (its reproducibility record, where the checkpoint has one)."""
+    stats = policy.meta.get("stats") or {}
+    lines = []
+    if policy.meta.get("kind") == TRAINING_STATE:
+        lines.append(
+            f"note: {ckpt} is a run's training state (last.pt, {stats.get('env_steps', '?')} env steps): evaluating "
+            f"its weights as they were then; the finished run's weights are in {Path(ckpt).with_name('model.pt')}"
+        )
+    if stats.get("threads") is not None:
+        setting = stats.get("threads_setting")
+        lines.append(
+            f"trained with {stats['threads']} torch thread(s)"
+            + ("" if setting is None else f" (--threads {setting}{' = auto' if setting == 0 else ''})")
+        )
+    return lines
 
 
 def _eval_pair(cfg: EvalConfig, policy, ckpt: Path, out: Path) -> str:
@@ -175,7 +214,12 @@ def _eval_pair(cfg: EvalConfig, policy, ckpt: Path, out: Path) -> str:
             successes=list(roll.success),
             title=f"{ds.name}: pair {pair.start} -> {pair.target} {verdict}, shortest {pair.shortest}",
         )
-    config = {"eval": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "train": policy.config.to_dict()}
+    config = {
+        "eval": dataclasses.asdict(cfg),
+        "checkpoint": str(ckpt),
+        "train": policy.config.to_dict(),
+        "train_stats": policy.meta.get("stats", {}),
+    }
     md = write_results(rows, out, config)
     print(md, end="")
     print(f"results: {out / 'results.json'}, {out / 'results.md'}")

@@ -33,7 +33,7 @@ from dtradar_rl.task.config import ConfigError, JobConfig, flag
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.runs import dqn_checkpoint, run_dir
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.checkpoints import check_trained_on_scene, load_policy
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
 from dtradar_rl.viz.plots import plot_adapt_curves
@@ -79,16 +79,15 @@ class AdaptConfig(JobConfig):
     scratch: bool = True
     """also train the checkpoint's preset from scratch on the changed twin for the same seconds"""
 
-    def validate(self) -> AdaptConfig:
-        super().validate()
-        for name in ("seconds", "eval_every_s", "lr"):
+    def check_ranges(self) -> None:
+        super().check_ranges()
+        for name in ("seconds", "eval_every_s", "lr", "expert_margin"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{flag(name)} must be > 0, got {getattr(self, name)}")
-        if self.pairs < 1 or self.learning_starts < 0:
-            raise ConfigError("--pairs must be >= 1 and --learning-starts >= 0")
-        if not 0 <= self.eps <= 1:
-            raise ConfigError(f"--eps must be in [0, 1], got {self.eps}")
-        return self
+        self.check_at_least(1, "pairs", "env_steps_per_update")
+        self.check_at_least(0, "learning_starts", "pair_seed", "expert_weight")
+        self.check_at_least(-1, "aug_obstacles")
+        self.check_within(0, 1, "eps")
 
 
 @dataclass
@@ -146,6 +145,9 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
     ckpt = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
     out = Path(cfg.out or run_dir(cfg.scene, "adapt"))
     start = load_policy(ckpt)
+    twin = check_trained_on_scene(start, cfg.scene)  # another scene's agent knows other cells: refused, as make logged
+    if twin["variant"] == cfg.variant and cfg.verbose:
+        print(f"note: {ckpt} was trained on {cfg.scene}/{cfg.variant} itself; fine-tuning it there changes little")
     ds = load_dataset(f"{cfg.scene}/{cfg.variant}")
     base = start.config
     if cfg.expert_weight > 0 and base.reward != "geodesic":

@@ -28,7 +28,7 @@ from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import cross_matrix
 from dtradar_rl.experiments.paper_report import render
 from dtradar_rl.experiments.paper_seeds import SeedJob, auto_workers, read_curves, run_seeds, summarize, train_or_reuse
-from dtradar_rl.task.config import Config, ConfigError, check_device
+from dtradar_rl.task.config import Config, ConfigError, check_device, check_unique
 from dtradar_rl.task.pairs import paper_pair
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import machine
@@ -95,12 +95,9 @@ class PaperConfig(Config):
             raise ConfigError("--seeds is empty", hint="e.g. --seeds 0 1 2 3 4")
         if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in self.seeds):
             raise ConfigError(f"--seeds takes non-negative integers, got {list(self.seeds)}")
-        twice = sorted({s for s in self.seeds if self.seeds.count(s) > 1})
-        if twice:
-            raise ConfigError(
-                f"--seeds names seed(s) {twice} more than once: one run would count twice (a spread that is not one)",
-                hint=f"give each seed once, e.g. --seeds {' '.join(str(s) for s in dict.fromkeys(self.seeds))}",
-            )
+        check_unique(self.seeds, "seeds")
+        check_unique(self.scenes, "scenes")
+        check_unique(self.cross_scenes, "cross_scenes")
 
     def validate(self) -> PaperConfig:
         """Every setting and every scene name, before anything loads or trains: an unknown scene (in --scenes or

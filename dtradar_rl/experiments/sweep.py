@@ -26,8 +26,9 @@ import numpy as np
 
 from dtradar_data.core.errors import MissingDependencyError
 from dtradar_data.core.files import write_atomic
+from dtradar_data.core.ray_cluster import connect_ray, wait_for_cpus
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins
-from dtradar_rl.task.config import Config, ConfigError, flag
+from dtradar_rl.task.config import Config, ConfigError, check_unique, flag
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DEFAULT_PRESET, PRESETS, config_for
@@ -62,6 +63,10 @@ class SweepConfig(Config):
     def validate(self) -> SweepConfig:
         if not self.scenes or not self.seeds:
             raise ConfigError("--scenes and --seeds must each name at least one value")
+        check_unique(self.seeds, "seeds")  # --seeds 0 0 would count one run twice: a spread that is not one
+        check_unique(self.scenes, "scenes")
+        if any(k < 0 for k in self.seeds):
+            raise ConfigError(f"{flag('seeds')} must be >= 0, got {' '.join(map(str, self.seeds))}")
         if self.preset not in PRESETS:
             raise ConfigError(f"{flag('preset')} {self.preset!r} is not a preset", hint=", ".join(PRESETS))
         if self.threads < 1 or self.pairs < 1 or self.total_env_steps < 0:
@@ -120,11 +125,9 @@ def sweep(cfg: SweepConfig) -> dict[str, Any]:
     t0 = time.perf_counter()
     if cfg.executor == "ray":
         ray = _import_ray()
-        started = not ray.is_initialized()
-        if started:
-            kwargs = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-            ray.init(address=cfg.ray_address, **kwargs) if cfg.ray_address else ray.init(**kwargs)
+        started = connect_ray(ray, cfg.ray_address)  # bounded: a dead address fails in seconds, not minutes
         try:
+            wait_for_cpus(ray, cfg.threads, what=f"one run ({flag('threads')} {cfg.threads})", address=cfg.ray_address)
             task = ray.remote(num_cpus=cfg.threads, max_retries=2)(run_one)
             runs = ray.get([task.remote(s, k, cfg) for s, k in jobs])
         finally:

@@ -73,14 +73,18 @@ class OfflineConfig(BehaviourConfig):
     def out_dir(self) -> Path:
         return Path(self.out or run_dir(self.scene, "offline", self.algorithm))
 
+    def check_ranges(self) -> None:
+        super().check_ranges()
+        self.check_at_least(1, "transitions", "n_steps", "batch_size", "target_update_interval", "pairs")
+        self.check_at_least(0, "eval_seed")
+        self.check_within(0, 1, "gamma", "bcq_flexibility", open_interval=True)
+        if not self.lr > 0:
+            raise ConfigError(f"--lr must be > 0, got {self.lr}", hint="e.g. --lr 3e-4")
+        self.check_at_least(0, "bc_beta", "cql_alpha")
+
     def validate(self) -> OfflineConfig:
         super().validate()
         check_algorithm(self.algorithm)
-        self.check_at_least(1, "transitions", "n_steps", "batch_size", "target_update_interval", "pairs")
-        self.check_within(0, 1, "gamma", "bcq_flexibility", open_interval=True)
-        if not self.lr > 0:
-            raise ConfigError(f"--lr must be > 0, got {self.lr}")
-        self.check_at_least(0, "bc_beta", "cql_alpha")
         return self
 
 

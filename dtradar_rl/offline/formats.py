@@ -6,8 +6,11 @@ Formats
   duckdb, pandas and the Hugging Face viewer.
 - **Minari** (:func:`export_minari`, :func:`from_minari`): one Minari episode per logged episode, ``observations``
   holding ``L + 1`` rows (``obs`` of every step, then the last ``next_obs``), ``actions``/``rewards``/
-  ``terminations``/``truncations`` ``L`` rows; written into Minari's own data path (``MINARI_DATASETS_PATH``, default
-  ``~/.minari/datasets``) under ``dtradar/<scene>-<variant>-<behaviour>-v<N>`` (``N`` from the store's tag ``vN``).
+  ``terminations``/``truncations`` ``L`` rows; written under ``dtradar/<scene>-<variant>-<behaviour>-v<N>`` (``N``
+  from the store's tag ``vN``) into ``MINARI_DATASETS_PATH`` when it is set, else into ``<data root>/minari``: one
+  Minari folder per data root, since each root numbers its tags from ``v0`` (:func:`~dtradar_data.store.logged.
+  minari_root`). The copy is staged and renamed into place (whole or absent), recorded (``dtradar.json``), checked
+  before it is reused and rewritten when incomplete (:func:`export_minari`); :func:`load_minari` opens it.
 - **d3rlpy** (:func:`to_mdp_dataset`): built from our table, not with ``d3rlpy.datasets.get_minari`` (which
   misaligns observations after the first episode in 2.8.1, DESIGN.md §4). d3rlpy drops the last step of an episode
   that ends in a timeout (it has no next observation there), so each truncated episode gets one extra row, its final
@@ -19,13 +22,30 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
+import os
+import shutil
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dtradar_data.core import layout as P
 from dtradar_data.core.errors import MissingDependencyError, SchemaMismatchError
-from dtradar_data.store.logged import LoggedDataset, LoggedId, load_logged, transitions_table
+from dtradar_data.core.files import sha256_file, waiting_lock
+from dtradar_data.store.logged import (
+    MINARI_DIR,
+    MINARI_ENV,
+    TRANSITIONS_FILE,
+    LoggedDataset,
+    LoggedId,
+    load_logged,
+    minari_root,
+    parse_logged_id,
+    transitions_table,
+)
+from dtradar_data.store.logged.staging import held_stage
 from dtradar_rl.task.config import ConfigError
 
 
@@ -122,28 +142,119 @@ def minari_episodes(a: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
     return out
 
 
-def export_minari(
-    data: LoggedDataset | str | LoggedId, *, dataset_id: str | None = None, overwrite: bool = False
-) -> str:
-    """Write the Minari copy of a logged version (in Minari's data path) and return its id; an existing copy of the
-    same version is kept, one of another version is replaced only with ``overwrite``."""
-    logged = as_logged(data)
-    minari = _minari()
+#: Minari's record of a namespace (``minari.namespace.NAMESPACE_METADATA_FILENAME``).
+NAMESPACE_FILE = "namespace_metadata.json"
+#: The record of a complete Minari copy, written beside its ``data/`` folder (Minari ignores it) as the copy's last
+#: file before it is renamed into place: what it holds, where from, and the sha256 of every file of ``data/``.
+RECORD_FILE = "dtradar.json"
+RECORD_FORMAT = 1
+#: Hidden (Minari lists no hidden folder) staging folders in the Minari path, held while written (see
+#: :mod:`dtradar_data.store.logged.staging`).
+STAGE_PREFIX = ".dtradar-stage-"
+
+
+@contextlib.contextmanager
+def _minari_path(path: Path):
+    """Point Minari (which reads ``MINARI_DATASETS_PATH`` on every call) at ``path`` for the block. Not thread-safe:
+    the process's environment is changed meanwhile."""
+    old = os.environ.get(MINARI_ENV)
+    os.environ[MINARI_ENV] = str(path)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(MINARI_ENV, None)
+        else:
+            os.environ[MINARI_ENV] = old
+
+
+def _files(folder: Path) -> dict[str, str]:
+    """``{path relative to folder: sha256}`` of the files of a copy's ``data/`` folder."""
+    data = folder / "data"
+    return {p.relative_to(folder).as_posix(): sha256_file(p) for p in sorted(data.rglob("*")) if p.is_file()}
+
+
+def _record(folder: Path) -> dict[str, Any] | None:
+    try:
+        rec = json.loads((folder / RECORD_FILE).read_text())
+        return rec if isinstance(rec, dict) and rec.get("format") == RECORD_FORMAT else None
+    except (OSError, ValueError):
+        return None
+
+
+def _minari_metadata(folder: Path) -> dict[str, Any] | None:
+    try:
+        meta = json.loads((folder / "data" / "metadata.json").read_text())
+        return meta if isinstance(meta, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+def _wanted(logged: LoggedDataset) -> dict[str, Any]:
+    """What the record of ``logged``'s complete copy says (the files' hashes apart)."""
+    return {
+        "format": RECORD_FORMAT,
+        "name": logged.name,
+        "version": logged.version,
+        "tag": logged.tag,
+        "transitions_sha256": ((logged.meta.get("files") or {}).get(TRANSITIONS_FILE) or {}).get("sha256"),
+        "episodes": int((logged.meta.get("stats") or {}).get("episodes", -1)),
+        "steps": len(logged),
+        "data_root": str(P.data_root().absolute()),
+    }
+
+
+def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
+    """``(state, why)`` of the Minari copy in ``folder`` next to ``logged``: ``"absent"``; ``"complete"`` (its
+    record names this version, the same transitions file and episode count, and every file has its recorded
+    sha256); ``"incomplete"`` (a write that was killed, damaged files, or an older dtradar's copy without a record:
+    to be rewritten); ``"other"`` (a complete copy of another logged version, by another data root whose tag
+    still points at it: not ours to replace); ``"stale"`` (a copy of another version that no data root claims any
+    more, e.g. this root's before its store was emptied: replaced); ``"foreign"`` (not written by dtradar)."""
+    if not folder.exists():
+        return "absent", ""
+    rec = _record(folder)
+    meta = _minari_metadata(folder)
+    if rec is None:
+        if meta is not None and not str(meta.get("description") or "").startswith("dtradar "):
+            return "foreign", f"{folder} was not written by dtradar ({str(meta.get('description'))[:60]!r})"
+        return "incomplete", f"{folder} has no complete {RECORD_FILE} (a killed write, or an older dtradar's copy)"
+    want = _wanted(logged)
+    same = all(rec.get(k) == want[k] for k in ("name", "version", "transitions_sha256"))
+    if not same:
+        root = Path(str(rec.get("data_root") or ""))
+        held = rec.get("data_root") != want["data_root"] and _claimed(
+            root, rec.get("name"), rec.get("tag"), rec.get("version")
+        )
+        what = f"{rec.get('name')}@{rec.get('tag')} (version {rec.get('version')}) of data root {root}"
+        return ("other" if held else "stale"), what
+    if rec.get("episodes") != want["episodes"] or rec.get("steps") != want["steps"]:
+        return (
+            "incomplete",
+            f"{folder} records {rec.get('episodes')} episodes, the logged version has {want['episodes']}",
+        )
+    if meta is None or meta.get("total_episodes") != want["episodes"] or meta.get("total_steps") != want["steps"]:
+        return "incomplete", f"{folder}: Minari's metadata does not count {want['episodes']} episodes"
+    if _files(folder) != rec.get("files"):
+        return "incomplete", f"{folder}: a file differs from its recorded sha256 (changed or damaged)"
+    return "complete", ""
+
+
+def _claimed(root: Path, name: Any, tag: Any, version: Any) -> bool:
+    """Whether data root ``root`` still stores ``name`` with ``tag`` pointing at ``version``."""
+    try:
+        lid = parse_logged_id(str(name))
+        refs = json.loads((root / "logged" / lid.scene / lid.variant / lid.behaviour / "refs.json").read_text())
+        return isinstance(tag, str) and refs.get("tags", {}).get(tag) == version
+    except (OSError, ValueError, KeyError, AttributeError):
+        return False
+
+
+def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset) -> Path:
+    """Write the Minari dataset ``mid`` of ``logged`` into the Minari path ``stage``; returns its folder there."""
     import gymnasium as gym
     from minari.data_collector import EpisodeBuffer
 
-    mid = dataset_id or logged.minari_id
-    marker = f"dtradar {logged.name} version {logged.version}"
-    if mid in minari.list_local_datasets():
-        desc = str(minari.load_dataset(mid).storage.metadata.get("description") or "")
-        if marker in desc:
-            return mid
-        if not overwrite:
-            raise ConfigError(
-                f"the Minari dataset {mid!r} exists but holds another dataset ({desc[:80]!r})",
-                hint=f"delete it (minari.delete_dataset({mid!r})) or pass overwrite=True",
-            )
-        minari.delete_dataset(mid)
     a = logged.arrays()
     buffers = [
         EpisodeBuffer(
@@ -158,7 +269,7 @@ def export_minari(
     ]
     d = a["obs"].shape[1]
     s = logged.meta.get("stats") or {}
-    with contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
+    with _minari_path(stage), contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # no author e-mail, no gymnasium env spec: by design
         minari.create_dataset_from_buffers(
             dataset_id=mid,
@@ -168,18 +279,96 @@ def export_minari(
             algorithm_name=str((logged.meta.get("behaviour") or {}).get("kind")),
             author="dtradar",
             code_permalink="https://github.com/dtradar/dtradar",
-            description=f"{marker}; parent {logged.meta.get('parent')}@{logged.meta.get('parent_version')}; "
-            f"behaviour success {s.get('success_rate', 0):.3f}; see the dtradar card (README.md) at "
-            f"{logged.path}",
+            description=f"dtradar {logged.name} version {logged.version}; parent {logged.meta.get('parent')}@"
+            f"{logged.meta.get('parent_version')}; behaviour success {s.get('success_rate', 0):.3f}; see the "
+            f"dtradar card (README.md) at {logged.path}",
         )
+    return stage / mid
+
+
+def _ensure_namespace(stage: Path, root: Path, mid: str) -> None:
+    """Give ``root`` the namespace record of ``mid`` (``<namespace>/namespace_metadata.json``) when it lacks it."""
+    namespace = mid.rpartition("/")[0]
+    if not namespace:
+        return
+    src = stage / namespace / NAMESPACE_FILE
+    dst = root / namespace / NAMESPACE_FILE
+    if src.is_file() and not dst.is_file():
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
+        shutil.copyfile(src, tmp)
+        os.replace(tmp, dst)
+
+
+def export_minari(
+    data: LoggedDataset | str | LoggedId,
+    *,
+    dataset_id: str | None = None,
+    overwrite: bool = False,
+) -> str:
+    """Write the Minari copy of a logged version into :func:`minari_root` and return its id.
+
+    The copy appears whole or not at all: it is written into a hidden staging folder of the Minari path, recorded
+    (``dtradar.json``: the version, the transitions file's sha256, the episode count, every data file's sha256)
+    and renamed into place, under a lock per id (a second process says what it waits for, then finds the copy). A
+    complete copy of the same version is kept; an incomplete or damaged one (a killed write, an older dtradar's
+    copy) is rewritten; a copy of another version that another data root still holds under this id is refused
+    (:class:`ConfigError`, naming ``MINARI_DATASETS_PATH`` and ``--no-minari``) unless ``overwrite``."""
+    logged = as_logged(data)
+    minari = _minari()
+    mid = dataset_id or logged.minari_id
+    root = minari_root()
+    folder = root / mid
+    root.mkdir(parents=True, exist_ok=True)
+    lock = root / f".dtradar-{mid.replace('/', '--')}.lock"
+    with waiting_lock(lock, f"writing the Minari copy {mid}", then="this process uses that copy if it is whole"):
+        state, why = copy_state(folder, logged)
+        if state == "complete":
+            return mid
+        if state in ("other", "foreign") and not overwrite:
+            raise ConfigError(
+                f"the Minari copy of {logged.name}@{logged.tag} was not written: {folder} holds "
+                f"{why if state == 'other' else 'a dataset dtradar did not write'} (the logged dataset itself is "
+                f"stored in {logged.path})",
+                hint=f"give each data root its own Minari folder: unset {MINARI_ENV} (the copies then go to "
+                f"<data root>/{MINARI_DIR}) or set it to another folder; or remove {folder}; or log without the "
+                "copy (`python -m dtradar_rl log ... --no-minari`)",
+            )
+        with held_stage(root, STAGE_PREFIX, lockless=lambda _: True) as stage:  # .dtradar-stage-*: only ours
+            staged = _write_copy(minari, stage, mid, logged)
+            rec = {**_wanted(logged), "minari_id": mid, "files": _files(staged)}
+            (staged / RECORD_FILE).write_text(json.dumps(rec, indent=2, sort_keys=True) + "\n")
+            _ensure_namespace(stage, root, mid)
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            if folder.exists():  # incomplete, stale or (overwrite) another's: aside into the stage, removed with it
+                os.rename(folder, stage / f"replaced-{folder.name}")
+            os.rename(staged, folder)
     return mid
+
+
+def load_minari(data: LoggedDataset | str | LoggedId, **export):
+    """The ``MinariDataset`` of a logged version's Minari copy, written first when it is missing or incomplete
+    (:func:`export_minari`); no ``MINARI_DATASETS_PATH`` needed."""
+    mid = export_minari(as_logged(data), **export)
+    from minari.dataset.minari_dataset import MinariDataset
+
+    return MinariDataset(minari_root() / mid / "data")
 
 
 def from_minari(dataset: Any) -> dict[str, np.ndarray]:
     """Our columns (``episode, step, obs, action, reward, next_obs, terminated, truncated``) from a Minari dataset
     (a ``MinariDataset`` or its id)."""
     minari = _minari()
-    ds = minari.load_dataset(dataset) if isinstance(dataset, str) else dataset
+    if isinstance(dataset, str):
+        ours = minari_root() / dataset / "data"  # a copy of ours, MINARI_DATASETS_PATH set or not
+        if ours.is_dir():
+            from minari.dataset.minari_dataset import MinariDataset
+
+            ds = MinariDataset(ours)
+        else:
+            ds = minari.load_dataset(dataset)
+    else:
+        ds = dataset
     cols: dict[str, list[np.ndarray]] = {
         k: [] for k in ("episode", "step", "obs", "action", "reward", "next_obs", "terminated", "truncated")
     }
@@ -224,8 +413,10 @@ def table_from_columns(c: dict[str, np.ndarray]):
 __all__ = [
     "as_logged",
     "d3rlpy_arrays",
+    "copy_state",
     "export_minari",
     "from_minari",
+    "load_minari",
     "import_d3rlpy",
     "minari_episodes",
     "quiet_d3rlpy",

@@ -5,12 +5,14 @@
     logged = log_dataset(LogConfig(scene="cubicle", behaviour="noisy-shortest"))   # cubicle/blueprint/noisy-shortest
     logged = dtradar_data.load("cubicle/blueprint/noisy-shortest")                 # the same, from the store
     mdp = to_mdp_dataset(logged)            # d3rlpy MDPDataset, every logged transition kept and aligned
-    minari_id = export_minari(logged)       # minari.load_dataset("dtradar/cubicle-blueprint-noisy-shortest-v0")
+    minari_id = export_minari(logged)       # "dtradar/cubicle-blueprint-noisy-shortest-v0" in <data root>/minari
 
 Storage, names, versions and cards are :mod:`dtradar_data.store.logged` (no torch there); the behaviour
 policies are :mod:`dtradar_rl.offline.behaviours` and the one rollout engine :mod:`dtradar_rl.offline.collection`. This
 module joins them: :func:`log_dataset` computes the version from the logging inputs *first*, so logging the same name
-with the same settings again only loads the stored version.
+with the same settings again only loads the stored version (and replaces it when it is damaged). Two processes logging
+the same version take turns (the second says what it waits for, then reuses the first's); staging folders that a
+killed run left in ``<root>/work`` are removed first.
 
 Its formats (Parquet in the store, Minari, d3rlpy) are :mod:`dtradar_rl.offline.formats`.
 """
@@ -23,13 +25,17 @@ from typing import Any
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import SchemaMismatchError
+from dtradar_data.core.errors import CorruptDatasetError, SchemaMismatchError
 from dtradar_data.store.logged import (
+    MINARI_ENV,
     LoggedDataset,
+    clean_logged_stages,
     load_logged,
     local_versions,
     logged_version,
     logging_inputs,
+    logging_lock,
+    minari_root,
     parse_logged_id,
     table_digest,
     transitions_table,
@@ -95,9 +101,20 @@ def log_inputs(cfg: LogConfig, ds: Dataset) -> dict[str, Any]:
     )
 
 
+def _stored(lid, version: str, say) -> LoggedDataset | None:
+    """The stored ``lid@version`` if it loads and verifies; None when absent or damaged (then logged again)."""
+    if version not in local_versions(lid, damaged=True):
+        return None
+    try:
+        return load_logged(lid, version)
+    except (CorruptDatasetError, SchemaMismatchError) as exc:
+        say(f"{lid.name}@{version} is stored but damaged ({exc.message}): logging it again")
+        return None
+
+
 def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset:
-    """Log ``cfg.behaviour`` on ``cfg.dataset_name`` into the store (or reuse the stored version of the same inputs),
-    write the Minari copy when ``cfg.minari``, and return the loaded dataset."""
+    """Log ``cfg.behaviour`` on ``cfg.dataset_name`` into the store (or reuse the stored version of the same inputs;
+    a damaged one is logged again), write the Minari copy when ``cfg.minari``, and return the loaded dataset."""
     cfg = cfg.validate()
     import torch
 
@@ -107,57 +124,65 @@ def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset
     inputs = log_inputs(cfg, ds)
     version = logged_version(inputs)
     lid = parse_logged_id(cfg.logged_name)
-    if version in local_versions(lid):
-        logged = load_logged(lid, version)
-        say(f"{lid.name}@{logged.tag} ({version}) is already logged with these settings: reused")
-    else:
-        normalizer = Normalizer.fit(ds)
-        spec = cfg.spec()
-        settings = inputs["settings"]
-        r = roll(
-            ds,
-            spec,
-            steps=cfg.steps,
-            num_envs=cfg.num_envs,
-            obs=cfg.obs,
-            normalizer=normalizer,
-            reward=cfg.reward,
-            max_steps=settings["max_steps"],
-            seed=cfg.seed,
-            device=cfg.device,
-        )
-        c = r.columns
-        table = transitions_table(
-            episode=c["episode"],
-            step=c["step"],
-            obs=c["obs"],
-            action=c["action"],
-            reward=c["reward"],
-            next_obs=c["next_obs"],
-            terminated=c["terminated"],
-            truncated=c["truncated"],
-            robot=c["robot"],
-            cell=c["cell"],
-            target=c["target"],
-            component=c["component"],
-        )
-        names = list(build_observations(ds, cfg.obs, normalizer).names)
-        meta = {
-            "behaviour_text": spec.describe(),
-            "normalizer": normalizer.to_dict(),
-            "observations": {"preset": cfg.obs, "names": names},
-            "stats": {"rollout": r.stats},
-        }
-        version, _ = write_logged(lid, inputs, table, meta)
-        logged = load_logged(lid, version)
-        s = logged.meta["stats"]
-        say(
-            f"logged {lid.name}@{logged.tag} ({version}): {s['steps']} steps, {s['episodes']} episodes, behaviour "
-            f"success {s['success_rate']:.3f}, mean return {s['mean_return']:.2f} in {r.stats['wall_s']:.1f} s"
-        )
+    clean_logged_stages()
+    with logging_lock(lid, version):
+        logged = _stored(lid, version, say)
+        if logged is not None:
+            say(f"{lid.name}@{logged.tag} ({version}) is already logged with these settings: reused")
+        else:
+            logged = _log(cfg, ds, lid, inputs, say)
     if cfg.minari:
         mid = export_minari(logged)
-        say(f"Minari copy: minari.load_dataset({mid!r})")
+        say(f"Minari copy: {logged.minari_path} (load: {MINARI_ENV}={minari_root()} minari.load_dataset({mid!r}))")
+    return logged
+
+
+def _log(cfg: LogConfig, ds: Dataset, lid, inputs: dict[str, Any], say) -> LoggedDataset:
+    """Roll the behaviour out, store the table as a version and load it back."""
+    normalizer = Normalizer.fit(ds)
+    spec = cfg.spec()
+    settings = inputs["settings"]
+    r = roll(
+        ds,
+        spec,
+        steps=cfg.steps,
+        num_envs=cfg.num_envs,
+        obs=cfg.obs,
+        normalizer=normalizer,
+        reward=cfg.reward,
+        max_steps=settings["max_steps"],
+        seed=cfg.seed,
+        device=cfg.device,
+    )
+    c = r.columns
+    table = transitions_table(
+        episode=c["episode"],
+        step=c["step"],
+        obs=c["obs"],
+        action=c["action"],
+        reward=c["reward"],
+        next_obs=c["next_obs"],
+        terminated=c["terminated"],
+        truncated=c["truncated"],
+        robot=c["robot"],
+        cell=c["cell"],
+        target=c["target"],
+        component=c["component"],
+    )
+    names = list(build_observations(ds, cfg.obs, normalizer).names)
+    meta = {
+        "behaviour_text": spec.describe(),
+        "normalizer": normalizer.to_dict(),
+        "observations": {"preset": cfg.obs, "names": names},
+        "stats": {"rollout": r.stats},
+    }
+    version, _ = write_logged(lid, inputs, table, meta)
+    logged = load_logged(lid, version)
+    s = logged.meta["stats"]
+    say(
+        f"logged {lid.name}@{logged.tag} ({version}): {s['steps']} steps, {s['episodes']} episodes, behaviour "
+        f"success {s['success_rate']:.3f}, mean return {s['mean_return']:.2f} in {r.stats['wall_s']:.1f} s"
+    )
     return logged
 
 

@@ -51,6 +51,7 @@ from dtradar_rl.offline.logged import LogConfig, check_compatible, log_dataset
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.task.runs import no_empty_folder_on_failure
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
 
@@ -120,12 +121,17 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | N
     ``dataset`` is the twin to log on and evaluate against (default: load ``cfg.dataset_name``).
     """
     cfg = cfg.validate()
+    with no_empty_folder_on_failure(cfg.out_dir):  # the folder is made when the model is saved; a failure leaves none
+        return _train_offline(cfg, dataset)
+
+
+def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | None) -> OfflineResult:
     d3rlpy = import_d3rlpy()
     t_start = time.perf_counter()
     torch.set_num_threads(cfg.threads or auto_threads())
     torch.set_flush_denormal(True)
+    threads = {"threads": torch.get_num_threads(), "threads_setting": cfg.threads}  # the reproducibility record
     out = cfg.out_dir
-    out.mkdir(parents=True, exist_ok=True)
     say = print if cfg.verbose else (lambda *a, **k: None)
 
     ds = dataset if isinstance(dataset, Dataset) else load_dataset(cfg.dataset_name)
@@ -178,6 +184,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | N
 
     model = out / "model.d3"
     tmp_model = out / ".model.d3.tmp"
+    out.mkdir(parents=True, exist_ok=True)  # only now is there something to write
     algo.save(str(tmp_model))
     os.replace(tmp_model, model)  # a kill mid-save leaves the previous model, never half of one
     meta = {
@@ -187,7 +194,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | N
         "obs": {"preset": cfg.obs, "names": obs_names},
         "dataset": {"name": ds.name, "version": ds.version},
         "logged": source,
-        "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s},
+        "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s, **threads},
     }
     write_atomic(out / "config.json", json.dumps(meta, indent=2) + "\n")
     _write_losses(losses, out / "losses.csv")

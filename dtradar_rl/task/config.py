@@ -8,21 +8,41 @@
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
+import math
+import numbers
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
 import torch
 
-from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.errors import InvalidSettingError
 from dtradar_rl.task.mdp import check_reward
 from dtradar_rl.task.observations import check_preset
 
 INDOOR_SCENES = ("cubicle", "meeting")
 
 
-class ConfigError(DtradarError, ValueError):
-    """A training or evaluation setting that is out of range."""
+class ConfigError(InvalidSettingError):
+    """A training or evaluation setting that is out of range (an :class:`InvalidSettingError`: exit status 2)."""
+
+
+#: True while the command line parses: the configs tyro makes skip their range checks until the command runs
+#: ``validate()``, so a bad flag is the boundary's one ``error:`` line (exit 2), not tyro's usage box.
+_CHECKS_DEFERRED = contextvars.ContextVar("dtradar_rl_config_checks_deferred", default=False)
+
+
+@contextmanager
+def deferred_checks(deferred: bool = True) -> Iterator[None]:
+    """Within the block, configs are made without their range checks (``deferred=False``: with them again)."""
+    token = _CHECKS_DEFERRED.set(deferred)
+    try:
+        yield
+    finally:
+        _CHECKS_DEFERRED.reset(token)
 
 
 def flag(name: str) -> str:
@@ -49,9 +69,49 @@ def check_device(name: str) -> torch.device:
     return device
 
 
+def check_unique(values, name: str) -> None:
+    """:class:`ConfigError` naming ``--<name>`` when ``values`` repeats one (a repeated seed or scene would count one
+    run twice, and two runs would share one output folder)."""
+    seen, repeated = set(), []
+    for v in values:
+        if v in seen and v not in repeated:
+            repeated.append(v)
+        seen.add(v)
+    if repeated:
+        listed = " ".join(str(v) for v in dict.fromkeys(values))
+        raise ConfigError(
+            f"{flag(name)} repeats {', '.join(repr(v) for v in repeated)}: each value is one run (or one column), "
+            "and a repeated one would be counted twice",
+            hint=f"name each once, e.g. {flag(name)} {listed}",
+        )
+
+
 @dataclass(frozen=True)
 class Config:
-    """The one base of every config: checks that name the ``--flag``, and a JSON round trip."""
+    """The one base of every config: checks that name the ``--flag``, and a JSON round trip.
+
+    A config checks its numbers when it is made (:meth:`check_ranges`, from ``__post_init__``: a wrong type, NaN or
+    infinity, a value out of range); :meth:`validate` adds what depends on the machine or the store (devices, names)
+    before the first expensive step."""
+
+    def __post_init__(self) -> None:
+        if not _CHECKS_DEFERRED.get():
+            self.check_ranges()
+
+    def check_ranges(self) -> None:
+        """Every field of type ``int`` or ``float`` holds a finite number of that type (an int for an int: no bool,
+        no 2.5); subclasses extend this with their ranges (calling ``super()``). No I/O, no device: a saved config
+        read back on another machine passes it."""
+        for f in dataclasses.fields(self):
+            kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+            v = getattr(self, f.name)
+            if kind == "int" and (isinstance(v, bool) or not isinstance(v, numbers.Integral)):
+                raise ConfigError(f"{flag(f.name)} must be an integer, got {v!r}")
+            if kind == "float":
+                if isinstance(v, bool) or not isinstance(v, numbers.Real):
+                    raise ConfigError(f"{flag(f.name)} must be a number, got {v!r}")
+                if not math.isfinite(v):
+                    raise ConfigError(f"{flag(f.name)} must be a finite number, got {v}")
 
     def check_at_least(self, minimum: int, *names: str) -> None:
         for name in names:
@@ -68,6 +128,7 @@ class Config:
 
     def validate(self):
         """Check every setting before the first expensive step; subclasses extend this and return ``self``."""
+        self.check_ranges()
         return self
 
     def to_dict(self) -> dict[str, Any]:
@@ -97,10 +158,9 @@ class JobConfig(Config):
     verbose: bool = True
     """print progress"""
 
-    def validate(self):
-        super().validate()
-        self.check_at_least(0, "threads")
-        return self
+    def check_ranges(self) -> None:
+        super().check_ranges()
+        self.check_at_least(0, "threads", "seed")
 
 
 @dataclass(frozen=True)
@@ -126,14 +186,23 @@ class TwinConfig(JobConfig):
     def dataset_name(self) -> str:
         return f"{self.scene}/{self.variant}" + (f"@{self.revision}" if self.revision else "")
 
+    def check_ranges(self) -> None:
+        super().check_ranges()
+        self.check_at_least(1, "num_envs")
+        self.check_at_least(0, "max_steps")
+        if (
+            not self.hidden
+            or any(isinstance(h, bool) or not isinstance(h, numbers.Integral) for h in self.hidden)
+            or min(self.hidden) < 1
+        ):
+            raise ConfigError(
+                f"--hidden must list positive layer sizes, got {self.hidden}", hint="e.g. --hidden 256 256"
+            )
+
     def validate(self):
         """Check the shared settings; subclasses extend this and return ``self``."""
         super().validate()
         check_preset(self.obs)
         check_reward(self.reward)
-        self.check_at_least(1, "num_envs")
-        self.check_at_least(0, "max_steps")
         check_device(self.device)
-        if not self.hidden or min(self.hidden) < 1:
-            raise ConfigError(f"--hidden must list positive layer sizes, got {self.hidden}")
         return self

@@ -28,13 +28,15 @@ Rewards (chosen by name, :data:`REWARDS`)
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError, unknown_name
+from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError, InvalidSettingError, unknown_name
 
 ACTIONS: tuple[str, ...] = ("X-", "X+", "Y-", "Y+")
 #: ``(dx, dy)`` of each action, in cells.
@@ -62,6 +64,26 @@ def default_max_steps(nx: int, ny: int) -> int:
     Twice the longest obstacle-free Manhattan path, with room for detours; episodes are *truncated* there.
     """
     return 4 * (nx + ny)
+
+
+def check_max_steps(max_steps) -> int | None:
+    """``max_steps`` as a positive int, or None for the default (None or 0); anything else (a negative or
+    fractional number, NaN, a bool, a string) is an :class:`InvalidSettingError`."""
+    if max_steps is None:
+        return None
+    whole = isinstance(max_steps, numbers.Integral) or (
+        isinstance(max_steps, numbers.Real) and math.isfinite(max_steps) and float(max_steps).is_integer()
+    )
+    if isinstance(max_steps, (bool, np.bool_)) or not whole:
+        raise InvalidSettingError(
+            f"max_steps must be a whole number of steps, got {max_steps!r}",
+            hint="pass a positive int, or None for the default 4 * (nx + ny)",
+        )
+    if int(max_steps) < 0:
+        raise InvalidSettingError(
+            f"max_steps must be > 0, got {max_steps}", hint="pass a positive int, or None for the default 4 * (nx + ny)"
+        )
+    return int(max_steps) or None
 
 
 def reward_fn(name: str, *, d2_after, pot_before, pot_after, collision, reached, diag2: float):

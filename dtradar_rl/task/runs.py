@@ -9,6 +9,8 @@ runs/paper/  runs/sweep/  runs/cross/
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 RUNS = Path("runs")
@@ -22,3 +24,25 @@ def run_dir(*parts: str) -> Path:
 def dqn_checkpoint(scene: str) -> Path:
     """The ``model.pt`` that ``make train SCENE=<scene>`` writes and ``make eval``/``adapt``/``logged`` read."""
     return run_dir(scene, "dqn", "model.pt")
+
+
+@contextmanager
+def no_empty_folder_on_failure(path: str | Path) -> Iterator[Path]:
+    """Run the block; when it fails, remove the folders of ``path`` it created (``path`` and the missing parents
+    above it) that it left empty, so a failed job leaves no empty ``--out`` behind. Folders that existed before,
+    or that hold anything, stay."""
+    path = Path(path)
+    missing = []
+    p = path
+    while not p.exists() and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    try:
+        yield path
+    except BaseException:
+        for folder in missing:  # deepest first
+            try:
+                folder.rmdir()  # only an empty folder goes
+            except OSError:
+                break
+        raise

@@ -17,7 +17,7 @@ import re
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import DtradarError, unknown_name
+from dtradar_data.core.errors import DatasetNotFoundError, DtradarError, unknown_name
 from dtradar_data.core.ids import VARIANTS
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish.loading import load
@@ -79,6 +79,30 @@ def load_dataset(name: str) -> Dataset:
         tx = (nx * cell_m / 2, ny * cell_m / 2, 3.0)
         return synthetic_dataset(nx, ny, blocked, cell_m=cell_m, tx=tx, name=f"{scene}/{variant}")
     return load(f"{scene}/{variant}", revision or None)
+
+
+def check_scenes(scenes, option: str, variant: str = "blueprint") -> None:
+    """Every scene of ``scenes`` has its ``<scene>/<variant>`` twin here (synthetic ones always do): checked from the
+    store's listing, before a job loads or trains anything. An unknown name is an :class:`UnknownNameError` with
+    suggestions, a known but unbuilt twin a :class:`DatasetNotFoundError` saying how to build it; both name
+    ``--<option>``."""
+    from dtradar_data.store.listing import list_datasets
+
+    stored = [s for s in scenes if not is_synthetic(s)]
+    listing = list_datasets() if stored else []
+    entries = {e.name: e for e in listing}
+    for scene in stored:
+        entry = entries.get(f"{scene}/{variant}")
+        if entry is not None and entry.built:
+            continue
+        flag = "--" + option.replace("_", "-")
+        if entry is None and scene not in {e.scene for e in listing}:
+            built = sorted({e.scene for e in listing if e.built and e.variant == variant} | {"synthetic"})
+            raise unknown_name(f"scene ({flag})", scene, built)
+        raise DatasetNotFoundError(
+            f"{flag}: {scene}/{variant} is not built here",
+            hint=f"build it first (make dataset SCENE={scene}), or leave {scene} out of {flag}",
+        )
 
 
 def dataset_exists(name: str) -> bool:

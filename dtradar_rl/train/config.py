@@ -6,13 +6,14 @@ overrides. What each preset reaches on each twin is measured in the docs (Naviga
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from dtradar_data.core.errors import unknown_name
 from dtradar_rl.envs.batched import AUG_POTENTIALS
-from dtradar_rl.task.config import INDOOR_SCENES, ConfigError, TwinConfig
+from dtradar_rl.task.config import INDOOR_SCENES, ConfigError, TwinConfig, flag
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.twins import is_synthetic
@@ -107,10 +108,8 @@ class DQNConfig(TwinConfig):
         """One (start, target) pair for the whole run (the paper's protocol) rather than a new one per episode."""
         return self.pair == "paper" or self.start is not None
 
-    def validate(self) -> DQNConfig:
-        super().validate()
-        if self.preset not in PRESETS:
-            raise unknown_name("training preset", self.preset, PRESETS)
+    def check_ranges(self) -> None:
+        super().check_ranges()
         self.check_at_least(
             1,
             "total_env_steps",
@@ -123,6 +122,33 @@ class DQNConfig(TwinConfig):
         self.check_at_least(
             0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every", "memory_radius", "escape_after"
         )
+        for name in ("start", "target"):
+            cell = getattr(self, name)
+            if cell is not None and (
+                len(cell) != 2 or any(isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 0 for v in cell)
+            ):
+                raise ConfigError(f"{flag(name)} must be a cell: two integers ix iy >= 0, got {cell!r}")
+        if not self.lr > 0:
+            raise ConfigError(f"--lr must be > 0, got {self.lr}", hint="the presets use 1e-3")
+        if self.lr_end == 0:
+            raise ConfigError(
+                "--lr-end 0 stops learning at the end of the budget",
+                hint="use a positive end rate, or a negative one for a constant --lr",
+            )
+        if self.expert_weight < 0 or not self.expert_margin > 0:
+            raise ConfigError(
+                f"--expert-weight must be >= 0 and --expert-margin > 0, got {self.expert_weight} and "
+                f"{self.expert_margin}"
+            )
+        if self.max_grad_norm < 0:
+            raise ConfigError(f"--max-grad-norm must be >= 0 (0 = off), got {self.max_grad_norm}")
+        self.check_within(0, 1, "gamma", open_interval=True)
+        self.check_within(0, 1, "eps_start", "eps_end", "eps_decay_fraction")
+
+    def validate(self) -> DQNConfig:
+        super().validate()
+        if self.preset not in PRESETS:
+            raise unknown_name("training preset", self.preset, PRESETS)
         if self.escape_after and not self.memory_visits:
             raise ConfigError("--escape-after reads the memory's visit counts", hint="set --memory-visits too")
         if (self.memory_bumps or self.memory_visits) and not self.memory_radius:
@@ -147,27 +173,11 @@ class DQNConfig(TwinConfig):
             )
         if self.aug_potential not in AUG_POTENTIALS:
             raise unknown_name("augmentation potential", self.aug_potential, AUG_POTENTIALS)
-        if not self.lr > 0:
-            raise ConfigError(f"--lr must be > 0, got {self.lr}", hint="the presets use 1e-3")
-        if self.lr_end == 0:
-            raise ConfigError(
-                "--lr-end 0 stops learning at the end of the budget",
-                hint="use a positive end rate, or a negative one for a constant --lr",
-            )
-        if self.expert_weight < 0 or not self.expert_margin > 0:
-            raise ConfigError(
-                f"--expert-weight must be >= 0 and --expert-margin > 0, got {self.expert_weight} and "
-                f"{self.expert_margin}"
-            )
         if self.expert_weight > 0 and self.reward != "geodesic":
             raise ConfigError(
                 f"--expert-weight reads the breadth-first distances of the geodesic reward, got --reward {self.reward}",
                 hint="use --reward geodesic, or --expert-weight 0",
             )
-        if self.max_grad_norm < 0:
-            raise ConfigError(f"--max-grad-norm must be >= 0 (0 = off), got {self.max_grad_norm}")
-        self.check_within(0, 1, "gamma", open_interval=True)
-        self.check_within(0, 1, "eps_start", "eps_end", "eps_decay_fraction")
         return self
 
 

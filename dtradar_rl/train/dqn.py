@@ -56,12 +56,14 @@ import torch.nn.functional as F
 from torch import nn
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.files import open_atomic
+from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_rl.agents.checkpoints import (
     CHECKPOINT_FORMAT,
-    read_checkpoint,
+    TRAINING_STATE,
+    CheckpointError,
     save_checkpoint,
     save_torch_atomic,
+    twin_record,
     write_config,
 )
 from dtradar_rl.agents.policy import QNetwork
@@ -70,6 +72,7 @@ from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.pairs import training_pair
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
+from dtradar_rl.train.checkpoints import check_resumed_twin, check_run_folder
 from dtradar_rl.train.config import DQNConfig
 from dtradar_rl.train.replay import ReplayBuffer
 from dtradar_rl.viz.plots import plot_curves
@@ -119,8 +122,12 @@ def train(
     torch.manual_seed(cfg.seed)
     device = torch.device(cfg.device)
     out = cfg.out_dir
+    # A run folder belongs to one scene and one config family: refused here, before anything loads or is written.
+    resumed = check_run_folder(cfg, out)
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
-    write_config(cfg, out)  # only once the dataset loaded: a failed start leaves an earlier run's config alone
+    if resumed is not None:
+        check_resumed_twin(resumed, ds, out)
+    threads = {"threads": torch.get_num_threads(), "threads_setting": cfg.threads}  # the reproducibility record
     normalizer = normalizer or Normalizer.fit(ds)
     pair = training_pair(cfg, ds)
     env = batched_env(
@@ -169,30 +176,39 @@ def train(
             f"pair ({pair.source}): start {pair.start} -> target {pair.target}, shortest {pair.shortest} steps, "
             f"episode cap {env.max_steps}"
         )
-    if cfg.resume and (out / "last.pt").exists():
-        state = read_checkpoint(
-            out / "last.pt", (CHECKPOINT_FORMAT,), what="resumable DQN run (last.pt)", device=cfg.device
-        )
-        q.load_state_dict(state["q"])
-        q_target.load_state_dict(state["q_target"])
-        optimizer.load_state_dict(state["optimizer"])
-        if "replay" in state:
-            buffer.load_state_dict(state["replay"])
-        env_steps, updates, episodes = state["env_steps"], state["updates"], [tuple(e) for e in state["episodes"]]
-        gen.set_state(state["gen"].cpu())
-        env.gen.set_state(state["env_gen"].cpu())
-        if "env_noise_gen" in state:
-            env.noise_gen.set_state(state["env_noise_gen"].cpu())
-        for k in env.state_keys:
-            setattr(env, k, state["env"][k].to(device))
-        ep_reward, ep_collisions = state["ep_reward"].to(device), state["ep_collisions"].to(device)
+    if resumed is not None:
+        state = resumed
+        try:
+            q.load_state_dict(state["q"])
+            q_target.load_state_dict(state["q_target"])
+            optimizer.load_state_dict(state["optimizer"])
+            if "replay" in state:
+                buffer.load_state_dict(state["replay"])
+            env_steps, updates, episodes = state["env_steps"], state["updates"], [tuple(e) for e in state["episodes"]]
+            gen.set_state(state["gen"].cpu())
+            env.gen.set_state(state["env_gen"].cpu())
+            if "env_noise_gen" in state:
+                env.noise_gen.set_state(state["env_noise_gen"].cpu())
+            for k in env.state_keys:
+                setattr(env, k, state["env"][k].to(device))
+            ep_reward, ep_collisions = state["ep_reward"].to(device), state["ep_collisions"].to(device)
+        except (KeyError, TypeError, ValueError, RuntimeError) as e:  # the family check lets none of these through
+            raise CheckpointError(
+                f"{out / 'last.pt'} does not fit this run ({type(e).__name__}: {e})",
+                hint=f"pick another --out, or train again without --resume (it replaces the run in {out})",
+            ) from e
         if cfg.verbose:
             print(f"resumed from {out / 'last.pt'} at {env_steps} env steps, {updates} updates")
+    # Only now, every check passed and the state loaded: a refused or failed start leaves the folder as it was.
+    write_config(cfg, out)
 
     def save_last():
         state = {
             "format": CHECKPOINT_FORMAT,
+            "kind": TRAINING_STATE,
             "config": json.dumps(cfg.to_dict()),
+            "dataset": twin_record(ds),
+            "stats": threads,
             "q": q.state_dict(),
             "q_target": q_target.state_dict(),
             "optimizer": optimizer.state_dict(),
@@ -303,23 +319,27 @@ def train(
     wall = time.perf_counter() - t_start - callback_s
     save_last()
     ckpt = out / "model.pt"
-    save_checkpoint(
-        ckpt,
-        q,
-        cfg,
-        normalizer,
-        getattr(env, "obs_names", env.obs_table.names),
-        ds,
-        stats={
-            "env_steps": env_steps,
-            "updates": updates,
-            "episodes": len(episodes),
-            "wall_s": wall,
-            **({"pair": pair.to_dict()} if pair else {}),
-        },
-    )
+    stats = {
+        "env_steps": env_steps,
+        "updates": updates,
+        "episodes": len(episodes),
+        "wall_s": wall,
+        **threads,
+        **({"pair": pair.to_dict()} if pair else {}),
+    }
+    save_checkpoint(ckpt, q, cfg, normalizer, getattr(env, "obs_names", env.obs_table.names), ds, stats=stats)
     write_curves(episodes, out)
+    write_run_record(out, ds, stats)
     return TrainResult(ckpt, out, env_steps, updates, len(episodes), wall, _summary(episodes))
+
+
+def write_run_record(out: Path, ds: Dataset, stats: dict[str, Any]) -> Path:
+    """``run.json``: how the run went and on what (the twin, steps, seconds, the torch threads it used and the
+    ``--threads`` setting, torch's version), beside ``config.json`` (which stays the config alone)."""
+    record = {"dataset": twin_record(ds), "stats": stats, "torch": torch.__version__}
+    path = out / "run.json"
+    write_atomic(path, json.dumps(record, indent=2, default=str) + "\n")
+    return path
 
 
 def expert_margin_loss(q_all: torch.Tensor, expert: torch.Tensor, margin: float) -> torch.Tensor:

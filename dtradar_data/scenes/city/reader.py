@@ -33,12 +33,13 @@ from pydantic import BaseModel, BeforeValidator, Field, ValidationError
 
 from dtradar_data.core import layout
 from dtradar_data.core.errors import (
+    InvalidSettingError,
     SceneFileError,
     UnknownNameError,
     did_you_mean,
     unknown_name,
 )
-from dtradar_data.core.grid import Grid
+from dtradar_data.core.grid import Grid, too_many_cells
 from dtradar_data.scenes.city.footprints import CityFootprints, LonLatBox
 from dtradar_data.scenes.city.frame import local_extent
 from dtradar_data.scenes.city.sources import load_footprints
@@ -67,6 +68,8 @@ from dtradar_data.scenes.model import (
     SceneSpec,
     TxSpec,
 )
+from dtradar_data.scenes.names import check_user_scene_name
+from dtradar_data.scenes.options import check_cell_m
 
 FORMAT = 1
 GROUND_THICKNESS_M = 0.2
@@ -213,7 +216,9 @@ def read_city_file(path: str | Path) -> CityDocument:
         ) from e
     except tomllib.TOMLDecodeError as e:
         raise SceneFileError(f"{path}: not valid TOML: {e}", hint="fix the syntax at the reported line") from e
-    return parse_city(data, origin=str(path))
+    doc = parse_city(data, origin=str(path))
+    check_user_scene_name(doc.scene.name, path, derived=tuple(f"{doc.scene.name}-{q}" for q in sorted(doc.quadrants)))
+    return doc
 
 
 def parse_city(data: dict[str, Any], *, origin: str = "<city>") -> CityDocument:
@@ -265,17 +270,31 @@ def _footprints(source: str, box: LonLatBox, crs: str, data_root: str, scene: st
 def city_footprints(doc: CityDocument, source: str | None = None) -> CityFootprints:
     """The city's footprints from ``source`` (default: the file's ``[city] footprints``)."""
     return _footprints(
-        str(source or doc.city.footprints), doc.box, doc.city.crs, str(layout.data_root()), doc.scene.name
+        str(doc.city.footprints if source is None else source),
+        doc.box,
+        doc.city.crs,
+        str(layout.data_root()),
+        doc.scene.name,
     )
 
 
-def quadrant_grid(quadrant: str, hx: float, hy: float, cell_m: float) -> Grid:
-    """The quadrant's grid: whole cells from the box centre outwards (quadrant grids meet at the centre)."""
+def quadrant_grid(quadrant: str, hx: float, hy: float, cell_m: float, *, option: bool = False, city: str = "") -> Grid:
+    """The quadrant's grid: whole cells from the box centre outwards (quadrant grids meet at the centre).
+    ``option``: ``cell_m`` is ``--cell-m`` (named in errors), not the ``[grid] cell_m`` of the file of ``city``."""
+    what = "--cell-m" if option else f"{city + '.toml: ' if city else ''}[grid] cell_m"
+    if option:
+        cell_m = check_cell_m(cell_m)
     nx, ny = math.floor(hx / cell_m + 1e-9), math.floor(hy / cell_m + 1e-9)
     if nx < 1 or ny < 1:
         raise SceneFileError(
-            f"cell_m={cell_m} is larger than the quadrant ({2 * hx:.0f} x {2 * hy:.0f} m city)",
-            hint="use a smaller --cell-m",
+            f"{what} {cell_m:g} is larger than the quadrant ({2 * hx:.0f} x {2 * hy:.0f} m city)",
+            hint="use a smaller --cell-m" if option else "use a smaller cell_m in [grid]",
+        )
+    problem = too_many_cells(nx, ny)
+    if problem:
+        raise (InvalidSettingError if option else SceneFileError)(
+            f"{what} {cell_m:g} over a {hx:.0f} x {hy:.0f} m quadrant: {problem}",
+            hint="use larger cells (--cell-m)" if option else "use a larger cell_m in [grid]",
         )
     sx, sy = QUADRANT_SIGNS[quadrant]
     x0 = cell_m / 2 if sx > 0 else -nx * cell_m + cell_m / 2
@@ -297,11 +316,14 @@ def city_spec(
             f"{scene} has no dynamic twin (the dynamic twin of {doc.scene.name} is {has})",
             hint=f"use {scene}/blueprint" + (f" or {has}" if dyn else ""),
         )
-    fp = city_footprints(doc, footprints)
     hx, hy = local_extent(doc.box, doc.city.crs)
+    # the grid first: a bad --cell-m fails before the footprints are read (or downloaded); 0 is a value, not "unset"
+    grid = quadrant_grid(
+        quadrant, hx, hy, doc.grid.cell_m if cell_m is None else cell_m, option=cell_m is not None, city=doc.scene.name
+    )
+    fp = city_footprints(doc, footprints)
     area = quadrant_rect(quadrant, hx, hy)
     buildings = [f.polygon() for f in fp.of_kind("building")]
-    grid = quadrant_grid(quadrant, hx, hy, cell_m or doc.grid.cell_m)
 
     paper = doc.quadrants[quadrant].tx_m
     tx_xy = place_transmitter(

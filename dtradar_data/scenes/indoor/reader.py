@@ -21,7 +21,7 @@ import numpy as np
 import tomllib
 from pydantic import ValidationError
 
-from dtradar_data.core.errors import SceneFileError, did_you_mean
+from dtradar_data.core.errors import InvalidSettingError, SceneFileError, did_you_mean
 from dtradar_data.core.grid import Grid
 from dtradar_data.scenes.indoor.document import (
     FORMAT,
@@ -158,13 +158,20 @@ class _Reader(DocumentErrors):
 
     def grid(self, g: GridModel, room: Room) -> Grid:
         cell = g.cell_m
-        grid = Grid(
-            x0_m=cell / 2 if g.x0_m is None else g.x0_m,
-            y0_m=cell / 2 if g.y0_m is None else g.y0_m,
-            cell_m=cell,
-            nx=g.nx,
-            ny=g.ny,
-        )
+        try:
+            grid = Grid(
+                x0_m=cell / 2 if g.x0_m is None else g.x0_m,
+                y0_m=cell / 2 if g.y0_m is None else g.y0_m,
+                cell_m=cell,
+                nx=g.nx,
+                ny=g.ny,
+            )
+        except InvalidSettingError as e:  # too many cells: the file's mistake, named with its section
+            raise self.fail(
+                "[grid]",
+                e.message.removeprefix("invalid receiver grid: "),
+                "use larger cells (cell_m) or fewer (nx, ny)",
+            ) from e
         xmin, ymin, xmax, ymax = grid.bounds()
         if xmin < -_EPS or ymin < -_EPS or xmax > room.width_m + _EPS or ymax > room.length_m + _EPS:
             raise self.fail(

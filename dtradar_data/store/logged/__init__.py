@@ -10,26 +10,37 @@ import load_logged``); the modules mirror :mod:`dtradar_data.store`:
   (:class:`LoggedId`, :func:`parse_logged_id`, :func:`format_logged_id`, :func:`is_logged_name`);
 - :mod:`.table` — the transition table: schema, invariants (:func:`check_transitions`), numpy views, episode stats;
 - :mod:`.versions` — a version is the hash of the logging inputs (:func:`logging_inputs`, :func:`logged_version`);
-- :mod:`.dataset` — :class:`LoggedDataset`, one loaded version, and its Minari id;
+- :mod:`.dataset` — :class:`LoggedDataset`, one loaded version, its Minari id and Minari folder (:func:`minari_root`:
+  ``$MINARI_DATASETS_PATH``, else ``<root>/minari``, one per data root);
 - :mod:`.card` — the dataset card of a version, a pure function of its metadata;
 - :mod:`.local` — the layout under ``<root>/logged``, atomic writes, installs of a download, checked reads
   (:func:`write_logged`, :func:`load_logged`);
-- :mod:`.listing` — every stored logged version (:func:`list_logged`) and full verification (:func:`verify_logged`).
+- :mod:`.listing` — every stored logged version, damaged ones flagged (:func:`list_logged`), and full verification
+  (:func:`verify_logged`);
+- :mod:`.staging` — staging folders held by their process (those of killed ones are cleaned), locks that say what
+  they wait for;
+- :mod:`.hints` — the ``python -m dtradar_rl log`` / ``make logged`` command that (re)creates a version.
 """
 
 from dtradar_data.core.ids import LOGGED_GRAMMAR, LoggedId, format_logged_id, is_logged_name, parse_logged_id
 from dtradar_data.store.logged.card import render_logged_card
-from dtradar_data.store.logged.dataset import LoggedDataset, minari_id
-from dtradar_data.store.logged.listing import LoggedEntry, list_logged, verify_logged
+from dtradar_data.store.logged.dataset import MINARI_DIR, MINARI_ENV, LoggedDataset, minari_id, minari_root
+from dtradar_data.store.logged.hints import log_commands, relog_hint
+from dtradar_data.store.logged.listing import LoggedEntry, list_logged, verify_logged, verify_logged_dir
 from dtradar_data.store.logged.local import (
     LOGGED_DIR,
     META_KEY,
+    STAGE_PREFIXES,
     check_version_dir,
+    clean_logged_stages,
     install_logged,
     load_logged,
     local_versions,
     logged_dir,
+    logged_names,
     logged_root,
+    logging_lock,
+    looks_like_stage,
     read_meta,
     read_transitions,
     refs_path,
@@ -54,6 +65,9 @@ __all__ = [
     "LOGGED_GRAMMAR",
     "LOGGED_LIBRARIES",
     "META_KEY",
+    "MINARI_DIR",
+    "MINARI_ENV",
+    "STAGE_PREFIXES",
     "TRANSITIONS_FILE",
     "TRANSITIONS_FORMAT",
     "TRANSITION_SCHEMA",
@@ -63,6 +77,7 @@ __all__ = [
     "arrays",
     "check_transitions",
     "check_version_dir",
+    "clean_logged_stages",
     "episode_stats",
     "format_logged_id",
     "install_logged",
@@ -70,19 +85,26 @@ __all__ = [
     "list_logged",
     "load_logged",
     "local_versions",
+    "log_commands",
     "logged_dir",
+    "logged_names",
     "logged_root",
     "logged_version",
     "logging_inputs",
+    "logging_lock",
+    "looks_like_stage",
     "minari_id",
+    "minari_root",
     "parse_logged_id",
     "read_meta",
     "read_transitions",
     "refs_path",
+    "relog_hint",
     "render_logged_card",
     "resolve_logged",
     "table_digest",
     "transitions_table",
     "verify_logged",
+    "verify_logged_dir",
     "write_logged",
 ]

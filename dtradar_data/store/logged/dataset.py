@@ -1,7 +1,16 @@
-"""One loaded logged version (:class:`LoggedDataset`: the transition table and its ``meta.json``) and its Minari id."""
+"""One loaded logged version (:class:`LoggedDataset`: the transition table and its ``meta.json``), its Minari id and
+where its Minari copy goes.
+
+The Minari copy of a data root's logged version is a Minari dataset in :func:`minari_root`: Minari's own setting
+``MINARI_DATASETS_PATH`` when it is set, else ``<data root>/minari``, one Minari folder per data root (not Minari's
+default ``~/.minari/datasets``, which every data root would share: the same id ``dtradar/...-v0`` names the first
+version logged in *each* data root, so two roots would write different data under one id). Load it with
+``MINARI_DATASETS_PATH=<data root>/minari`` set, or with :func:`dtradar_rl.offline.formats.load_minari`.
+"""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -9,10 +18,23 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from dtradar_data.core import layout as P
 from dtradar_data.core.ids import LoggedId, is_tag, parse_logged_id
 from dtradar_data.store.logged.table import arrays
 
-__all__ = ["LoggedDataset", "minari_id"]
+__all__ = ["MINARI_DIR", "MINARI_ENV", "LoggedDataset", "minari_id", "minari_root"]
+
+#: Minari's own setting: the folder of its local datasets.
+MINARI_ENV = "MINARI_DATASETS_PATH"
+#: The folder under the data root holding the Minari copies when ``MINARI_DATASETS_PATH`` is not set.
+MINARI_DIR = "minari"
+
+
+def minari_root() -> Path:
+    """Where the Minari copies of logged datasets are written and read: ``$MINARI_DATASETS_PATH`` if set, else
+    ``<data root>/minari`` (one Minari folder per data root; see the module docstring). Absolute."""
+    value = os.environ.get(MINARI_ENV, "").strip()
+    return (Path(value).expanduser() if value else P.data_root() / MINARI_DIR).absolute()
 
 
 def minari_id(lid: LoggedId, tag: str | None) -> str:
@@ -49,6 +71,11 @@ class LoggedDataset:
     @property
     def minari_id(self) -> str:
         return minari_id(parse_logged_id(self.name), self.tag)
+
+    @property
+    def minari_path(self) -> Path:
+        """The folder of its Minari copy (which may not be written yet): ``minari_root() / minari_id``."""
+        return minari_root() / self.minari_id
 
     def arrays(self) -> dict[str, np.ndarray]:
         return arrays(self.table)

@@ -3,14 +3,17 @@
 ``<root>/logged/<scene>/<variant>/<behaviour>/<version>/{transitions.parquet, meta.json, README.md}`` and
 ``.../<behaviour>/refs.json``: a tree apart from ``<root>/datasets`` so that RT listings never see them. A version is
 written into a staging folder under ``<root>/work`` and renamed into place (complete or absent), as for RT datasets
-(:mod:`dtradar_data.store.writing`).
+(:mod:`dtradar_data.store.writing`); the staging folder is held by its process, so the next write removes those a
+killed one left (:mod:`.staging`). A version folder without a readable ``meta.json`` is *damaged*, not absent:
+``local_versions(lid, damaged=True)`` lists it for ``list`` and ``verify``, and logging the same settings again
+replaces it (as it replaces a version whose file no longer matches its record).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import shutil
-import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -20,11 +23,20 @@ import pyarrow.parquet as pq
 from filelock import FileLock
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError
-from dtradar_data.core.files import json_safe, sha256_file, write_atomic
-from dtradar_data.core.ids import HASH_RE, LoggedId, is_tag, parse_logged_id
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    DatasetNotFoundError,
+    RevisionNotFoundError,
+    SchemaMismatchError,
+    UnknownNameError,
+    did_you_mean,
+)
+from dtradar_data.core.files import json_safe, sha256_file, waiting_lock, write_atomic
+from dtradar_data.core.ids import HASH_RE, SCENE_RE, LoggedId, is_tag, parse_logged_id
 from dtradar_data.store.logged.card import render_logged_card
 from dtradar_data.store.logged.dataset import LoggedDataset
+from dtradar_data.store.logged.hints import relog_hint
+from dtradar_data.store.logged.staging import clean_stale_stages, held_stage
 from dtradar_data.store.logged.table import TRANSITIONS_FILE, TRANSITIONS_FORMAT, check_transitions, episode_stats
 from dtradar_data.store.logged.versions import logged_version
 from dtradar_data.store.versions import Refs, read_refs, resolve_revision, write_refs
@@ -36,6 +48,10 @@ __all__ = [
     "logged_dir",
     "refs_path",
     "local_versions",
+    "logged_names",
+    "id_of_dir",
+    "clean_logged_stages",
+    "logging_lock",
     "write_logged",
     "check_version_dir",
     "install_logged",
@@ -47,6 +63,20 @@ __all__ = [
 
 LOGGED_DIR = "logged"
 META_KEY = b"dtradar.logged"
+#: Prefixes of the staging folders under ``<root>/work`` that this package writes (a version, a pull).
+STAGE_PREFIXES = ("logged-", "pull-logged-")
+
+
+def looks_like_stage(stage: Path) -> bool:
+    """Whether a lockless ``<root>/work`` folder of one of :data:`STAGE_PREFIXES` is a stage an older dtradar left
+    (a version: files only; a pull: its download folders), not another writer's folder that shares the prefix."""
+    try:
+        entries = list(stage.iterdir())
+    except OSError:
+        return False
+    if stage.name.startswith(STAGE_PREFIXES[1]):
+        return all(p.name in ("download", "cache", "version") for p in entries)
+    return all(p.is_file() for p in entries)
 
 
 def logged_root() -> Path:
@@ -61,14 +91,76 @@ def refs_path(lid: LoggedId) -> Path:
     return logged_dir(lid) / P.REFS_FILE
 
 
-def local_versions(lid: LoggedId) -> list[str]:
-    """Version folders of ``lid`` (complete ones: with meta.json), oldest tag first."""
+def local_versions(lid: LoggedId, *, damaged: bool = False) -> list[str]:
+    """Version folders of ``lid``, oldest tag first: those with a ``meta.json``, or with ``damaged`` every one (a
+    folder without it is a damaged version for ``list`` and ``verify`` to report, as for RT datasets)."""
     d = logged_dir(lid)
     if not d.is_dir():
         return []
-    found = [p.name for p in d.iterdir() if p.is_dir() and HASH_RE.fullmatch(p.name) and (p / P.META_FILE).is_file()]
+    found = [
+        p.name
+        for p in d.iterdir()
+        if p.is_dir() and HASH_RE.fullmatch(p.name) and (damaged or (p / P.META_FILE).is_file())
+    ]
     order = {v: i for i, (_, v) in enumerate(read_refs(refs_path(lid)).ordered())}
     return sorted(found, key=lambda v: (order.get(v, len(order)), v))
+
+
+def logged_names() -> list[str]:
+    """Every ``scene/variant/behaviour`` with a version folder in the store (healthy or damaged), sorted."""
+    root = logged_root()
+    if not root.is_dir():
+        return []
+    out = []
+    for bdir in sorted(root.glob("*/*/*")):
+        parts = bdir.relative_to(root).parts
+        if not bdir.is_dir() or not all(SCENE_RE.fullmatch(p) for p in parts):
+            continue
+        try:
+            lid = parse_logged_id("/".join(parts))
+        except UnknownNameError:  # e.g. a variant folder that is not one
+            continue
+        if local_versions(lid, damaged=True):
+            out.append(lid.name)
+    return out
+
+
+def id_of_dir(vdir: Path) -> LoggedId | None:
+    """The id of a version folder in the store (None for one elsewhere, e.g. a download being checked)."""
+    try:
+        parts = vdir.resolve().relative_to(logged_root().resolve()).parts
+        return parse_logged_id("/".join(parts[:3])) if len(parts) == 4 else None
+    except (ValueError, UnknownNameError, OSError):
+        return None
+
+
+def clean_logged_stages() -> list[Path]:
+    """Remove the staging folders under ``<root>/work`` that a killed log or pull left (none held by a live
+    process); returns them. Every write does it first; ``python -m dtradar_rl log`` too."""
+    work = P.data_root() / "work"
+    return [p for prefix in STAGE_PREFIXES for p in clean_stale_stages(work, prefix, lockless=looks_like_stage)]
+
+
+def logging_lock(lid: LoggedId, version: str):
+    """A context manager held while one process logs ``lid@version`` (the rollout, then the write): a second
+    process with the same settings says whom it waits for (:func:`~dtradar_data.core.files.waiting_lock`), waits,
+    then finds the version stored."""
+    return waiting_lock(
+        logged_dir(lid) / f".{version}.logging.lock",
+        f"logging {lid.name}@{version}",
+        then="this process reuses that version",
+    )
+
+
+def _verified(vdir: Path, version: str) -> bool:
+    """Whether the stored version folder holds the record and the file it should (the cheap checks)."""
+    try:
+        meta = read_meta(vdir)
+        rec = (meta.get("files") or {}).get(TRANSITIONS_FILE) or {}
+        f = vdir / TRANSITIONS_FILE
+        return meta.get("version") == version and f.is_file() and sha256_file(f) == rec.get("sha256")
+    except (CorruptDatasetError, OSError):
+        return False
 
 
 def write_logged(
@@ -77,21 +169,19 @@ def write_logged(
     """Store a logged version atomically (reused when it exists) and tag it; returns ``(version, directory)``.
 
     ``meta`` is stored in ``meta.json`` with the name, version, inputs, table stats, file hashes and creation time
-    added; the card is rendered from it."""
+    added; the card is rendered from it. A stored copy of the version that is damaged (no readable ``meta.json``,
+    or a file that no longer matches it) is replaced; stale staging folders of killed writers are removed."""
     lid = parse_logged_id(name).with_revision(None)
     check_transitions(table)
     version = logged_version(inputs)
     ddir = logged_dir(lid)
     ddir.mkdir(parents=True, exist_ok=True)
+    clean_logged_stages()
     with FileLock(ddir / ".lock"):
         vdir = ddir / version
         refs = read_refs(refs_path(lid))
-        if not (vdir / P.META_FILE).is_file():
-            if vdir.exists():
-                shutil.rmtree(vdir)  # a leftover without meta.json never became a version
-            P.work_root().mkdir(parents=True, exist_ok=True)
-            stage = Path(tempfile.mkdtemp(prefix="logged-", dir=P.work_root()))
-            try:
+        if not (vdir.is_dir() and _verified(vdir, version)):
+            with held_stage(P.work_root(), STAGE_PREFIXES[0], lockless=looks_like_stage) as stage:
                 full = {
                     **json_safe(meta),
                     "name": lid.name,
@@ -123,14 +213,22 @@ def write_logged(
                 tag = refs.tag_of(version) or refs.next_tag()
                 write_atomic(stage / P.META_FILE, json.dumps(full, indent=2, sort_keys=True) + "\n")
                 write_atomic(stage / P.CARD_FILE, render_logged_card(full, tag))
-                stage.rename(vdir)
-            except BaseException:
-                shutil.rmtree(stage, ignore_errors=True)
-                raise
+                _replace(vdir, stage)
         if refs.tag_of(version) is None:
             refs = Refs({**refs.tags, refs.next_tag(): version}, version)
             write_refs(refs_path(lid), refs)
     return version, vdir
+
+
+def _replace(vdir: Path, stage: Path) -> None:
+    """Move ``stage`` to ``vdir``; a damaged folder there is first moved aside into a held folder under the work
+    folder (same filesystem) and removed after, so a reader finds the old folder or the new one, never a mix."""
+    if not vdir.exists():
+        shutil.move(str(stage), vdir)
+        return
+    with held_stage(P.work_root(), STAGE_PREFIXES[0], lockless=looks_like_stage) as trash:
+        os.rename(vdir, trash / vdir.name)
+        shutil.move(str(stage), vdir)
 
 
 def check_version_dir(vdir: Path) -> tuple[str, dict[str, Any]]:
@@ -167,10 +265,8 @@ def install_logged(name: str | LoggedId, staged: Path, *, preferred_tag: str | N
     ddir.mkdir(parents=True, exist_ok=True)
     with FileLock(ddir / ".lock"):
         vdir = ddir / version
-        if not (vdir / P.META_FILE).is_file():
-            if vdir.exists():
-                shutil.rmtree(vdir)
-            shutil.move(str(staged), vdir)
+        if not (vdir.is_dir() and _verified(vdir, version)):  # absent or damaged: the verified download replaces it
+            _replace(vdir, staged)
         refs = read_refs(refs_path(lid))
         if refs.tag_of(version) is None:
             tag = (
@@ -182,30 +278,51 @@ def install_logged(name: str | LoggedId, staged: Path, *, preferred_tag: str | N
     return vdir
 
 
+def _hint(vdir: Path, meta: dict[str, Any] | None = None) -> str:
+    """How to get the version in ``vdir`` again (exact when ``meta`` says how it was logged)."""
+    lid = id_of_dir(vdir)
+    if lid is None:
+        return "log or pull the dataset again (`python -m dtradar_rl log ...`)"
+    return relog_hint(lid, meta, damaged=str(vdir))
+
+
 def read_meta(vdir: Path) -> dict[str, Any]:
+    """The ``meta.json`` of a logged version; :class:`CorruptDatasetError` naming the file when it is missing or is
+    not a logged-dataset record."""
+    path = vdir / P.META_FILE
     try:
-        meta = json.loads((vdir / P.META_FILE).read_text())
+        meta = json.loads(path.read_text())
         if not isinstance(meta, dict) or meta.get("format") != TRANSITIONS_FORMAT:
             raise ValueError(
                 f"format {meta.get('format') if isinstance(meta, dict) else None!r}, expected {TRANSITIONS_FORMAT}"
             )
         return meta
+    except FileNotFoundError as exc:
+        raise CorruptDatasetError(f"{path} is missing", hint=_hint(vdir)) from exc
     except (OSError, ValueError) as exc:
-        raise CorruptDatasetError(
-            f"{vdir / P.META_FILE} is not a logged-dataset record ({exc})",
-            hint="log the dataset again (`python -m dtradar_rl log ...`)",
-        ) from exc
+        raise CorruptDatasetError(f"{path} is not a logged-dataset record ({exc})", hint=_hint(vdir)) from exc
 
 
-def resolve_logged(name: str | LoggedId, revision: str | None = None) -> tuple[LoggedId, str, Path]:
+def resolve_logged(
+    name: str | LoggedId, revision: str | None = None, *, damaged: bool = False
+) -> tuple[LoggedId, str, Path]:
+    """``(id, version, folder)`` of a stored logged version (``damaged``: also one without ``meta.json``). A name
+    not in the store is a :class:`DatasetNotFoundError` with the stored name it was probably meant to be, if any,
+    and the command that logs it."""
     lid = parse_logged_id(name)
+    if revision and lid.revision and revision != lid.revision:
+        raise RevisionNotFoundError(
+            f"two revisions given: {lid.revision!r} in the name and {revision!r}", hint="give the revision once"
+        )
     revision = revision or lid.revision
-    versions = local_versions(lid)
+    versions = local_versions(lid, damaged=damaged)
     if not versions:
+        others = [n for n in logged_names() if n != lid.name]
+        suggestion = did_you_mean(lid.name, others)
         raise DatasetNotFoundError(
-            f"logged dataset {lid.name} is not in {logged_root()}",
-            hint=f"log it: `python -m dtradar_rl log --scene {lid.scene} --variant "
-            f"{lid.variant} --behaviour {lid.behaviour}` (or `make logged`)",
+            f"logged dataset {lid.name} is not in {logged_root()}" + (f"; {suggestion}" if suggestion else ""),
+            hint=relog_hint(lid, new=True)
+            + ("; `python -m dtradar_data list` shows the stored ones" if others else ""),
         )
     version = resolve_revision(read_refs(refs_path(lid)), versions, revision, lid.name)
     return lid, version, logged_dir(lid) / version
@@ -224,18 +341,24 @@ def read_transitions(path: Path) -> pa.Table:
 
 def load_logged(name: str | LoggedId, revision: str | None = None, *, verify: bool = True) -> LoggedDataset:
     """Load a logged version: the newest without ``revision`` (or ``@rev`` in ``name``), else a tag or hash.
-    ``verify`` re-hashes the file against ``meta.json``; the table is always checked (:func:`check_transitions`)."""
-    lid, version, vdir = resolve_logged(name, revision)
+    ``verify`` re-hashes the file against ``meta.json``; the table is always checked (:func:`check_transitions`).
+    A damaged version asked for (or the only ones there are) is a :class:`CorruptDatasetError` naming its file, not
+    "not in the store"."""
+    try:
+        lid, version, vdir = resolve_logged(name, revision)
+    except (DatasetNotFoundError, RevisionNotFoundError):
+        lid, version, vdir = resolve_logged(name, revision, damaged=True)  # raises again when none is damaged
     meta = read_meta(vdir)
     f = vdir / TRANSITIONS_FILE
     rec = (meta.get("files") or {}).get(TRANSITIONS_FILE) or {}
     if not f.is_file():
-        raise CorruptDatasetError(f"{f} is missing", hint="log the dataset again")
+        raise CorruptDatasetError(f"{f} is missing", hint=_hint(vdir, meta))
     if verify and sha256_file(f) != rec.get("sha256"):
-        raise CorruptDatasetError(
-            f"{f}: sha256 differs from meta.json (changed or damaged)", hint=f"log it again, or remove {vdir}"
-        )
-    table = read_transitions(f)
+        raise CorruptDatasetError(f"{f}: sha256 differs from meta.json (changed or damaged)", hint=_hint(vdir, meta))
+    try:
+        table = read_transitions(f)
+    except (CorruptDatasetError, SchemaMismatchError) as exc:
+        raise type(exc)(exc.message, hint=_hint(vdir, meta)) from exc
     tag = read_refs(refs_path(lid)).tag_of(version)
     meta["tag"] = tag
     return LoggedDataset(lid.name, version, tag, table, meta, vdir)

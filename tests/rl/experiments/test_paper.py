@@ -96,9 +96,10 @@ def test_an_unknown_scene_or_a_seed_given_twice_fails_before_anything_is_written
             ["--scenes", "synthetic-8x6", "--cross-scenes", "cubicle", "synthetic-8x6"],
             ["cubicle/blueprint is not built"],
         ),
-        (["--scenes", "synthetic-8x6", "--seeds", "0", "0"], ["--seeds names seed(s) [0] more than once"]),
+        (["--scenes", "synthetic-8x6", "--seeds", "0", "0"], ["--seeds repeats 0"]),
         (["--scenes", "synthetic-8x6", "--seeds", "-1"], ["--seeds takes non-negative integers"]),
         (["--scenes", "synthetic-8x6", "--jobs", "-1"], ["--jobs must be >= 0"]),
+        (["--scenes", "cubicle", "cubicle"], ["--scenes repeats 'cubicle'"]),
     ):
         assert main(["paper", *args, "--out", str(out)]) == 2, args
         err = capsys.readouterr().err
