@@ -10,6 +10,7 @@ version is stored.
 from __future__ import annotations
 
 import dataclasses
+import math
 import shutil
 import tempfile
 import time
@@ -45,6 +46,7 @@ from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
 from dtradar_data.scenes import build_targets, load_scene_spec
 from dtradar_data.scenes.model import Box
+from dtradar_data.scenes.options import check_scene_options
 from dtradar_data.scenes.tx_pose import check_tx_pose_error, tx_pose_error
 from dtradar_data.store import local, versions, writing
 
@@ -111,13 +113,22 @@ class BuildConfig:
     """With --tx-pose-error: the seed of the move's direction and of the turn's axis."""
 
     def __post_init__(self) -> None:
+        # the scene options as the command line checks them (NaN, infinity, sizes), for a config built in Python too
+        check_scene_options(footprints=self.osm, cell_m=self.cell_m, grid=self.grid, tx=self.tx)
+        if not math.isfinite(self.retrace_radius_m):
+            raise InvalidSettingError(
+                f"--retrace-radius-m {self.retrace_radius_m} must be a finite number", hint="e.g. --retrace-radius-m 3"
+            )
         if self.coverage_samples < 1:
             raise InvalidSettingError(
                 f"--coverage-samples {self.coverage_samples} must be positive",
                 hint="the default is 2000000; use --no-coverage-map to skip the map",
             )
         if self.retrace_radius_m < 0:
-            raise InvalidSettingError(f"--retrace-radius-m {self.retrace_radius_m} must be >= 0")
+            raise InvalidSettingError(
+                f"--retrace-radius-m {self.retrace_radius_m} must be >= 0",
+                hint="it is how far around a changed object cells are re-traced, in metres; e.g. 3",
+            )
         if self.retrace_radius_m != BuildConfig.retrace_radius_m and not self.differential:
             raise InvalidSettingError(
                 "--retrace-radius-m applies to --differential only", hint="add --differential, or drop it"
@@ -135,7 +146,9 @@ class BuildConfig:
                 hint="drop --executor ray (and --ray-address, --workers), or drop --differential to trace it on Ray",
             )
         if self.workers < 0:
-            raise InvalidSettingError(f"--workers {self.workers} must be >= 0 (0 = one per CPU)")
+            raise InvalidSettingError(
+                f"--workers {self.workers} must be >= 0", hint="0 is one Ray worker per CPU; or give a count, e.g. 2"
+            )
         if self.tx_pose_error is not None:
             if len(self.tx_pose_error) != 2:
                 raise InvalidSettingError(
@@ -148,7 +161,7 @@ class BuildConfig:
             )
         if self.executor == "ray":
             import_ray()  # a missing Ray is a setup error, reported before anything is traced
-        elif self.ray_address or self.workers:
+        elif self.ray_address is not None or self.workers:
             raise InvalidSettingError(
                 "--ray-address and --workers apply to --executor ray only", hint="add --executor ray, or drop them"
             )

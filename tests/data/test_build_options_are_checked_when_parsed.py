@@ -109,3 +109,20 @@ def test_a_scene_files_grid_too_large_for_memory_is_refused_when_read_naming_the
     path.write_text(big)
     with pytest.raises(SceneFileError, match=r"big\.toml: \[grid\]: 5000 x 5000 = 25,000,000 cells"):
         load_scene_spec(path, "blueprint")
+
+
+@pytest.mark.parametrize(
+    "kw, flag",
+    [
+        (dict(retrace_radius_m=float("nan"), differential=True), "--retrace-radius-m"),
+        (dict(tx=(1.0, float("nan"), 2.0)), "--tx"),
+        (dict(grid=(0.0, 0.0, float("inf"), 4, 4)), "--grid"),
+        (dict(cell_m=0.0), "--cell-m"),
+        (dict(ray_address=""), "--ray-address"),
+        (dict(workers=-1), "--workers"),
+    ],
+)
+def test_a_build_config_made_in_python_checks_the_same_values_as_the_command_line(kw, flag):
+    with pytest.raises(InvalidSettingError) as e:
+        builder.BuildConfig(scene="cubicle", **kw)
+    assert flag in str(e.value) and "how to fix" in str(e.value)

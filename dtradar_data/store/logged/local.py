@@ -20,7 +20,6 @@ from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
-from filelock import FileLock
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import (
@@ -177,7 +176,7 @@ def write_logged(
     ddir = logged_dir(lid)
     ddir.mkdir(parents=True, exist_ok=True)
     clean_logged_stages()
-    with FileLock(ddir / ".lock"):
+    with waiting_lock(ddir / ".lock", f"storing a version of {lid.name}", notice_after_s=2.0):
         vdir = ddir / version
         refs = read_refs(refs_path(lid))
         if not (vdir.is_dir() and _verified(vdir, version)):
@@ -263,7 +262,7 @@ def install_logged(name: str | LoggedId, staged: Path, *, preferred_tag: str | N
         )
     ddir = logged_dir(lid)
     ddir.mkdir(parents=True, exist_ok=True)
-    with FileLock(ddir / ".lock"):
+    with waiting_lock(ddir / ".lock", f"installing a version of {lid.name}", notice_after_s=2.0):
         vdir = ddir / version
         if not (vdir.is_dir() and _verified(vdir, version)):  # absent or damaged: the verified download replaces it
             _replace(vdir, staged)
