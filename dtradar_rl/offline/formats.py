@@ -10,7 +10,10 @@ Formats
   from the store's tag ``vN``) into ``MINARI_DATASETS_PATH`` when it is set, else into ``<data root>/minari``: one
   Minari folder per data root, since each root numbers its tags from ``v0`` (:func:`~dtradar_data.store.logged.
   minari_root`). The copy is staged and renamed into place (whole or absent), recorded (``dtradar.json``), checked
-  before it is reused and rewritten when incomplete (:func:`export_minari`); :func:`load_minari` opens it.
+  before it is reused and rewritten when incomplete (:func:`export_minari`); :func:`load_minari` opens it. It
+  records the env spec of the twin it was logged on (:func:`minari_env_specs`), so ``recover_environment()`` gives
+  the logging env and ``recover_environment(eval_env=True)`` the evaluation env (the dynamic twin of a blueprint
+  log), and its observation space is that env's.
 - **d3rlpy** (:func:`to_mdp_dataset`): built from our table, not with ``d3rlpy.datasets.get_minari`` (which
   misaligns observations after the first episode in 2.8.1, DESIGN.md §4). d3rlpy drops the last step of an episode
   that ends in a timeout (it has no next observation there), so each truncated episode gets one extra row, its final
@@ -26,13 +29,14 @@ import json
 import os
 import shutil
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import MissingDependencyError, SchemaMismatchError
+from dtradar_data.core.errors import DtradarError, MissingDependencyError, SchemaMismatchError
 from dtradar_data.core.files import sha256_file, waiting_lock
 from dtradar_data.store.logged import (
     MINARI_DIR,
@@ -46,7 +50,9 @@ from dtradar_data.store.logged import (
     transitions_table,
 )
 from dtradar_data.store.logged.staging import held_stage
+from dtradar_rl.envs.registration import twin_env_spec, twin_version
 from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.twins import load_dataset
 
 
 def as_logged(data: LoggedDataset | str | LoggedId) -> LoggedDataset:
@@ -147,7 +153,9 @@ NAMESPACE_FILE = "namespace_metadata.json"
 #: The record of a complete Minari copy, written beside its ``data/`` folder (Minari ignores it) as the copy's last
 #: file before it is renamed into place: what it holds, where from, and the sha256 of every file of ``data/``.
 RECORD_FILE = "dtradar.json"
-RECORD_FORMAT = 1
+#: 2: the copy records the env spec (``recover_environment``) and the env's observation space; a copy of format 1
+#: (none) is rewritten once.
+RECORD_FORMAT = 2
 #: Hidden (Minari lists no hidden folder) staging folders in the Minari path, held while written (see
 #: :mod:`dtradar_data.store.logged.staging`).
 STAGE_PREFIX = ".dtradar-stage-"
@@ -175,9 +183,10 @@ def _files(folder: Path) -> dict[str, str]:
 
 
 def _record(folder: Path) -> dict[str, Any] | None:
+    """The copy's record, of any format (an older one names its version too: see :func:`copy_state`)."""
     try:
         rec = json.loads((folder / RECORD_FILE).read_text())
-        return rec if isinstance(rec, dict) and rec.get("format") == RECORD_FORMAT else None
+        return rec if isinstance(rec, dict) and isinstance(rec.get("format"), int) else None
     except (OSError, ValueError):
         return None
 
@@ -207,10 +216,12 @@ def _wanted(logged: LoggedDataset) -> dict[str, Any]:
 def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
     """``(state, why)`` of the Minari copy in ``folder`` next to ``logged``: ``"absent"``; ``"complete"`` (its
     record names this version, the same transitions file and episode count, and every file has its recorded
-    sha256); ``"incomplete"`` (a write that was killed, damaged files, or an older dtradar's copy without a record:
-    to be rewritten); ``"other"`` (a complete copy of another logged version, by another data root whose tag
-    still points at it: not ours to replace); ``"stale"`` (a copy of another version that no data root claims any
-    more, e.g. this root's before its store was emptied: replaced); ``"foreign"`` (not written by dtradar)."""
+    sha256); ``"incomplete"`` (a write that was killed, damaged files, an older dtradar's copy without a record or
+    with another record format (format 1: no env spec), or a copy written without an env spec because its twin
+    was not here, which is now: to be rewritten); ``"other"`` (a complete copy of another logged version, by
+    another data root whose tag still points at it: not ours to replace, whatever its format); ``"stale"`` (a copy
+    of another version that no data root claims any more, e.g. this root's before its store was emptied:
+    replaced); ``"foreign"`` (not written by dtradar)."""
     if not folder.exists():
         return "absent", ""
     rec = _record(folder)
@@ -228,6 +239,11 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
         )
         what = f"{rec.get('name')}@{rec.get('tag')} (version {rec.get('version')}) of data root {root}"
         return ("other" if held else "stale"), what
+    if rec.get("format") != RECORD_FORMAT:
+        return "incomplete", (
+            f"{folder} was written by another dtradar (record format {rec.get('format')}, this one writes "
+            f"{RECORD_FORMAT}: the copy records an env spec since format 2)"
+        )
     if rec.get("episodes") != want["episodes"] or rec.get("steps") != want["steps"]:
         return (
             "incomplete",
@@ -237,6 +253,8 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
         return "incomplete", f"{folder}: Minari's metadata does not count {want['episodes']} episodes"
     if _files(folder) != rec.get("files"):
         return "incomplete", f"{folder}: a file differs from its recorded sha256 (changed or damaged)"
+    if rec.get("env_spec") is None and rec.get("env_retry") and minari_envs(logged).spec is not None:
+        return "incomplete", f"{folder} has no env spec ({rec.get('env_missing')}); the twin is here now"
     return "complete", ""
 
 
@@ -250,10 +268,123 @@ def _claimed(root: Path, name: Any, tag: Any, version: Any) -> bool:
         return False
 
 
-def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset) -> Path:
-    """Write the Minari dataset ``mid`` of ``logged`` into the Minari path ``stage``; returns its folder there."""
+@dataclass
+class MinariEnvs:
+    """The envs a Minari copy records (:func:`minari_envs`): the logging env, made (its spaces are the copy's), its
+    spec and the evaluation env's spec; or, when they cannot be made, None and why (``retry``: the twin was not
+    here, so a later export tries again)."""
+
+    env: Any = None
+    spec: Any = None
+    eval_spec: Any = None
+    missing: str = ""
+    retry: bool = False
+
+    def record(self) -> dict[str, Any]:
+        """Their part of ``dtradar.json``."""
+        return {
+            "env_spec": json.loads(self.spec.to_json()) if self.spec is not None else None,
+            "eval_env_spec": json.loads(self.eval_spec.to_json()) if self.eval_spec is not None else None,
+            "env_missing": self.missing or None,
+            "env_retry": self.retry,
+        }
+
+
+def minari_env_specs(logged: LoggedDataset):
+    """``(spec, eval_spec)``: the gymnasium env specs of ``logged``'s Minari copy, from its ``meta.json`` (and which
+    dynamic twin is here).
+
+    ``spec`` (``recover_environment()``): the navigation env on the twin the data was logged on, pinned to its
+    version (``dataset``/``version``: ``meta.parent``/``meta.parent_version``), with the logged observation preset,
+    reward, step limit, the logged feature normaliser and no noise (logged steps are noise-free, and memoryless: a
+    memory agent cannot log). ``eval_spec`` (``recover_environment(eval_env=True)``): for a log on a ``blueprint``
+    twin, the same settings on the scene's ``dynamic`` twin (its newest version here, pinned; the training twin's
+    normaliser, as every evaluation of a policy on another twin: the transfer test of DT-RaDaR), when that twin
+    is here; otherwise (a log on the dynamic twin, or no dynamic twin here) ``spec`` itself. A meta that lacks
+    what the spec needs is a :class:`SchemaMismatchError`; a missing dynamic twin is no error."""
+    meta = logged.meta
+    settings = meta.get("settings") or {}
+    preset = (meta.get("observations") or {}).get("preset")
+    parent, version = meta.get("parent"), meta.get("parent_version")
+    lacking = [
+        k
+        for k, v in {
+            "parent": parent,
+            "parent_version": version,
+            "observations.preset": preset,
+            "normalizer": meta.get("normalizer"),
+            "settings.reward": settings.get("reward"),
+            "settings.max_steps": settings.get("max_steps"),
+        }.items()
+        if not v
+    ]
+    if lacking:
+        raise SchemaMismatchError(
+            f"{logged.name}@{logged.version}: its meta.json lacks {', '.join(lacking)} (not logged by log_dataset)",
+            hint="log it again with `python -m dtradar_rl log ...` to give its Minari copy an env spec",
+        )
+    settings_kw = {
+        "obs": str(preset),
+        "reward": str(settings["reward"]),
+        "max_steps": int(settings["max_steps"]),
+        "normalizer": meta["normalizer"],
+    }
+    spec = twin_env_spec(str(parent), str(version), **settings_kw)
+    eval_spec = spec
+    scene, _, variant = str(parent).partition("/")
+    if variant == "blueprint":
+        try:
+            dynamic = load_dataset(f"{scene}/dynamic")
+        except DtradarError:  # not built or pulled here: evaluate on the logging twin
+            dynamic = None
+        if dynamic is not None:
+            eval_spec = twin_env_spec(f"{scene}/dynamic", twin_version(dynamic), **settings_kw)
+    return spec, eval_spec
+
+
+def minari_envs(logged: LoggedDataset) -> MinariEnvs:
+    """The specs of :func:`minari_env_specs` with the logging env made from its spec, checked against the data (its
+    observation dimension, and every logged observation inside its observation space); :class:`MinariEnvs` with
+    ``missing`` when the meta lacks what a spec needs, or the twin at its version is not here or does not fit."""
+    import gymnasium as gym
+
+    try:
+        spec, eval_spec = minari_env_specs(logged)
+    except SchemaMismatchError as e:
+        return MinariEnvs(missing=e.message)
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):
+            env = gym.make(spec)
+        a = logged.arrays()
+        space = env.observation_space
+        if space.shape != a["obs"].shape[1:]:
+            raise SchemaMismatchError(f"the env observes {space.shape}, the data holds {a['obs'].shape[1:]}")
+        for k in ("obs", "next_obs"):
+            if not (np.all(a[k] >= space.low) and np.all(a[k] <= space.high)):
+                raise SchemaMismatchError(f"logged {k} fall outside the env's observation space")
+    except DtradarError as e:
+        return MinariEnvs(
+            missing=f"twin {spec.kwargs['dataset']}@{spec.kwargs['version']}: {e.message}",
+            retry=not isinstance(e, SchemaMismatchError),
+        )
+    return MinariEnvs(env, spec, eval_spec)
+
+
+def _env_text(spec) -> str:
+    k = spec.kwargs
+    return (
+        f"{k['dataset']}@{k['version']} (obs {k['obs']}, reward {k['reward']}, max_steps {k['max_steps']}, noise "
+        f"{k['noise']})"
+    )
+
+
+def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset, envs: MinariEnvs | None = None) -> Path:
+    """Write the Minari dataset ``mid`` of ``logged`` into the Minari path ``stage``, with the env specs of
+    ``envs`` (default :func:`minari_envs`; without a spec, an unbounded observation space); returns its folder."""
     import gymnasium as gym
     from minari.data_collector import EpisodeBuffer
+
+    envs = envs if envs is not None else minari_envs(logged)
 
     a = logged.arrays()
     buffers = [
@@ -269,19 +400,30 @@ def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset) -> Path:
     ]
     d = a["obs"].shape[1]
     s = logged.meta.get("stats") or {}
+    if envs.spec is not None:
+        env_args = {"env": envs.env, "eval_env": envs.eval_spec}
+        how = (
+            f"recover_environment(): {_env_text(envs.spec)}; recover_environment(eval_env=True): "
+            f"{_env_text(envs.eval_spec)} (import path {envs.spec.entry_point}, needs dtradar installed)"
+        )
+    else:
+        env_args = {
+            "observation_space": gym.spaces.Box(-np.inf, np.inf, (d,), np.float32),
+            "action_space": gym.spaces.Discrete(4),
+        }
+        how = f"no env spec: {envs.missing}"
     with _minari_path(stage), contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # no author e-mail, no gymnasium env spec: by design
+        warnings.simplefilter("ignore", UserWarning)  # no author e-mail (and without a spec, no env): by design
         minari.create_dataset_from_buffers(
             dataset_id=mid,
             buffer=buffers,
-            observation_space=gym.spaces.Box(-np.inf, np.inf, (d,), np.float32),
-            action_space=gym.spaces.Discrete(4),
+            **env_args,
             algorithm_name=str((logged.meta.get("behaviour") or {}).get("kind")),
             author="dtradar",
             code_permalink="https://github.com/dtradar/dtradar",
             description=f"dtradar {logged.name} version {logged.version}; parent {logged.meta.get('parent')}@"
-            f"{logged.meta.get('parent_version')}; behaviour success {s.get('success_rate', 0):.3f}; see the "
-            f"dtradar card (README.md) at {logged.path}",
+            f"{logged.meta.get('parent_version')}; behaviour success {s.get('success_rate', 0):.3f}; {how}; see "
+            f"the dtradar card (README.md) at {logged.path}",
         )
     return stage / mid
 
@@ -334,9 +476,16 @@ def export_minari(
                 f"<data root>/{MINARI_DIR}) or set it to another folder; or remove {folder}; or log without the "
                 "copy (`python -m dtradar_rl log ... --no-minari`)",
             )
+        envs = minari_envs(logged)
+        if envs.spec is None:
+            warnings.warn(
+                f"the Minari copy {mid} records no env spec (recover_environment() will not work): {envs.missing}",
+                UserWarning,
+                stacklevel=2,
+            )
         with held_stage(root, STAGE_PREFIX, lockless=lambda _: True) as stage:  # .dtradar-stage-*: only ours
-            staged = _write_copy(minari, stage, mid, logged)
-            rec = {**_wanted(logged), "minari_id": mid, "files": _files(staged)}
+            staged = _write_copy(minari, stage, mid, logged, envs)
+            rec = {**_wanted(logged), "minari_id": mid, **envs.record(), "files": _files(staged)}
             (staged / RECORD_FILE).write_text(json.dumps(rec, indent=2, sort_keys=True) + "\n")
             _ensure_namespace(stage, root, mid)
             folder.parent.mkdir(parents=True, exist_ok=True)
@@ -418,6 +567,8 @@ __all__ = [
     "from_minari",
     "load_minari",
     "import_d3rlpy",
+    "minari_env_specs",
+    "minari_envs",
     "minari_episodes",
     "quiet_d3rlpy",
     "table_from_columns",
