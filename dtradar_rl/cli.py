@@ -106,12 +106,14 @@ def _parse_and_run(argv: list[str]) -> int:
         )
 
     def log_cmd(cfg: Annotated[LogConfig, tyro.conf.arg(name="")] = LogConfig()) -> None:
-        """Log a behaviour policy (random, noisy-shortest, epsilon-greedy, mixture) on a twin into the store as a
-        versioned, carded offline-RL dataset <scene>/<variant>/<behaviour> (+ its Minari copy)."""
-        from dtradar_rl.offline.logged import log_dataset
+        """Log a behaviour policy (random, noisy-shortest, epsilon-greedy, mixture) or a dataset family (random,
+        expert, medium, medium-replay, mixed; --behaviour all: the five) on a twin into the store as versioned,
+        carded offline-RL datasets <scene>/<variant>/<behaviour> (+ their Minari copies), each card with the
+        behaviour's normalised score (0 random, 100 shortest-path expert)."""
+        from dtradar_rl.offline.logged import log_families
 
-        logged = log_dataset(cfg.validate())
-        print(f"{logged!r}\ncard: {logged.path / 'README.md'}\nload: dtradar_data.load({logged.name!r})")
+        for logged in log_families(cfg.validate()).values():
+            print(f"{logged!r}\ncard: {logged.path / 'README.md'}\nload: dtradar_data.load({logged.name!r})")
 
     def offline_bench_cmd(cfg: Annotated[OfflineBenchConfig, tyro.conf.arg(name="")] = OfflineBenchConfig()) -> None:
         """Offline-RL benchmark: d3rlpy CQL, BCQ, BC, DQN, DoubleDQN, NFQ on every logged behaviour dataset, several

@@ -8,9 +8,23 @@ Kinds (:data:`BEHAVIOURS`), all seeded, each acting for every robot of a
   (ties broken at random; distances on the twin being logged), otherwise a random move.
 - ``epsilon-greedy``: a trained DQN checkpoint (``model.pt`` of ``make train``): its greedy move, or with
   probability ``epsilon`` a random move. The checkpoint must observe with the logged preset.
-- ``mixture`` (the D4RL "medium-replay" idea: data of several qualities in one set): the robots are split between
-  the ``components`` (robot ``i`` uses component ``i mod k`` for the whole log), each one of the kinds above with
-  the same parameters. Which component acted is stored per step (column ``component``).
+- ``mixture``: the robots are split between the ``components`` (robot ``i`` uses component ``i mod k`` for the whole
+  log), each one of the single kinds (those above, ``expert`` and ``medium``) with the same parameters. Which
+  component acted is stored per step (column ``component``).
+
+The **dataset families** (:data:`FAMILIES`), named like D4RL's (Fu et al. 2020) and needing no argument:
+
+- ``random``: as above (normalised score about 0 by definition, see :mod:`dtradar_rl.evaluation.normalized`).
+- ``expert``: ``noisy-shortest`` with probability :data:`EXPERT_SHORTEST_PROB` (0.95) of the shortest-path move: the
+  normalised score's 100 is the noise-free expert, so this one scores a little below.
+- ``medium``: an online DQN (the ``tuned`` preset, seeded) stopped at the first evaluation where the normalised
+  score of this very behaviour reaches ``medium_target`` (50: half the expert), then logged with its greedy move
+  replaced with probability :data:`MEDIUM_EPSILON` (0.1) by a random one. The agent is trained once per recipe and
+  cached (:func:`dtradar_rl.offline.logged.medium_agent`).
+- ``medium-replay``: every transition that medium agent's run collected while it trained, up to its stop (its replay
+  buffer; :func:`dtradar_rl.offline.collection.replay`).
+- ``mixed``: a mixture of ``random``, ``medium`` and ``expert`` (robot ``i`` uses component ``i mod 3``). ``mixture``
+  stays as the configurable mixture (``--components``, ``--checkpoint``); ``mixed`` is its family member.
 
 The batched rollout that logs them is :func:`dtradar_rl.offline.collection.roll`.
 """
@@ -29,12 +43,43 @@ from dtradar_data.core.errors import unknown_name
 from dtradar_data.core.files import sha256_file
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED, METRIC, ShortestPathOracle
 from dtradar_rl.task.config import ConfigError, TwinConfig
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.train.checkpoints import load_policy
 
-BEHAVIOURS: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy", "mixture")
-SINGLE: tuple[str, ...] = BEHAVIOURS[:3]
+#: The dataset families (D4RL's names), in the order ``--behaviour all`` logs them.
+FAMILIES: tuple[str, ...] = ("random", "expert", "medium", "medium-replay", "mixed")
+BEHAVIOURS: tuple[str, ...] = (
+    "random",
+    "noisy-shortest",
+    "epsilon-greedy",
+    "mixture",
+    "expert",
+    "medium",
+    "medium-replay",
+    "mixed",
+)
+#: Kinds that act alone (a mixture's components).
+SINGLE: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy", "expert", "medium")
+#: ``--behaviour all``: every family of :data:`FAMILIES` on the twin.
+ALL = "all"
+
+#: ``expert``: probability of the breadth-first shortest-path move (else a uniformly random one).
+EXPERT_SHORTEST_PROB = 0.95
+#: ``medium``: probability of a random move instead of the agent's greedy one, when logging and when scored.
+MEDIUM_EPSILON = 0.1
+#: ``medium``: the normalised score the agent's training stops at, and how far past it the stop may land before
+#: the log says so (the agent is evaluated every :data:`MEDIUM_EVAL_EVERY` environment steps).
+MEDIUM_TARGET = 50.0
+MEDIUM_TOLERANCE = 10.0
+MEDIUM_BUDGET = 200_000
+MEDIUM_EVAL_EVERY = 2048
+MEDIUM_PRESET = "tuned"
+#: One torch thread: the same seed gives the same agent, bit for bit, whatever the load of the machine.
+MEDIUM_THREADS = 1
+MIXED_COMPONENTS: tuple[str, ...] = ("random", "medium", "expert")
+GREEDY: tuple[str, ...] = ("epsilon-greedy", "medium")
 
 
 @dataclass(frozen=True)
@@ -46,6 +91,12 @@ class BehaviourSpec:
     epsilon: float = 0.3
     checkpoint: str = ""
     components: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy")
+    medium_target: float = MEDIUM_TARGET
+    medium_budget: int = MEDIUM_BUDGET
+    hidden: tuple[int, ...] = (256, 256)
+    #: the trained medium agent's model.pt, filled in by :func:`dtradar_rl.offline.logged.resolve_spec` (not a
+    #: parameter: the medium recipe is, see :meth:`medium_recipe`)
+    medium_checkpoint: str = ""
 
     def validate(self) -> BehaviourSpec:
         if self.kind not in BEHAVIOURS:
@@ -59,6 +110,15 @@ class BehaviourSpec:
                 raise ConfigError(f"--{name.replace('_', '-')} must be in [0, 1], got {v}")
         if self.kind == "mixture" and not self.components:
             raise ConfigError("--components must list at least one behaviour for a mixture")
+        if all(g in self.used for g in GREEDY):
+            raise ConfigError(
+                "a mixture acts with one DQN: epsilon-greedy (--checkpoint) or medium (trained here), not both"
+            )
+        if self.needs_medium:
+            if not 0 < self.medium_target <= 100:
+                raise ConfigError(f"--medium-target must be in (0, 100], got {self.medium_target}")
+            if self.medium_budget < 1:
+                raise ConfigError(f"--medium-budget must be >= 1, got {self.medium_budget}")
         if "epsilon-greedy" in self.used and not self.checkpoint:
             raise ConfigError(
                 f"the {self.kind} behaviour needs a trained DQN checkpoint",
@@ -73,22 +133,54 @@ class BehaviourSpec:
 
     @property
     def used(self) -> tuple[str, ...]:
-        """The single kinds that act: the components of a mixture, else the kind itself."""
-        return self.components if self.kind == "mixture" else (self.kind,)
+        """The single kinds that act: the components of a mixture, else the kind itself (none for
+        ``medium-replay``, which is a training run's replay buffer, not a policy)."""
+        if self.kind == "mixture":
+            return self.components
+        if self.kind == "mixed":
+            return MIXED_COMPONENTS
+        return () if self.kind == "medium-replay" else (self.kind,)
+
+    @property
+    def needs_medium(self) -> bool:
+        """Whether logging this behaviour needs the trained medium agent."""
+        return "medium" in self.used or self.kind == "medium-replay"
+
+    def medium_recipe(self) -> dict[str, Any]:
+        """How the medium agent is made and when it stops: what, with the twin, the logging settings, the seed and
+        the library versions, identifies it (its cache key, and part of the version of every dataset using it)."""
+        return {
+            "trainer": "dtradar_rl.train.dqn",
+            "preset": MEDIUM_PRESET,
+            "hidden": list(self.hidden),
+            "budget": int(self.medium_budget),
+            "threads": MEDIUM_THREADS,
+            "target": float(self.medium_target),
+            "score": f"normalized {METRIC} of the epsilon-greedy agent (epsilon {MEDIUM_EPSILON})",
+            "epsilon": MEDIUM_EPSILON,
+            "eval_every": MEDIUM_EVAL_EVERY,
+            "pairs": DEFAULT_PAIRS,
+            "eval_seed": DEFAULT_SEED,
+            "stop": "the first evaluation at or above the target",
+        }
 
     def to_dict(self) -> dict[str, Any]:
         """Only the parameters that matter for this kind (so unused settings never change a version); a
-        checkpoint is recorded by its content hash, not its path."""
+        checkpoint is recorded by its content hash, not its path; the medium agent by its recipe."""
         used = self.used
         d: dict[str, Any] = {"kind": self.kind}
-        if self.kind == "mixture":
-            d["components"] = list(self.components)
+        if self.kind in ("mixture", "mixed"):
+            d["components"] = list(used)
             d["assignment"] = "robot i uses component i mod k"
         if "noisy-shortest" in used:
             d["shortest_prob"] = self.shortest_prob
+        if "expert" in used:
+            d["expert_shortest_prob"] = EXPERT_SHORTEST_PROB
         if "epsilon-greedy" in used:
             d["epsilon"] = self.epsilon
             d["checkpoint_sha256"] = sha256_file(Path(self.checkpoint))
+        if self.needs_medium:
+            d["medium"] = self.medium_recipe()
         return d
 
     def describe(self) -> str:
@@ -99,12 +191,26 @@ class BehaviourSpec:
             "target (ties broken at random), otherwise a uniformly random move",
             "epsilon-greedy": f"the greedy move of a trained DQN checkpoint (sha256 recorded below), replaced with "
             f"probability {self.epsilon} by a uniformly random move",
+            "expert": f"the D4RL expert level: with probability {EXPERT_SHORTEST_PROB} a breadth-first shortest-path "
+            "move towards the target (ties broken at random), otherwise a uniformly random move",
+            "medium": f"the D4RL medium level: the greedy move of an online DQN ({MEDIUM_PRESET} preset, this "
+            f"log's seed) whose training stopped at the first evaluation (every {MEDIUM_EVAL_EVERY} environment "
+            f"steps) where this behaviour's normalised score reached {self.medium_target:g}, replaced with "
+            f"probability {MEDIUM_EPSILON} by a uniformly random move",
         }
-        if self.kind == "mixture":
-            parts = "; ".join(f"component {i} `{c}`: {text[c]}" for i, c in enumerate(self.components))
+        if self.kind in ("mixture", "mixed"):
+            parts = "; ".join(f"component {i} `{c}`: {text[c]}" for i, c in enumerate(self.used))
             return (
-                f"A mixture (the D4RL medium-replay idea): robot i acts with component i mod "
-                f"{len(self.components)} for the whole log. {parts}."
+                f"A mixture{' (the `mixed` family)' if self.kind == 'mixed' else ''}: robot i acts with component "
+                f"i mod {len(self.used)} for the whole log. {parts}."
+            )
+        if self.kind == "medium-replay":
+            return (
+                "`medium-replay` (the D4RL medium-replay level): every transition the `medium` agent's online DQN "
+                f"({MEDIUM_PRESET} preset, this log's seed) collected while it trained, up to the stop where its "
+                f"normalised score reached {self.medium_target:g}: its replay buffer in the order collected. The "
+                "robots explored epsilon-greedily, epsilon decaying linearly from 1 over 40 % of a "
+                f"{self.medium_budget}-step budget, so the data go from random moves to the medium agent's."
             )
         return f"`{self.kind}`: {text[self.kind]}."
 
@@ -115,7 +221,8 @@ class BehaviourConfig(TwinConfig):
     and :class:`~dtradar_rl.offline.trainer.OfflineConfig`."""
 
     behaviour: str = "noisy-shortest"
-    """behaviour policy: random, noisy-shortest, epsilon-greedy (a DQN checkpoint) or mixture (see --components)"""
+    """behaviour policy: random, noisy-shortest, epsilon-greedy (a DQN checkpoint) or mixture (see --components); or a
+    dataset family (D4RL's names): random, expert, medium, medium-replay, mixed"""
     shortest_prob: float = 0.5
     """noisy-shortest: probability of the breadth-first shortest-path move at each step"""
     epsilon: float = 0.3
@@ -124,47 +231,29 @@ class BehaviourConfig(TwinConfig):
     """epsilon-greedy (and mixtures using it): the DQN model.pt written by `make train`"""
     components: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy")
     """mixture: the behaviours robots are split between (robot i uses component i mod k)"""
+    medium_target: float = MEDIUM_TARGET
+    """medium, medium-replay, mixed: the normalised score (0 random, 100 shortest-path expert) at which the medium
+    agent's training stops"""
+    medium_budget: int = MEDIUM_BUDGET
+    """medium, medium-replay, mixed: the medium agent's DQN budget in environment steps (its exploration decays over
+    40 % of it); an agent that does not reach --medium-target within it is an error"""
 
     def spec(self) -> BehaviourSpec:
-        return BehaviourSpec(self.behaviour, self.shortest_prob, self.epsilon, self.checkpoint, tuple(self.components))
+        return BehaviourSpec(
+            self.behaviour,
+            self.shortest_prob,
+            self.epsilon,
+            self.checkpoint,
+            tuple(self.components),
+            medium_target=self.medium_target,
+            medium_budget=self.medium_budget,
+            hidden=tuple(self.hidden),
+        )
 
     def validate(self):
         super().validate()
         self.spec().validate()
         return self
-
-
-class ShortestPathOracle:
-    """Breadth-first shortest-path moves for every robot of a :class:`BatchedNavEnv` (the behaviour's expert)."""
-
-    def __init__(self, env: BatchedNavEnv):
-        self.env = env
-        self._pool_size = -1
-        self._refresh()
-
-    def _refresh(self) -> None:
-        env = self.env
-        if env.pool.numel() != self._pool_size:  # targets are rows of env.pool; it only grows
-            if env.dist.shape[1]:  # the geodesic reward already keeps this table
-                self.dist = env.dist
-            else:
-                d = env.mdp.bfs_distances_many(env.pool.cpu().numpy())
-                self.dist = torch.as_tensor(d, dtype=torch.int32, device=env.device)
-            self._pool_size = env.pool.numel()
-
-    def optimal(self) -> torch.Tensor:
-        """``bool[num_envs, 4]``: moves that shorten the breadth-first distance to the target by one."""
-        self._refresh()
-        env = self.env
-        d_now = self.dist[env.tpool, env.cell]
-        d_next = self.dist[env.tpool[:, None], env.next_cell[env.cell]]
-        return d_next == (d_now - 1)[:, None]  # a collision stays in place, so it is never optimal
-
-    def act(self, gen: torch.Generator) -> torch.Tensor:
-        """One shortest-path move per robot, ties broken at random."""
-        good = self.optimal()
-        u = torch.rand(good.shape, generator=gen, device=good.device) + good.float()
-        return u.argmax(1)
 
 
 @dataclass
@@ -180,19 +269,23 @@ class Actor:
 
     def __post_init__(self):
         n = self.env.num_envs
-        k = len(self.spec.used)
+        k = max(1, len(self.spec.used))
         self.component = torch.arange(n, device=self.env.device) % k
-        if "noisy-shortest" in self.spec.used:
+        if "noisy-shortest" in self.spec.used or "expert" in self.spec.used:
             self.oracle = ShortestPathOracle(self.env)
 
     def _single(self, kind: str, obs: torch.Tensor, random_actions: torch.Tensor, coin: torch.Tensor) -> torch.Tensor:
         if kind == "random":
             return random_actions
-        if kind == "noisy-shortest":
-            return torch.where(coin < self.spec.shortest_prob, self.oracle.act(self.gen), random_actions)
+        if kind in ("noisy-shortest", "expert"):
+            p = self.spec.shortest_prob if kind == "noisy-shortest" else EXPERT_SHORTEST_PROB
+            return torch.where(coin < p, self.oracle.act(self.gen), random_actions)
+        if kind not in GREEDY:
+            raise ConfigError(f"the {kind} behaviour does not act: it is a training run's replay buffer")
         with torch.no_grad():
             greedy = self.policy.act(obs)
-        return torch.where(coin < self.spec.epsilon, random_actions, greedy)
+        eps = self.spec.epsilon if kind == "epsilon-greedy" else MEDIUM_EPSILON
+        return torch.where(coin < eps, random_actions, greedy)
 
     def __call__(self, obs: torch.Tensor) -> torch.Tensor:
         n, dev = self.env.num_envs, self.env.device
@@ -209,26 +302,36 @@ class Actor:
 
 
 def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, device: str = "cpu") -> Policy | None:
-    """The DQN of an ``epsilon-greedy`` behaviour, checked to observe like the log (preset and normaliser)."""
-    if "epsilon-greedy" not in spec.used:
+    """The DQN of an ``epsilon-greedy`` (or ``medium``) behaviour, checked to observe like the log (preset and
+    normaliser). A ``medium`` spec must have been resolved (:func:`dtradar_rl.offline.logged.resolve_spec`)."""
+    if "epsilon-greedy" in spec.used:
+        path = spec.checkpoint
+    elif "medium" in spec.used:
+        path = spec.medium_checkpoint
+        if not path:
+            raise ConfigError(
+                f"the {spec.kind} behaviour acts with the medium agent, which this spec does not name yet",
+                hint="resolve it first: dtradar_rl.offline.logged.resolve_spec(config, dataset) trains or reuses it",
+            )
+    else:
         return None
-    policy = load_policy(spec.checkpoint, device)
+    policy = load_policy(path, device)
     if getattr(policy.config, "memory_radius", 0):
         raise ConfigError(
-            f"the checkpoint {spec.checkpoint} is a memory agent ({policy.config.preset} preset): a logged step holds "
+            f"the checkpoint {path} is a memory agent ({policy.config.preset} preset): a logged step holds "
             "the twin's observation only, not the agent's memory of the episode",
             hint='log with a memoryless agent: make train SCENE=<scene> ARGS="--preset tuned --out runs/<scene>/tuned"',
         )
     if policy.obs_preset != obs:
         raise ConfigError(
-            f"the checkpoint {spec.checkpoint} observes {policy.obs_preset!r}, the log {obs!r}",
+            f"the checkpoint {path} observes {policy.obs_preset!r}, the log {obs!r}",
             hint=f"pass --obs {policy.obs_preset}",
         )
     if not np.allclose(policy.normalizer.mean, normalizer.mean, rtol=1e-5, atol=1e-6) or not np.allclose(
         policy.normalizer.std, normalizer.std, rtol=1e-5, atol=1e-6
     ):
         raise ConfigError(
-            f"the checkpoint {spec.checkpoint} was trained on another twin (its feature normaliser "
+            f"the checkpoint {path} was trained on another twin (its feature normaliser "
             "differs from the logged twin's)",
             hint="log on the twin the checkpoint was trained on",
         )
@@ -265,8 +368,14 @@ class BehaviourPolicy(Policy):
 def behaviour_policy(
     spec: BehaviourSpec, ds: Dataset, obs: str = "neighbors", seed: int = 0, device: str = "cpu"
 ) -> BehaviourPolicy:
-    """The behaviour ``spec`` observing like a log on ``ds`` (its preset, the normaliser fitted on ``ds``)."""
+    """The behaviour ``spec`` observing like a log on ``ds`` (its preset, the normaliser fitted on ``ds``); a
+    ``medium`` or ``mixed`` spec resolved first (:func:`dtradar_rl.offline.logged.resolve_spec`)."""
     spec.validate()
+    if not spec.used:
+        raise ConfigError(
+            f"the {spec.kind} dataset is a training run's replay buffer, not a policy that can act",
+            hint="roll out the medium behaviour instead (its agent at the stop)",
+        )
     normalizer = Normalizer.fit(ds)
     return BehaviourPolicy(
         q=None,
@@ -281,7 +390,14 @@ def behaviour_policy(
 
 
 __all__ = [
+    "ALL",
     "BEHAVIOURS",
+    "EXPERT_SHORTEST_PROB",
+    "FAMILIES",
+    "MEDIUM_EPSILON",
+    "MEDIUM_TARGET",
+    "MEDIUM_TOLERANCE",
+    "MIXED_COMPONENTS",
     "Actor",
     "BehaviourConfig",
     "BehaviourPolicy",

@@ -5,6 +5,10 @@ for every robot of a batched env.
 returns numpy arrays robot by robot, every episode contiguous, with the observation before and after each move. The
 last step of each episode is ``terminated`` (target reached) or ``truncated`` (the step limit, or the logging budget
 ending mid-episode), never both. Nothing is dropped.
+
+:func:`replay` turns an online DQN run's replay buffer (the ``medium-replay`` family) into the same columns: it steps a
+fresh env built like the run's with the buffer's actions, which gives the cells, targets and truncations the buffer
+does not keep, and checks every observation, reward and terminal against the buffer's.
 """
 
 from __future__ import annotations
@@ -17,9 +21,11 @@ import numpy as np
 import torch
 
 from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import CorruptDatasetError
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.offline.behaviours import Actor, BehaviourSpec, checkpoint_policy
 from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.train.replay import replay_transitions
 
 
 @dataclass
@@ -78,13 +84,19 @@ def roll(
         env.reset_where(term | trunc)
         o = env.observe()
 
+    return _assemble(rec, num_envs, horizon, actor.component.cpu().numpy(), t0)
+
+
+def _assemble(rec: dict[str, list[torch.Tensor]], n: int, horizon: int, component: np.ndarray, t0: float) -> Rollout:
+    """Steps recorded step by step for ``n`` robots as columns robot by robot, every unfinished episode truncated by
+    the end of logging, with episode and step numbers."""
+
     def stack(xs):  # [step, robot, ...] -> [robot, step, ...]
         return torch.stack(xs, 1).cpu().numpy()
 
     cols = {k: stack(v) for k, v in rec.items()}
     cut = ~(cols["terminated"][:, -1] | cols["truncated"][:, -1])
     cols["truncated"][:, -1] |= cut  # the logging budget ends every unfinished episode: a truncation
-    n = num_envs
     flat = {k: v.reshape(n * horizon, *v.shape[2:]) for k, v in cols.items()}
     ends = flat["terminated"] | flat["truncated"]
     episode = np.r_[0, np.cumsum(ends)[:-1]].astype(np.int64)
@@ -95,7 +107,7 @@ def roll(
         "episode": episode,
         "step": step,
         "robot": np.repeat(np.arange(n), horizon),
-        "component": np.repeat(actor.component.cpu().numpy(), horizon),
+        "component": np.repeat(component, horizon),
     }
     stats = {
         "robots": n,
@@ -110,4 +122,72 @@ def roll(
     return Rollout(out, stats)
 
 
-__all__ = ["Rollout", "roll"]
+def replay(
+    ds: Dataset,
+    buffer: dict[str, Any],
+    *,
+    num_envs: int,
+    obs: str = "neighbors",
+    normalizer: Normalizer | None = None,
+    reward: str = "geodesic",
+    max_steps: int | None = None,
+    seed: int = 0,
+    device: str = "cpu",
+) -> Rollout:
+    """The transitions of an online DQN run's replay buffer (``buffer``: :meth:`ReplayBuffer.state_dict` of a run with
+    ``num_envs`` robots, ``seed``, and no obstacle augmentation, memory or noise, whose buffer never wrapped) as
+    :func:`roll`'s columns. The run added one batch of ``num_envs`` transitions per step, robot by robot, so a fresh env
+    built like the run's and stepped with the buffer's actions passes through the same states (the env draws its pairs
+    from its own seeded generator); each observation, reward and terminal must equal the buffer's, else
+    :class:`CorruptDatasetError`. The stored columns are the buffer's own; cells, targets and truncations come from the
+    replayed env; the episodes running at the end are truncated by the end of logging."""
+    t0 = time.perf_counter()
+    tr = replay_transitions(buffer)
+    n = int(num_envs)
+    size = len(tr["action"])
+    if size == 0 or size % n:
+        raise CorruptDatasetError(
+            f"a replay buffer of {size} transitions is not whole steps of {n} robots",
+            hint="replay the buffer of a run that never wrapped, with the run's --num-envs",
+        )
+    horizon = size // n
+    normalizer = normalizer or Normalizer.fit(ds)
+    env = BatchedNavEnv.from_dataset(
+        ds, n, obs=obs, normalizer=normalizer, reward=reward, max_steps=max_steps or None, device=device, seed=seed
+    )
+    as_t = lambda x: torch.as_tensor(x, device=env.device)  # noqa: E731
+    keys = ("obs", "action", "reward", "next_obs", "terminated", "truncated", "cell", "target")
+    rec: dict[str, list[torch.Tensor]] = {k: [] for k in keys}
+    env.reset()
+    for t in range(horizon):
+        rows = slice(t * n, (t + 1) * n)
+        o, a = as_t(tr["obs"][rows]), as_t(tr["action"][rows]).long()
+        rec["cell"].append(env.cell.clone())
+        rec["target"].append(env.target.clone())
+        seen = env.observe()
+        next_o, r, term, trunc, _ = env.step(a)
+        same = (
+            torch.equal(seen, o)
+            and torch.equal(next_o, as_t(tr["next_obs"][rows]))
+            and torch.equal(r, as_t(tr["reward"][rows]))
+            and torch.equal(term, as_t(tr["terminated"][rows]))
+        )
+        if not same:
+            raise CorruptDatasetError(
+                f"the replay buffer differs from its run at step {t} (transitions {rows.start}..{rows.stop - 1}): "
+                "it was not collected on this twin with these settings",
+                hint="replay it with the run's twin, --num-envs, --obs, --reward, --max-steps and --seed",
+            )
+        rec["obs"].append(o)
+        rec["action"].append(a)
+        rec["reward"].append(r)
+        rec["next_obs"].append(next_o)
+        rec["terminated"].append(term)
+        rec["truncated"].append(trunc & ~term)
+        env.reset_where(term | trunc)
+    out = _assemble(rec, n, horizon, np.zeros(n, np.int64), t0)
+    out.stats["source"] = "replay buffer"
+    return out
+
+
+__all__ = ["Rollout", "replay", "roll"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import torch
 
 
@@ -69,4 +70,23 @@ class ReplayBuffer:
             self.expert[:n] = s["expert"]
 
 
-__all__ = ["ReplayBuffer"]
+def replay_transitions(state: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The transitions of a saved buffer (:meth:`ReplayBuffer.state_dict`, e.g. ``last.pt["replay"]``) as numpy arrays
+    in the order they were added, oldest first (``obs``/``next_obs`` float32[N, D], ``action`` int64, ``reward``
+    float32, ``terminated`` bool; ``expert`` bool[N, 4] when kept). A buffer that wrapped holds only the newest
+    ``capacity`` transitions: its ``size`` then equals its capacity and ``ptr`` marks the oldest."""
+    n, ptr = int(state["size"]), int(state["ptr"])
+    # not full: the ring was filled from 0 and ptr == size; full (ptr < capacity == size): ptr is the oldest entry
+    start = 0 if ptr == n else ptr
+    order = (np.arange(n) + start) % max(n, 1)
+    out = {}
+    for k in ("obs", "next_obs", "action", "reward", "terminated", "expert"):
+        if k in state:
+            out[k] = state[k].detach().cpu().numpy()[order]
+    out["terminated"] = out["terminated"] > 0.5
+    out["obs"], out["next_obs"] = out["obs"].astype(np.float32), out["next_obs"].astype(np.float32)
+    out["reward"] = out["reward"].astype(np.float32)
+    return out
+
+
+__all__ = ["ReplayBuffer", "replay_transitions"]
