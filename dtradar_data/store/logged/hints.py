@@ -13,7 +13,16 @@ __all__ = ["BEHAVIOUR_KINDS", "log_commands", "relog_hint"]
 
 #: The behaviour kinds of ``python -m dtradar_rl log --behaviour`` (:data:`dtradar_rl.offline.behaviours.BEHAVIOURS`,
 #: which dtradar_data may not import: torch).
-BEHAVIOUR_KINDS: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy", "mixture")
+BEHAVIOUR_KINDS: tuple[str, ...] = (
+    "random",
+    "noisy-shortest",
+    "epsilon-greedy",
+    "mixture",
+    "expert",
+    "medium",
+    "medium-replay",
+    "mixed",
+)
 
 
 def _fmt(value: Any) -> str:
@@ -39,6 +48,11 @@ def log_commands(lid: LoggedId, meta: dict[str, Any] | None = None) -> tuple[str
         rest += ["--checkpoint", f"MODEL.PT(sha256:{str(beh['checkpoint_sha256'])[:12]}...)"]
     if kind == "mixture" and beh.get("components"):
         rest += ["--components", *(_fmt(c) for c in beh["components"])]
+    medium = beh.get("medium") if isinstance(beh.get("medium"), dict) else {}
+    if "target" in medium:  # the medium agent's recipe enters the version of every family that uses it
+        rest += ["--medium-target", _fmt(medium["target"])]
+    if "budget" in medium:
+        rest += ["--medium-budget", _fmt(medium["budget"])]
     if inputs:
         settings = inputs.get("settings") or {}
         rest += ["--steps", _fmt(inputs.get("steps")), "--seed", _fmt(inputs.get("seed"))]

@@ -156,3 +156,15 @@ def test_all_takes_no_name_and_the_families_take_no_checkpoint(root):
         LogConfig(behaviour=f).validate()  # none needs --checkpoint
     assert dataclasses.replace(LogConfig(), behaviour="medium-replay", steps=0).validate()
     assert main(["log", "--scene", TINY, "--behaviour", "all", "--name", "x"]) == 2
+
+
+def test_the_store_knows_every_behaviour_kind_and_relogs_a_medium_family_with_its_recipe():
+    from dtradar_data.core.ids import parse_logged_id
+    from dtradar_data.store.logged.hints import BEHAVIOUR_KINDS, log_commands
+    from dtradar_rl.offline.behaviours import BEHAVIOURS
+
+    assert set(BEHAVIOUR_KINDS) == set(BEHAVIOURS)  # dtradar_data cannot import torch: a copy, kept equal here
+    beh = {"kind": "medium", "medium": {"target": 40.0, "budget": 5000}}
+    python, make = log_commands(parse_logged_id("cubicle/blueprint/medium"), {"inputs": {"behaviour": beh}})
+    assert "--behaviour medium" in python and "--medium-target 40.0 --medium-budget 5000" in python
+    assert "BEHAVIOUR=medium" in make
