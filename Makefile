@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic bench-latency bench-nav
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic bench-latency bench-nav bench-offline-speed
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -145,3 +145,7 @@ bench-latency:
 # The default agent, SB3 DQN and the planner on every twin, with and without noise and a tx pose error -> results/bench_nav.*
 bench-nav:
 	$(PY) bench/bench_nav.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
+
+# d3rlpy updates/s per algorithm: logging, sampler, threads, epochs, evaluators, worker processes -> results/bench_offline_speed.*
+bench-offline-speed:
+	$(PY) bench/bench_offline_speed.py --scene $(SCENE) $(ARGS)

@@ -26,10 +26,18 @@ ALGORITHMS: dict[str, str] = {
 }
 
 
+#: torch threads of one d3rlpy training by default (see :attr:`OfflineConfig.threads`)
+TRAIN_THREADS = 1
+
+
 @dataclass(frozen=True)
 class OfflineConfig(BehaviourConfig):
     """Offline RL with d3rlpy: log a behaviour policy on a twin, train on the log, evaluate on the twins."""
 
+    threads: int = TRAIN_THREADS
+    """torch CPU threads of training (0 = auto, as for the online trainer: up to 2, fewer on a busy machine). Default 1:
+    d3rlpy's small networks ran 6-40x slower with two threads whenever another process held a core, and the weights
+    are the same with 1 or 2 (bench/bench_offline_speed.py)"""
     algorithm: str = "cql"
     """d3rlpy algorithm: cql (DiscreteCQL), bcq (DiscreteBCQ), bc (DiscreteBC), dqn (DQN, offline), ddqn
     (DoubleDQN, offline), nfq (NFQ: fitted Q, no target network)"""

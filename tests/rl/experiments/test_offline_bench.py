@@ -1,10 +1,26 @@
 """The offline-RL benchmark end to end in a reduced setting: logged datasets, d3rlpy runs over seeds, mean ± std,
-JSON, Markdown and a bar plot."""
+JSON, Markdown and a bar plot; FQE beside the true value; the same runs in worker processes as in one."""
 
 import json
+import math
+
+import pytest
 
 from dtradar_rl.cli import main
-from dtradar_rl.experiments.offline_bench import OfflineBenchConfig, aggregate, run_bench
+from dtradar_rl.experiments import offline_bench
+from dtradar_rl.experiments.offline_bench import (
+    BenchJob,
+    OfflineBenchConfig,
+    aggregate,
+    auto_workers,
+    parallel_gain,
+    run_bench,
+    run_jobs,
+    spearman,
+)
+from dtradar_rl.offline.config import OfflineConfig
+from dtradar_rl.offline.logged import LogConfig, log_dataset
+from dtradar_rl.task.twins import load_dataset
 
 
 def test_mean_and_std_are_over_seeds():
@@ -21,6 +37,8 @@ def test_a_tiny_benchmark_runs_end_to_end_in_seconds(root, tmp_path):
         n_steps=10,
         num_envs=8,
         pairs=8,
+        workers=1,
+        fqe=False,
         out=str(tmp_path / "bench"),
         verbose=False,
     )
@@ -35,8 +53,93 @@ def test_a_tiny_benchmark_runs_end_to_end_in_seconds(root, tmp_path):
     assert "DiscreteBC" in md and "NFQ" in md and " ± " in md and "behaviour itself" in md
     assert (tmp_path / "bench" / "bench.png").stat().st_size > 1000
     assert result["datasets"]["random"]["name"] == "synthetic-8x6/blueprint/random"
+    # --no-fqe: no off-policy evaluation anywhere
+    assert "ope" not in saved and not any("fqe" in r for r in saved["runs"]) and "FQE" not in md
+    assert not (tmp_path / "bench" / "bench_fqe.png").exists()
+
+
+def test_with_fqe_every_agent_gets_an_estimate_and_a_true_value_and_their_rank_correlation(root, tmp_path):
+    cfg = OfflineBenchConfig(
+        scene="synthetic-8x6",
+        behaviours=("random", "noisy-shortest"),
+        algorithms=("bc", "dqn"),
+        seeds=(0,),
+        steps=400,
+        n_steps=20,
+        fqe_steps=20,
+        num_envs=8,
+        pairs=8,
+        workers=1,
+        variants=("blueprint",),
+        out=str(tmp_path / "bench"),
+        verbose=False,
+    )
+    result = run_bench(cfg)
+    saved = json.loads((tmp_path / "bench" / "bench.json").read_text())
+    assert len(saved["runs"]) == 4
+    assert all(math.isfinite(r["fqe"]) and math.isfinite(r["true_value"]) and r["fqe_s"] > 0 for r in saved["runs"])
+    assert all(e["fqe"]["n"] == 1 and "true_value" in e for e in saved["summary"])
+    ope = saved["ope"]
+    assert ope["n"] == 4 and ope["gamma"] == 0.9 and ope["fqe_steps"] == 20
+    assert ope["spearman"] == spearman([r["fqe"] for r in result["runs"]], [r["true_value"] for r in result["runs"]])
+    md = (tmp_path / "bench" / "bench.md").read_text()
+    assert "| FQE | true value |" in md and "Spearman rank correlation" in md
+    assert (tmp_path / "bench" / "bench_fqe.png").stat().st_size > 1000
+
+
+def test_spearman_is_the_rank_correlation_and_none_when_undefined():
+    assert spearman([1, 2, 3, 4], [10, 20, 30, 40]) == 1.0
+    assert spearman([1, 2, 3, 4], [4, 3, 2, 1]) == -1.0
+    assert spearman([1, 2, 3, 4], [1, 3, 2, 4]) == pytest.approx(0.8)  # 1 - 6 * (0 + 1 + 1 + 0) / (4 * 15)
+    assert spearman([1, 2], [1, 2]) is None and spearman([1, 1, 1], [1, 2, 3]) is None
+
+
+def test_two_worker_processes_train_the_same_agents_as_one_process(root, tmp_path):
+    twin = load_dataset("synthetic-8x6/blueprint")
+    logged = log_dataset(
+        LogConfig(scene="synthetic-8x6", behaviour="random", steps=400, num_envs=8, minari=False, verbose=False), twin
+    )
+    jobs = [
+        BenchJob(
+            behaviour="random",
+            algorithm=algo,
+            seed=1,
+            logged=f"{logged.name}@{logged.version}",
+            config=OfflineConfig(
+                scene="synthetic-8x6",
+                algorithm=algo,
+                seed=1,
+                n_steps=20,
+                batch_size=32,
+                hidden=(16,),
+                pairs=8,
+                eval_variants=("blueprint",),
+                shield=False,
+                verbose=False,
+                out=str(tmp_path / layout / algo),
+            ),
+        )
+        for layout in ("one", "two")
+        for algo in ("dqn", "bc")
+    ]
+    one = run_jobs(jobs[:2], workers=1)
+    two = run_jobs(jobs[2:], workers=2)
+    key = lambda r: r["algorithm"]
+    pids = {r["pid"] for r in two}
+    assert len(pids) >= 1 and all(r["pid"] != one[0]["pid"] for r in two)  # they ran in other processes
+    for a, b in zip(sorted(one, key=key), sorted(two, key=key)):
+        assert a["blueprint"] == b["blueprint"] and a["final_losses"] == b["final_losses"], (a, b)
 
 
 def test_the_benchmark_command_refuses_an_unknown_algorithm(root, capsys):
     assert main(["offline-bench", "--scene", "synthetic-8x6", "--algorithms", "cqll"]) == 2
     assert "did you mean 'cql'" in capsys.readouterr().err
+
+
+def test_trainings_run_side_by_side_only_when_the_cores_measurably_work_in_parallel(monkeypatch):
+    assert parallel_gain(1, seconds=0.05) > 0
+    monkeypatch.setattr(offline_bench.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(offline_bench, "parallel_gain", lambda k: 1.1)  # the cores busy with other jobs
+    assert auto_workers(90) == (1, 1.1)
+    monkeypatch.setattr(offline_bench, "parallel_gain", lambda k: 1.6)
+    assert auto_workers(90) == (2, 1.6) and auto_workers(1) == (1, None)
