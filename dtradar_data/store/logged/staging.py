@@ -1,8 +1,8 @@
 """Staging folders held by a live process, and the cleanup of those a killed one left behind.
 
-A writer stages a version in ``<parent>/<prefix>XXXX/`` and renames it into place when it is complete; a process
+A writer stages a version in ``<parent>/<prefix><random>/`` and renames it into place when it is complete; a process
 killed with SIGKILL (or by the OOM killer, or a power cut) leaves that folder behind. Each stage is *held*: an
-exclusive OS file lock on ``<parent>/<prefix>XXXX.lock``, taken before the folder is created and released by the
+exclusive OS file lock on ``<parent>/<prefix><random>.lock``, taken before the folder is created and released by the
 kernel when its process ends, however it ends. :func:`clean_stale_stages` removes the folders whose lock it can take
 (their writer is gone) and leaves those whose lock is held (a live writer, in this process or another): no clock, no
 guess from a pid that may have been reused. A folder of the prefix without a lock file was left by a dtradar before
@@ -47,7 +47,7 @@ def _take(lock_path: Path) -> FileLock | None:
 
 
 def clean_stale_stages(parent: Path, prefix: str, *, lockless: Callable[[Path], bool] | None = None) -> list[Path]:
-    """Remove the stage folders ``<parent>/<prefix>XXXXXXXX`` that no live process holds; returns those removed.
+    """Remove the stage folders ``<parent>/<prefix><random>`` that no live process holds; returns those removed.
 
     Only names of exactly that shape (``tempfile``'s 8 characters after the prefix) are considered, so another
     writer's folder that merely starts with the prefix (a ray-tracing build's ``work/<scene>`` for a scene named
@@ -94,7 +94,7 @@ def clean_stale_stages(parent: Path, prefix: str, *, lockless: Callable[[Path], 
 
 @contextmanager
 def held_stage(parent: Path, prefix: str, *, lockless: Callable[[Path], bool] | None = None) -> Iterator[Path]:
-    """A new empty folder ``<parent>/<prefix>XXXXXXXX``, held for the block (see the module docstring). Rename it
+    """A new empty folder ``<parent>/<prefix><random>``, held for the block (see the module docstring). Rename it
     into place inside the block; whatever is left of it at the end is removed. Stale stages of the prefix are
     cleaned first (:func:`clean_stale_stages`, with ``lockless``)."""
     parent.mkdir(parents=True, exist_ok=True)
