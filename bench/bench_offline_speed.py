@@ -412,6 +412,61 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def plot(result: dict[str, Any], path: Path) -> Path | None:
+    """Updates per second of every variant of the algorithms section, one group of bars per algorithm (the ratio to
+    the trainer's former loop written on each bar), and the parallel layouts beside them."""
+    s = result["sections"]
+    per = (s.get("algorithms") or {}).get("per_algorithm") or {}
+    par = (s.get("parallel") or {}).get("rows") or []
+    if not per and not par:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(
+        1,
+        2 if par else 1,
+        figsize=(12 if par else 8, 4.2),
+        squeeze=False,
+        gridspec_kw={"width_ratios": [3, 1]} if par else None,
+    )
+    ax = axes[0][0]
+    algos = list(per)
+    variants = list(dict.fromkeys(r["variant"] for rows in per.values() for r in rows))
+    width = 0.8 / max(1, len(variants))
+    for k, v in enumerate(variants):
+        xs, ys, ratios = [], [], []
+        for i, a in enumerate(algos):
+            r = next((r for r in per[a] if r["variant"] == v), None)
+            if r is not None:
+                xs.append(i + (k - (len(variants) - 1) / 2) * width)
+                ys.append(r["updates_per_s"])
+                ratios.append(r["ratio"])
+        bars = ax.bar(xs, ys, width, label=v)
+        for b, q in zip(bars, ratios):
+            ax.annotate(
+                f"{q:.2f}x", (b.get_x() + b.get_width() / 2, b.get_height()), ha="center", va="bottom", fontsize=6
+            )
+    ax.set_xticks(range(len(algos)), algos)
+    ax.set_ylabel("d3rlpy updates per second")
+    ax.set_title(f"training speed on {result['logged']}", fontsize=10)
+    ax.legend(fontsize=7)
+    if par:
+        ax2 = axes[0][1]
+        ax2.bar([r["layout"] for r in par], [r["updates_per_s"] for r in par], color=["C0", "C1"][: len(par)])
+        for i, r in enumerate(par):
+            ax2.annotate(f"{r['speedup']:.2f}x", (i, r["updates_per_s"]), ha="center", va="bottom", fontsize=8)
+        ax2.set_ylabel("updates per second, all jobs")
+        ax2.set_title("parallel trainings", fontsize=10)
+        ax2.tick_params(axis="x", labelsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def _yes(x: bool | None) -> str:
     return "-" if x is None else ("yes" if x else "no")
 
@@ -477,7 +532,10 @@ def main(argv: list[str] | None = None) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(json_path, json.dumps(result, indent=2) + "\n")
         write_atomic(out.with_suffix(".md"), markdown(result))
+    png = plot(result, out.with_suffix(".png"))
     say(markdown(result))
+    if png:
+        say(f"results: {json_path}, {out.with_suffix('.md')}, {png}")
     return 0
 
 

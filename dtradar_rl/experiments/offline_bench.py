@@ -1,19 +1,25 @@
-"""The offline-RL benchmark: d3rlpy algorithms x logged behaviour datasets x seeds, evaluated with our own rollouts.
+"""The offline-RL benchmark: d3rlpy algorithms x logged dataset families x seeds, evaluated with our own rollouts and
+scored on the normalised scale (0 = uniformly random moves, 100 = the shortest-path expert).
 
-    make offline-bench SCENE=cubicle                      # the full setting (long on 2 CPU cores)
+    make offline-bench SCENE=cubicle                      # the default: 5 families x 6 algorithms x 3 seeds
     python -m dtradar_rl offline-bench --scene cubicle --seeds 0 --n-steps 2000   # a reduced one
 
-1. The online reference: a DQN checkpoint (``--checkpoint``, else ``runs/<scene>/dqn/model.pt``, else one is trained
-   with the ``tuned`` preset and ``--online-steps``) is evaluated on the blueprint and dynamic twins. It is also the
-   greedy policy of the ``epsilon-greedy`` behaviour and of the mixture's third component.
-2. Every behaviour in ``--behaviours`` logs ``--steps`` steps on the blueprint twin into the store
-   (``<scene>/blueprint/<behaviour>``, reused when already logged with the same settings; see
-   :mod:`dtradar_rl.offline.logged`). Its own success rate and mean return on those episodes are reported beside the
-   algorithms trained on it.
+1. The datasets: every behaviour in ``--behaviours`` (default the five families of D4RL's names, ``random``,
+   ``expert``, ``medium``, ``medium-replay``, ``mixed``; :mod:`dtradar_rl.offline.behaviours`) logs ``--steps``
+   steps on the blueprint twin into the store (``<scene>/blueprint/<family>``, reused when already logged with the
+   same settings, so ``make logged SCENE=<scene> BEHAVIOUR=all`` beforehand is the same data; the medium agent is
+   trained once and cached). The behaviour itself is rolled out like the trained agents (not ``medium-replay``,
+   which is a replay buffer, not one policy) and its logged episodes' score read from its card.
+2. The references: the normalised score's random and expert SPL on the evaluation pairs of every evaluated twin
+   (:func:`dtradar_rl.evaluation.normalized.reference_scores`); with the default ``--pairs 500`` these are exactly the
+   pairs and references of ``make eval`` and the datasets' cards. An online agent is evaluated beside them when one
+   exists (``--checkpoint``, else ``runs/<scene>/dqn/model.pt`` of ``make train``); the older behaviours
+   ``epsilon-greedy`` and ``mixture`` act with a memoryless one (a ``tuned`` DQN is trained into ``<out>/online_dqn``
+   when there is none).
 3. Every algorithm in ``--algorithms`` (d3rlpy DiscreteCQL, DiscreteBCQ, DiscreteBC, DQN, DoubleDQN, NFQ) trains
    ``--n-steps`` updates on each dataset for every seed, through :func:`dtradar_rl.offline.trainer.train_offline` (same
    hyper-parameters as ``make offline``), and is evaluated on the same seeded (start, target) pairs of both twins:
-   success rate, SPL and collisions per episode, unshielded.
+   normalised score, success rate, SPL and collisions per episode, unshielded.
    The (dataset, algorithm, seed) trainings run in ``--workers`` spawned processes, one torch thread each (default
    :func:`auto_workers`: one per core when the cores measurably work in parallel right now, else one after the
    other): a second torch thread in one training made it 6-40x slower whenever another process held a core, and on
@@ -24,15 +30,12 @@
    and measured by rolling it out on the blueprint twin from the same (start, target) pairs with the logged reward
    and the same γ (``--fqe-gamma``, :mod:`dtradar_rl.offline.ope`); the Spearman rank correlation of the two across
    agents, overall and within each dataset.
-5. ``bench.json`` (every run and the mean ± std over seeds, with the machine's load), ``bench.md`` (the table),
-   ``bench.png`` (bars with the spread over seeds; the online DQN as a line) and ``bench_fqe.png`` (FQE against the
-   true value, one point per agent, the rank correlation in the title) go to ``--out``.
+5. ``bench.json`` (every run and the mean ± std over seeds, the references, the machine's load), ``bench.md`` (the
+   normalised-score table per twin, then every metric), ``bench.png`` (score bars with the spread over seeds) and
+   ``bench_fqe.png`` (FQE against the true value) go to ``--out`` (:mod:`dtradar_rl.experiments.offline_report`).
 
-Time, measured on the 2-core VM (``bench/bench_offline_speed.py``, one torch thread, load ~2): 6.1 ms per update
-on average over the six algorithms (BC 3.0, CQL 7.3, BCQ 9.0, the others ~5.8), ~2 s per run beside its updates
-(evaluation on both twins, saving), ~12 s of FQE per agent at 2000 FQE updates. The full setting (5 datasets x 6
-algorithms x 3 seeds x 10 K updates) then takes ~1.6 h of training alone in one process (~1 h with two processes
-on free cores), ~20 min more with FQE; 30 min per twin fits ~2.7 K updates per run in one process without FQE.
+The budget (``--n-steps``, ``--fqe-steps``) is chosen so the default run fits 30 min of wall time per twin on this
+2-core machine; what it reaches and how long it took are in docs/logged-datasets.md.
 """
 
 from __future__ import annotations
@@ -50,21 +53,22 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from dtradar_data.core.files import write_atomic
 from dtradar_data.store.logged import episode_stats
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
-from dtradar_rl.offline.behaviours import BEHAVIOURS, behaviour_policy
+from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized, reference_scores
+from dtradar_rl.experiments.offline_report import markdown, ope_summary, plot, plot_fqe, summarize
+from dtradar_rl.offline.behaviours import BEHAVIOURS, FAMILIES, behaviour_policy
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.formats import as_logged
-from dtradar_rl.offline.logged import LogConfig, log_dataset
-from dtradar_rl.offline.ope import FQE_GAMMA, FQE_STEPS, episode_starts, fqe_estimate, true_value
+from dtradar_rl.offline.logged import LogConfig, log_dataset, resolve_spec
+from dtradar_rl.offline.ope import FQE_GAMMA, episode_starts, fqe_estimate, true_value
 from dtradar_rl.offline.trainer import train_offline
 from dtradar_rl.task.config import Config, ConfigError
 from dtradar_rl.task.runs import dqn_checkpoint
-from dtradar_rl.task.runtime import describe, machine
+from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
@@ -77,38 +81,48 @@ NAMES = {
     "ddqn": "DoubleDQN",
     "nfq": "NFQ",
 }
+#: The evaluation pairs' seed: the normalised score's (and ``make eval``'s).
+EVAL_SEED = DEFAULT_SEED
+#: Behaviours that act with a memoryless online DQN checkpoint.
+NEED_ONLINE = ("epsilon-greedy", "mixture")
+#: The default budget, chosen by measurement to fit 30 min per twin on 2 cores (docs/logged-datasets.md).
+BENCH_UPDATES = 5_000
+BENCH_FQE_STEPS = 1_000
 
 
 @dataclass(frozen=True)
 class OfflineBenchConfig(Config):
-    """Offline-RL benchmark: d3rlpy algorithms on every logged behaviour dataset of a scene, several seeds,
-    evaluated on the blueprint and dynamic twins beside the online DQN and the behaviour itself."""
+    """Offline-RL benchmark: d3rlpy algorithms on every logged dataset family of a scene, several seeds, scored on
+    the normalised scale (0 random, 100 shortest-path expert) on the blueprint and dynamic twins, beside the
+    behaviour itself and the online agent."""
 
     scene: str = "cubicle"
     """scene whose blueprint twin is logged on (synthetic-<nx>x<ny> for a stand-in without a ray tracer)"""
-    behaviours: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy", "mixture")
-    """behaviour datasets to train on"""
+    behaviours: tuple[str, ...] = FAMILIES
+    """datasets to train on: the families random, expert, medium, medium-replay, mixed (default: all five), or the
+    older behaviours noisy-shortest, epsilon-greedy, mixture"""
     algorithms: tuple[str, ...] = ("cql", "bcq", "bc", "dqn", "ddqn", "nfq")
     """d3rlpy algorithms (cql, bcq, bc, dqn, ddqn, nfq)"""
     seeds: tuple[int, ...] = (0, 1, 2)
     """training seeds of every algorithm (the logged datasets are the same for all: seed 0)"""
     steps: int = 100_000
-    """environment steps logged per behaviour"""
-    n_steps: int = 10_000
+    """environment steps logged per dataset (not medium-replay: the medium agent's whole run)"""
+    n_steps: int = BENCH_UPDATES
     """d3rlpy updates per run"""
     shortest_prob: float = 0.5
     """noisy-shortest: probability of the shortest-path move"""
     epsilon: float = 0.3
     """epsilon-greedy: probability of a random move"""
     checkpoint: str = ""
-    """online DQN checkpoint (default runs/<scene>/dqn/model.pt when it is a memoryless agent, else a tuned one is
-    trained into <out>/online_dqn)"""
+    """online agent evaluated beside the offline ones (default runs/<scene>/dqn/model.pt when it exists); the
+    epsilon-greedy and mixture behaviours act with it (a memoryless one; else a tuned DQN is trained into
+    <out>/online_dqn)"""
     online_steps: int = 600_000
     """environment steps of the online DQN when it has to be trained (tuned preset)"""
     num_envs: int = 256
     """robots logging in parallel"""
     pairs: int = 500
-    """seeded (start, target) pairs per evaluated twin"""
+    """seeded (start, target) pairs per evaluated twin (500 = those of make eval and of the normalised score)"""
     variants: tuple[str, ...] = ("blueprint", "dynamic")
     """twins to evaluate on"""
     device: str = "cpu"
@@ -118,8 +132,8 @@ class OfflineBenchConfig(Config):
     proportionally more work right now, else 1; 1 = all in this process)"""
     fqe: bool = True
     """estimate every agent's value with d3rlpy's FQE and measure it on the twin (--no-fqe: skip both)"""
-    fqe_steps: int = FQE_STEPS
-    """FQE updates per agent (about 12 s each on 1 core at 2000)"""
+    fqe_steps: int = BENCH_FQE_STEPS
+    """FQE updates per agent (about 6 s each on 1 core at 1000)"""
     fqe_gamma: float = FQE_GAMMA
     """discount of the value FQE estimates and the rollouts measure (the agents train with 0.5, under which all
     reasonable agents are worth about the same; see dtradar_rl.offline.ope)"""
@@ -179,23 +193,26 @@ def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, An
     return result.checkpoint, {"trained_here": True, "train_s": time.perf_counter() - t0, "env_steps": result.env_steps}
 
 
+def _scores(metrics: dict[str, Any], refs: dict[str, float]) -> dict[str, float]:
+    """``metrics`` (success rate, SPL, collisions) with the normalised score of its SPL first."""
+    return {"normalized": normalized(metrics["spl"], refs), **{m: float(metrics[m]) for m in METRICS}}
+
+
 def evaluate_behaviour(
-    cfg: OfflineBenchConfig, behaviour: str, checkpoint: str | Path | None, twins: dict[str, Any], blueprint: Any
+    log_cfg: LogConfig, twins: dict[str, Any], blueprint: Any, refs: dict[str, dict[str, float]], pairs: int
 ) -> dict[str, dict[str, float]]:
-    """The behaviour policy itself, rolled out with our evaluation (same seeded pairs as the trained agents) on
-    every twin: ``{variant: {success_rate, spl, collisions}}``."""
-    log_cfg = LogConfig(
-        scene=cfg.scene,
-        behaviour=behaviour,
-        shortest_prob=cfg.shortest_prob,
-        epsilon=cfg.epsilon,
-        checkpoint=str(checkpoint or ""),
-    )
-    bp = behaviour_policy(log_cfg.spec(), blueprint, obs=log_cfg.obs, seed=2024, device=cfg.device)
+    """The behaviour of ``log_cfg`` itself, rolled out with our evaluation (same seeded pairs as the trained agents)
+    on every twin: ``{variant: {normalized, success_rate, spl, collisions}}``; empty for ``medium-replay``, which is
+    a training run's replay buffer, not one policy."""
+    spec = resolve_spec(log_cfg, blueprint, say=lambda *a, **k: None)
+    if not spec.used:
+        return {}
+    bp = behaviour_policy(spec, blueprint, obs=log_cfg.obs, seed=EVAL_SEED, device=log_cfg.device)
     out = {}
     for name, ds in twins.items():
-        r = rollout(bp, ds, sample_eval_pairs(ds, cfg.pairs, 2024), device=cfg.device)
-        out[name.split("/")[1]] = {m: float(v) for m, v in metrics_from_rollouts(r).to_dict().items() if m in METRICS}
+        variant = name.split("/")[1]
+        r = rollout(bp, ds, sample_eval_pairs(ds, pairs, EVAL_SEED), device=log_cfg.device)
+        out[variant] = _scores(metrics_from_rollouts(r).to_dict(), refs[variant])
     return out
 
 
@@ -204,15 +221,9 @@ def _row_metrics(rows: list[dict[str, Any]], variant_name: str) -> dict[str, flo
     return {m: float(row[m]) for m in METRICS}
 
 
-def aggregate(values: list[float]) -> dict[str, float]:
-    v = np.asarray(values, float)
-    return {"mean": float(v.mean()), "std": float(v.std(ddof=0)), "n": int(len(v))}
-
-
 def _finish(
     cfg: OfflineBenchConfig,
-    online: dict[str, Any],
-    datasets: dict[str, Any],
+    head: dict[str, Any],
     runs: list[dict[str, Any]],
     m_start: dict[str, Any],
     t_start: float,
@@ -221,38 +232,18 @@ def _finish(
 ) -> dict[str, Any]:
     """Aggregate the runs so far (mean ± std over seeds) and write ``bench.{json,md}`` and (``plots``) the PNGs."""
     out = cfg.out_dir
-    summary = []
-    for beh in datasets:
-        for algo in cfg.algorithms:
-            rs = [r for r in runs if r["behaviour"] == beh and r["algorithm"] == algo]
-            if not rs:
-                continue
-            entry = {
-                "behaviour": beh,
-                "algorithm": algo,
-                "seeds": [r["seed"] for r in rs],
-                "train_s": aggregate([r["train_s"] for r in rs]),
-            }
-            for v in cfg.variants:
-                if all(v in r for r in rs):
-                    entry[v] = {m: aggregate([r[v][m] for r in rs]) for m in METRICS}
-            for k in ("fqe", "true_value"):
-                if all(k in r for r in rs):
-                    entry[k] = aggregate([r[k] for r in rs])
-            summary.append(entry)
     result = {
         "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.__dict__.items()},
         "algorithms": {a: NAMES[a] for a in cfg.algorithms},
-        "online_dqn": online,
-        "datasets": datasets,
-        "summary": summary,
+        **head,
+        "summary": summarize(runs, list(cfg.behaviours), list(cfg.algorithms), list(cfg.variants)),
         "runs": runs,
         "machine": {"start": m_start, "end": machine()},
         "layout": layout or {},
         "wall_s": time.perf_counter() - t_start,
     }
     if cfg.fqe:
-        result["ope"] = ope_summary(runs, cfg)
+        result["ope"] = ope_summary(runs, cfg.fqe_gamma, cfg.fqe_steps)
     write_atomic(out / "bench.json", json.dumps(result, indent=2) + "\n")
     write_atomic(out / "bench.md", markdown(result))
     if plots:
@@ -260,35 +251,6 @@ def _finish(
         if cfg.fqe:
             plot_fqe(result, out / "bench_fqe.png")
     return result
-
-
-def spearman(x: list[float], y: list[float]) -> float | None:
-    """Spearman's rank correlation of ``x`` and ``y`` (ties get their mean rank); None with fewer than 3 points or
-    a constant side."""
-    from scipy.stats import spearmanr
-
-    if len(x) < 3 or len(set(x)) < 2 or len(set(y)) < 2:
-        return None
-    rho = float(spearmanr(x, y).statistic)
-    return None if math.isnan(rho) else rho
-
-
-def ope_summary(runs: list[dict[str, Any]], cfg: OfflineBenchConfig) -> dict[str, Any]:
-    """FQE against the true value over every agent so far: the rank correlation, overall and per dataset."""
-    got = [r for r in runs if "fqe" in r and "true_value" in r]
-    per = {}
-    for beh in dict.fromkeys(r["behaviour"] for r in got):
-        rs = [r for r in got if r["behaviour"] == beh]
-        per[beh] = {"spearman": spearman([r["fqe"] for r in rs], [r["true_value"] for r in rs]), "n": len(rs)}
-    return {
-        "spearman": spearman([r["fqe"] for r in got], [r["true_value"] for r in got]),
-        "n": len(got),
-        "per_dataset": per,
-        "gamma": cfg.fqe_gamma,
-        "fqe_steps": cfg.fqe_steps,
-        "value": "mean discounted return (logged reward) from the logged episodes' (start, target) pairs, greedy and "
-        "unshielded: FQE from the logged transitions, true by rollouts on the blueprint twin",
-    }
 
 
 @dataclass(frozen=True)
@@ -413,47 +375,53 @@ def run_jobs(
     return rows
 
 
-def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
-    """Run the benchmark of ``cfg`` and write ``bench.{json,md,png}``; returns the JSON object."""
-    cfg = cfg.validate()
-    say = print if cfg.verbose else (lambda *a, **k: None)
-    t_start = time.perf_counter()
-    out = cfg.out_dir
-    out.mkdir(parents=True, exist_ok=True)
-    m_start = machine()
-    twins = {f"{cfg.scene}/{v}": load_dataset(f"{cfg.scene}/{v}") for v in cfg.variants}
-    blueprint = twins.get(f"{cfg.scene}/blueprint") or load_dataset(f"{cfg.scene}/blueprint")
-    needs_dqn = any(b in ("epsilon-greedy", "mixture") for b in cfg.behaviours)
-    online: dict[str, Any] = {}
-    ckpt = Path(cfg.checkpoint) if cfg.checkpoint else None
-    if needs_dqn or cfg.checkpoint or _memoryless(dqn_checkpoint(cfg.scene)):
+def _online(cfg: OfflineBenchConfig, twins: dict[str, Any], refs: dict[str, Any], say) -> tuple[Path | None, dict]:
+    """The online agent's checkpoint (None when there is none and no behaviour needs one) and its scores."""
+    if any(b in NEED_ONLINE for b in cfg.behaviours):
         ckpt, info = _online_checkpoint(cfg, say)
-        policy = load_policy(ckpt, cfg.device)
-        rows = [
-            r
-            for r, _, _ in evaluate_twins(
-                policy,
-                cfg.scene,
-                cfg.variants,
-                pairs=cfg.pairs,
-                seed=2024,
-                device=cfg.device,
-                shield=False,
-                datasets=twins,
-            )
-        ]
-        online = {
-            "checkpoint": str(ckpt),
-            **info,
-            **{r["dataset"].split("/")[1]: {m: float(r[m]) for m in METRICS} for r in rows},
-        }
-        say(
-            f"online DQN {ckpt}: "
-            + ", ".join(f"{v} success {online[v]['success_rate']:.3f}" for v in cfg.variants if v in online)
+    elif cfg.checkpoint or dqn_checkpoint(cfg.scene).is_file():
+        ckpt, info = Path(cfg.checkpoint) if cfg.checkpoint else dqn_checkpoint(cfg.scene), {"trained_here": False}
+    else:
+        return None, {}
+    policy = load_policy(ckpt, cfg.device)
+    rows = [
+        r
+        for r, _, _ in evaluate_twins(
+            policy,
+            cfg.scene,
+            cfg.variants,
+            pairs=cfg.pairs,
+            seed=EVAL_SEED,
+            device=cfg.device,
+            shield=False,
+            datasets=twins,
         )
+    ]
+    preset = getattr(policy.config, "preset", "") or "?"
+    online = {
+        "checkpoint": str(ckpt),
+        "label": f"online DQN, {preset} preset" + (", trained here" if info.get("trained_here") else ""),
+        **info,
+        **{r["dataset"].split("/")[1]: _scores(r, refs[r["dataset"].split("/")[1]]) for r in rows},
+    }
+    say(
+        f"online agent {ckpt}: "
+        + ", ".join(
+            f"{v} score {online[v]['normalized']:.1f} (success {online[v]['success_rate']:.3f})"
+            for v in cfg.variants
+            if v in online
+        )
+    )
+    return ckpt, online
 
+
+def log_datasets(
+    cfg: OfflineBenchConfig, ckpt: Path | None, twins: dict[str, Any], blueprint: Any, refs: dict[str, Any]
+) -> tuple[dict[str, Any], dict[str, str]]:
+    """Every dataset of ``cfg.behaviours`` logged (or reused) on the blueprint: its description for ``bench.json``
+    (counts, its behaviour's own scores) and its ``name@version``."""
     datasets: dict[str, Any] = {}
-    jobs: list[BenchJob] = []
+    ids: dict[str, str] = {}
     for beh in cfg.behaviours:
         log_cfg = LogConfig(
             scene=cfg.scene,
@@ -461,7 +429,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
             steps=cfg.steps,
             shortest_prob=cfg.shortest_prob,
             epsilon=cfg.epsilon,
-            checkpoint=str(ckpt or ""),
+            checkpoint=str(ckpt or "") if beh in NEED_ONLINE else "",
             num_envs=cfg.num_envs,
             device=cfg.device,
             minari=False,
@@ -471,6 +439,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         logged = log_dataset(log_cfg, blueprint)
         # recomputed, not read from the card: logs stored by an older dtradar counted end-of-log cuts as failures
         s = episode_stats(logged.table, (logged.meta.get("settings") or {}).get("max_steps"))
+        card_score = ((logged.meta.get("score") or {}).get("episodes") or {}).get("normalized")
         datasets[beh] = {
             "name": logged.name,
             "version": logged.version,
@@ -481,35 +450,58 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
             "success_rate": s["success_rate"],
             "reached_of_all": s["reached_of_all"],
             "mean_return": s["mean_return"],
+            "logged_score": None if card_score is None or math.isnan(card_score) else float(card_score),
             "log_s": time.perf_counter() - t0,
-            "eval": evaluate_behaviour(cfg, beh, ckpt, twins, blueprint),
+            "eval": evaluate_behaviour(log_cfg, twins, blueprint, refs, cfg.pairs),
         }
-        jobs += [
-            BenchJob(
-                behaviour=beh,
+        ids[beh] = f"{logged.name}@{logged.version}"
+    return datasets, ids
+
+
+def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
+    """Run the benchmark of ``cfg`` and write ``bench.{json,md,png}``; returns the JSON object."""
+    cfg = cfg.validate()
+    say = print if cfg.verbose else (lambda *a, **k: None)
+    t_start = time.perf_counter()
+    out = cfg.out_dir
+    out.mkdir(parents=True, exist_ok=True)
+    m_start = machine()
+    twins = {f"{cfg.scene}/{v}": load_dataset(f"{cfg.scene}/{v}") for v in cfg.variants}
+    blueprint = twins.get(f"{cfg.scene}/blueprint") or load_dataset(f"{cfg.scene}/blueprint")
+    refs = {
+        name.split("/")[1]: reference_scores(ds, pairs=cfg.pairs, seed=EVAL_SEED, device=cfg.device)
+        for name, ds in twins.items()
+    }
+    ckpt, online = _online(cfg, twins, refs, say)
+    datasets, ids = log_datasets(cfg, ckpt, twins, blueprint, refs)
+    head = {"references": refs, "online_dqn": online, "datasets": datasets, "log_s": time.perf_counter() - t_start}
+    jobs = [
+        BenchJob(
+            behaviour=beh,
+            algorithm=algo,
+            seed=seed,
+            logged=ids[beh],
+            config=OfflineConfig(
+                scene=cfg.scene,
                 algorithm=algo,
                 seed=seed,
-                logged=f"{logged.name}@{logged.version}",
-                config=OfflineConfig(
-                    scene=cfg.scene,
-                    algorithm=algo,
-                    seed=seed,
-                    n_steps=cfg.n_steps,
-                    pairs=cfg.pairs,
-                    eval_variants=tuple(cfg.variants),
-                    shield=False,
-                    device=cfg.device,
-                    num_envs=cfg.num_envs,
-                    threads=1,
-                    verbose=False,
-                    out=str(out / "runs" / beh / algo / f"seed{seed}"),
-                ),
-                fqe_steps=cfg.fqe_steps if cfg.fqe else 0,
-                fqe_gamma=cfg.fqe_gamma,
-            )
-            for algo in cfg.algorithms
-            for seed in cfg.seeds
-        ]
+                n_steps=cfg.n_steps,
+                pairs=cfg.pairs,
+                eval_variants=tuple(cfg.variants),
+                shield=False,
+                device=cfg.device,
+                num_envs=cfg.num_envs,
+                threads=1,
+                verbose=False,
+                out=str(out / "runs" / beh / algo / f"seed{seed}"),
+            ),
+            fqe_steps=cfg.fqe_steps if cfg.fqe else 0,
+            fqe_gamma=cfg.fqe_gamma,
+        )
+        for beh in cfg.behaviours
+        for algo in cfg.algorithms
+        for seed in cfg.seeds
+    ]
 
     workers, gain = (cfg.workers, None) if cfg.workers else auto_workers(len(jobs))
     workers = min(workers, max(1, len(jobs)))
@@ -518,19 +510,26 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     runs: list[dict[str, Any]] = []
 
     def done(run: dict[str, Any]) -> None:
+        for v in cfg.variants:
+            if v in run:
+                run[v] = _scores(run[v], refs[v])
         runs.append(run)
         ope = f"; FQE {run['fqe']:.3f}, true {run['true_value']:.3f}" if "fqe" in run else ""
         say(
             f"[{time.perf_counter() - t_start:7.1f}s] {run['behaviour']:<15} {NAMES[run['algorithm']]:<12} "
             f"seed {run['seed']}: "
-            + ", ".join(f"{v} {run[v]['success_rate']:.3f}" for v in cfg.variants if v in run)
+            + ", ".join(
+                f"{v} {run[v]['normalized']:.1f} (success {run[v]['success_rate']:.3f})"
+                for v in cfg.variants
+                if v in run
+            )
             + f" ({run['train_s']:.1f} s training{ope})"
         )
-        _finish(cfg, online, datasets, runs, m_start, t_start, plots=False, layout=layout)  # partial results survive
+        _finish(cfg, head, runs, m_start, t_start, plots=False, layout=layout)  # partial results survive
 
     runs = run_jobs(jobs, workers, done)
     runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
-    result = _finish(cfg, online, datasets, runs, m_start, t_start, layout=layout)
+    result = _finish(cfg, head, runs, m_start, t_start, layout=layout)
     say(markdown(result), end="")
     say(
         f"results: {out / 'bench.json'}, {out / 'bench.md'}, {out / 'bench.png'}"
@@ -539,204 +538,17 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     return result
 
 
-def _pm(a: dict[str, float] | None, fmt: str = "{:.3f}") -> str:
-    if not a:
-        return "-"
-    return fmt.format(a["mean"]) + (" ± " + fmt.format(a["std"]) if a["n"] > 1 else "")
-
-
-def markdown(result: dict[str, Any]) -> str:
-    """The benchmark table: one row per behaviour dataset, then one per algorithm trained on it (mean ± std)."""
-    cfg = result["config"]
-    variants = cfg["variants"]
-    ope = result.get("ope")
-    head = (
-        "| dataset | policy | "
-        + " | ".join(f"{v}: success | {v}: SPL | {v}: collisions/ep" for v in variants)
-        + (" | FQE | true value" if ope else "")
-        + " | train (s) |"
-    )
-    no_ope = " | - | -" if ope else ""
-    lines = [
-        f"Offline RL on `{cfg['scene']}` ({len(cfg['seeds'])} seed(s): {', '.join(map(str, cfg['seeds']))}; "
-        f"{cfg['n_steps']} d3rlpy updates; {cfg['steps']} logged steps per behaviour; {cfg['pairs']} seeded "
-        "pairs per twin, unshielded; mean ± std over seeds)",
-        "",
-        head,
-        "|" + "---|" * (3 + 3 * len(variants) + (2 if ope else 0)),
-    ]
-    online = result.get("online_dqn") or {}
-    if online:
-        cells = []
-        for v in variants:
-            m = online.get(v) or {}
-            cells += [f"{m.get(k, float('nan')):.3f}" if m else "-" for k in ("success_rate", "spl")]
-            cells += [f"{m['collisions']:.2f}" if m else "-"]
-        lines.append("| (online) | DQN, tuned | " + " | ".join(cells) + no_ope + " | - |")
-    for beh, d in result["datasets"].items():
-        ev = d.get("eval") or {}
-        blank = " | ".join(
-            f"{ev[v]['success_rate']:.3f} | {ev[v]['spl']:.3f} | {ev[v]['collisions']:.2f}" if v in ev else "- | - | -"
-            for v in variants
-        )
-        lines.append(
-            f"| `{d['name']}`@{d['tag']} | behaviour itself (its logged episodes on the blueprint: success "
-            f"{d['success_rate']:.3f} of finished episodes, {d.get('reached_of_all', 0):.3f} of all; "
-            f"mean return {d['mean_return']:.2f}, {d['episodes']} episodes, "
-            f"{d.get('cut_by_end_of_log', 0)} cut by the end of logging) | "
-            f"{blank}{no_ope} | - |"
-        )
-        for e in (e for e in result["summary"] if e["behaviour"] == beh):
-            cells = []
-            for v in variants:
-                m = e.get(v) or {}
-                cells += [_pm(m.get("success_rate")), _pm(m.get("spl")), _pm(m.get("collisions"), "{:.2f}")]
-            if ope:
-                cells += [_pm(e.get("fqe")), _pm(e.get("true_value"))]
-            lines.append(
-                f"| {beh} | {result['algorithms'][e['algorithm']]} | "
-                + " | ".join(cells)
-                + f" | {e['train_s']['mean']:.1f} |"
-            )
-    if ope:
-        rho = "-" if ope["spearman"] is None else f"{ope['spearman']:.2f}"
-        per = ", ".join(
-            f"{b} {'-' if d['spearman'] is None else format(d['spearman'], '.2f')} ({d['n']})"
-            for b, d in ope["per_dataset"].items()
-        )
-        lines += [
-            "",
-            f"FQE against the true value: Spearman rank correlation {rho} over {ope['n']} agents (per dataset: "
-            f"{per}). Value = {ope['value']}; γ = {ope['gamma']}, {ope['fqe_steps']} FQE updates per agent.",
-        ]
-    mach = result["machine"]
-    lines += [
-        "",
-        f"Machine: {describe(mach['start'])}; load average (1/5/15 min) at start "
-        f"{_load(mach['start'])}, at end {_load(mach['end'])}; total wall time {result['wall_s']:.0f} s"
-        + (
-            f" ({result['layout']['jobs']} trainings in {result['layout']['workers']} process(es), one torch thread "
-            "each" + _gain(result["layout"].get("parallel_gain")) + ")."
-            if result.get("layout")
-            else "."
-        ),
-    ]
-    return "\n".join(lines) + "\n"
-
-
-def _gain(g: float | None) -> str:
-    return "" if g is None else f"; {g:.2f}x the work with one process per core than with one, measured at the start"
-
-
-def _load(m: dict[str, Any]) -> str:
-    la = m.get("load_average")
-    return "/".join(f"{x:.1f}" for x in la) if la else "-"
-
-
-def plot(result: dict[str, Any], path: Path) -> Path:
-    """Success bars per dataset and algorithm, one panel per twin, error bars = std over seeds; online DQN dashed."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    variants = result["config"]["variants"]
-    behs = list(result["datasets"])
-    algos = list(result["algorithms"])
-    fig, axes = plt.subplots(1, len(variants), figsize=(5.5 * len(variants), 4.2), squeeze=False)
-    width = 0.8 / max(1, len(algos))
-    for ax, v in zip(axes[0], variants):
-        x = np.arange(len(behs))
-        for k, a in enumerate(algos):
-            means, stds = [], []
-            for b in behs:
-                e = next((e for e in result["summary"] if e["behaviour"] == b and e["algorithm"] == a), {})
-                m = (e.get(v) or {}).get("success_rate") or {"mean": np.nan, "std": 0.0}
-                means.append(m["mean"])
-                stds.append(m["std"])
-            ax.bar(
-                x + (k - (len(algos) - 1) / 2) * width,
-                means,
-                width,
-                yerr=stds,
-                capsize=2,
-                label=result["algorithms"][a],
-            )
-        beh_success = [
-            ((result["datasets"][b].get("eval") or {}).get(v) or {}).get("success_rate", np.nan) for b in behs
-        ]
-        ax.scatter(x, beh_success, marker="x", color="k", zorder=3, label="behaviour itself")
-        online = (result.get("online_dqn") or {}).get(v)
-        if online:
-            ax.axhline(online["success_rate"], color="k", ls="--", lw=1, label="online DQN")
-        ax.set_xticks(x, behs, rotation=15)
-        ax.set_ylim(0, 1.25)
-        ax.set_ylabel("success rate")
-        ax.set_title(f"{result['config']['scene']} → {v}")
-    axes[0][-1].legend(fontsize=7, loc="upper right", ncol=2)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
-def plot_fqe(result: dict[str, Any], path: Path) -> Path:
-    """FQE's estimate against the true value, one point per trained agent (colour: algorithm, marker: dataset),
-    the diagonal, and the Spearman rank correlation in the title."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    runs = [r for r in result["runs"] if "fqe" in r and "true_value" in r]
-    algos, behs = list(result["algorithms"]), list(result["datasets"])
-    markers = "osD^vP*X"
-    fig, ax = plt.subplots(figsize=(5.6, 4.8))
-    for r in runs:
-        k = algos.index(r["algorithm"])
-        ax.scatter(
-            r["true_value"], r["fqe"], color=f"C{k}", marker=markers[behs.index(r["behaviour"]) % len(markers)], s=28
-        )
-    if runs:
-        vals = [r["true_value"] for r in runs] + [r["fqe"] for r in runs]
-        lo, hi = min(vals), max(vals)
-        pad = 0.05 * (hi - lo or 1.0)
-        ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], color="0.6", lw=1, ls="--", label="FQE = true")
-    for k, a in enumerate(algos):
-        ax.scatter([], [], color=f"C{k}", marker="o", label=result["algorithms"][a])
-    for j, b in enumerate(behs):
-        ax.scatter([], [], color="k", marker=markers[j % len(markers)], label=b)
-    ope = result.get("ope") or {}
-    rho = ope.get("spearman")
-    ax.set_title(
-        f"{result['config']['scene']}: FQE vs true value, Spearman ρ = {'-' if rho is None else f'{rho:.2f}'} "
-        f"({len(runs)} agents)",
-        fontsize=10,
-    )
-    ax.set_xlabel(f"true value (rollouts on the twin, γ = {ope.get('gamma', '-')})")
-    ax.set_ylabel("FQE estimate (logged data only)")
-    ax.legend(fontsize=7, loc="lower right", ncol=2)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
 __all__ = [
     "ALGORITHMS",
+    "BENCH_FQE_STEPS",
+    "BENCH_UPDATES",
     "BenchJob",
     "OfflineBenchConfig",
-    "aggregate",
     "auto_workers",
-    "markdown",
+    "evaluate_behaviour",
+    "log_datasets",
     "parallel_gain",
-    "ope_summary",
-    "plot",
-    "plot_fqe",
     "run_bench",
     "run_job",
     "run_jobs",
-    "spearman",
 ]

@@ -11,13 +11,13 @@ from dtradar_rl.experiments import offline_bench
 from dtradar_rl.experiments.offline_bench import (
     BenchJob,
     OfflineBenchConfig,
-    aggregate,
     auto_workers,
     parallel_gain,
     run_bench,
     run_jobs,
-    spearman,
 )
+from dtradar_rl.experiments.offline_report import aggregate, spearman
+from dtradar_rl.evaluation.normalized import normalized, reference_scores
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.task.twins import load_dataset
@@ -56,6 +56,53 @@ def test_a_tiny_benchmark_runs_end_to_end_in_seconds(root, tmp_path):
     # --no-fqe: no off-policy evaluation anywhere
     assert "ope" not in saved and not any("fqe" in r for r in saved["runs"]) and "FQE" not in md
     assert not (tmp_path / "bench" / "bench_fqe.png").exists()
+
+
+def test_every_run_is_scored_on_the_normalised_scale_of_its_twin(root, tmp_path):
+    cfg = OfflineBenchConfig(
+        scene="synthetic-8x6",
+        behaviours=("random", "expert"),
+        algorithms=("bc",),
+        seeds=(0,),
+        steps=800,
+        n_steps=10,
+        num_envs=8,
+        pairs=16,
+        workers=1,
+        fqe=False,
+        out=str(tmp_path / "bench"),
+        verbose=False,
+    )
+    result = run_bench(cfg)
+    for v in ("blueprint", "dynamic"):
+        refs = reference_scores(load_dataset(f"synthetic-8x6/{v}"), pairs=16, seed=2024)
+        assert result["references"][v] == refs and refs["expert"] > refs["random"]
+        for r in result["runs"]:
+            assert r[v]["normalized"] == pytest.approx(normalized(r[v]["spl"], refs))
+        # the behaviour itself on the same scale: the noisy shortest-path expert near 100, random near 0
+        expert, rand = result["datasets"]["expert"]["eval"][v], result["datasets"]["random"]["eval"][v]
+        assert expert["normalized"] > 60 > 30 > rand["normalized"]
+    assert result["datasets"]["expert"]["logged_score"] > 60
+    assert result["summary"][0]["blueprint"]["normalized"]["n"] == 1
+    md = (tmp_path / "bench" / "bench.md").read_text()
+    assert "**synthetic-8x6 → dynamic** (normalised score)" in md and "| expert |" in md
+
+
+def test_the_score_table_has_a_row_per_dataset_and_the_best_algorithm_in_bold():
+    from dtradar_rl.experiments.offline_report import score_table
+
+    def entry(beh, algo, score):
+        return {"behaviour": beh, "algorithm": algo, "blueprint": {"normalized": aggregate([score, score + 2])}}
+
+    result = {
+        "algorithms": {"bc": "DiscreteBC", "cql": "DiscreteCQL"},
+        "datasets": {"expert": {"eval": {"blueprint": {"normalized": 94.5}}}, "medium-replay": {"eval": {}}},
+        "summary": [entry("expert", "bc", 97.0), entry("expert", "cql", 80.0), entry("medium-replay", "cql", 40.0)],
+    }
+    lines = score_table(result, "blueprint")
+    assert lines[0] == "| dataset | behaviour itself | DiscreteBC | DiscreteCQL |"
+    assert lines[2] == "| expert | 94.5 | **98.0 ± 1.0** | 81.0 ± 1.0 |"
+    assert lines[3] == "| medium-replay | - | - | **41.0 ± 1.0** |"
 
 
 def test_with_fqe_every_agent_gets_an_estimate_and_a_true_value_and_their_rank_correlation(root, tmp_path):
