@@ -86,7 +86,7 @@ EVAL_SEED = DEFAULT_SEED
 #: Behaviours that act with a memoryless online DQN checkpoint.
 NEED_ONLINE = ("epsilon-greedy", "mixture")
 #: The default budget, chosen by measurement to fit 30 min per twin on 2 cores (docs/logged-datasets.md).
-BENCH_UPDATES = 5_000
+BENCH_UPDATES = 4_000
 BENCH_FQE_STEPS = 1_000
 
 
