@@ -6,7 +6,9 @@ path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A 
 (``dallas``): :func:`build_targets` expands it to its quadrants. Scenes built on a Mitsuba/Sionna XML
 (:mod:`dtradar_data.scenes.xml_scene`): Sionna's bundled cities (``sionna:munich``, dataset ``sionna-munich``), a
 user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section. :func:`tx_pose_error` makes
-the antenna-pose-error twin of any of them (``<scene>-txpose``: the transmitter moved and turned a little). A user's
+the antenna-pose-error twin of any of them (``<scene>-txpose``: the transmitter moved and turned a little).
+:func:`load_moving_scene` reads a room's or a city quadrant's *moving* twin (people and vehicles moving through its
+blueprint: :mod:`dtradar_data.scenes.movers`), a series of static scenes that no build traces yet. A user's
 scene file may not take a built-in name (:mod:`dtradar_data.scenes.names`), and the options that replace part of a
 scene are checked before any file is read (:mod:`dtradar_data.scenes.options`).
 """
@@ -16,17 +18,19 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from dtradar_data.core.errors import SceneFileError, unknown_name
+from dtradar_data.core.errors import InvalidSettingError, SceneFileError, unknown_name
 from dtradar_data.core.ids import VARIANTS
 from dtradar_data.scenes.city.reader import (
     city_file,
     city_names,
+    load_city_moving,
     load_city_spec,
     quadrant_scenes,
     read_city_file,
 )
-from dtradar_data.scenes.indoor.reader import load_room_file
+from dtradar_data.scenes.indoor.reader import load_moving_room_file, load_room_file
 from dtradar_data.scenes.model import SceneSpec
+from dtradar_data.scenes.movers import MOVING_VARIANT, Mover, MoverChange, MovingScene
 from dtradar_data.scenes.names import check_user_scene_name
 from dtradar_data.scenes.options import check_scene_options
 from dtradar_data.scenes.sionna_scenes import is_sionna_name, sionna_dataset_scenes, sionna_scene_names
@@ -34,6 +38,10 @@ from dtradar_data.scenes.tx_pose import tx_pose_error
 from dtradar_data.scenes.xml_scene import is_mesh_scene_file, load_mesh_scene_file, load_sionna_spec, load_xml_spec
 
 __all__ = [
+    "MOVING_VARIANT",
+    "Mover",
+    "MoverChange",
+    "MovingScene",
     "SceneSpec",
     "available_scenes",
     "sionna_scene_names",
@@ -42,6 +50,7 @@ __all__ = [
     "city_names",
     "scene_file",
     "is_scene_path",
+    "load_moving_scene",
     "load_scene_spec",
     "tx_pose_error",
 ]
@@ -95,8 +104,13 @@ def load_scene_spec(
     ``cell_m`` (cities and XML scenes) replaces its cell size; ``grid`` (``X0, Y0, CELL_M, NX, NY``) and ``tx``
     (``X, Y, Z``) replace an XML scene's grid and transmitter (required for a bare ``.xml``).
     """
+    if variant == MOVING_VARIANT:
+        raise InvalidSettingError(
+            f"{scene}/{MOVING_VARIANT} is a moving twin, a series of scenes rather than one",
+            hint=f"load it with load_moving_scene({str(scene)!r}): a MovingScene whose spec_at(k) is snapshot k",
+        )
     if variant not in VARIANTS:
-        raise unknown_name("variant", variant, VARIANTS)
+        raise unknown_name("variant", variant, (*VARIANTS, MOVING_VARIANT))
     check_scene_options(footprints=footprints, cell_m=cell_m, grid=grid, tx=tx)  # before any file is read
     mesh_options = {"grid": grid, "tx": tx, "cell_m": cell_m}
     if is_scene_path(scene):
@@ -126,6 +140,45 @@ def load_scene_spec(
     if scene in available_scenes():
         return load_city_spec(scene, variant, footprints=footprints, cell_m=cell_m)
     raise unknown_name("scene", scene, available_scenes() + city_names())
+
+
+def load_moving_scene(scene: str | Path, *, footprints: str | None = None, cell_m: float | None = None) -> MovingScene:
+    """The moving twin of a built-in room (``"cubicle"``), a city quadrant (``"dallas-q3"``) or the user's room file:
+    its ``[moving]`` movers over its blueprint (or dynamic twin), every ``dt_s`` seconds for ``snapshots`` steps.
+
+    ``footprints`` and ``cell_m`` apply to city quadrants as in :func:`load_scene_spec`. Scenes built on an XML file
+    have no moving twin. Not traced by any build yet: :meth:`MovingScene.spec_at` gives each snapshot as a scene.
+    """
+    check_scene_options(footprints=footprints, cell_m=cell_m)
+    if is_scene_path(scene):
+        path = Path(scene).expanduser()
+        if not path.is_file():
+            raise SceneFileError(
+                f"{path}: no such scene file",
+                hint="check the path, or use a built-in scene: " + ", ".join(available_scenes()),
+            )
+        if path.suffix.lower() == ".xml" or is_mesh_scene_file(path):
+            raise _no_moving_twin(str(path), "a scene built on an XML file")
+        _indoor_only(footprints, cell_m, str(path))
+        moving = load_moving_room_file(path)
+        check_user_scene_name(moving.scene, path)
+        return moving
+    scene = str(scene)
+    if is_sionna_name(scene):
+        raise _no_moving_twin(scene, "one of Sionna's bundled scenes")
+    if scene in indoor_scenes():
+        _indoor_only(footprints, cell_m, scene)
+        return load_moving_room_file(scene_file(scene))
+    if scene in available_scenes():
+        return load_city_moving(scene, footprints=footprints, cell_m=cell_m)
+    raise unknown_name("scene", scene, available_scenes() + city_names())
+
+
+def _no_moving_twin(scene: str, what: str) -> SceneFileError:
+    return SceneFileError(
+        f"{scene} is {what}: it has no moving twin",
+        hint="movers are declared in the [moving] section of a room or city scene file (.toml); see docs/scenes.md",
+    )
 
 
 def _indoor_only(footprints, cell_m, scene: str, grid=None, tx=None, what: str = "an indoor scene") -> None:
@@ -158,6 +211,13 @@ def builtin_names() -> list[str]:
 def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | Path, str]]:
     """``(scene, variant)`` pairs a build of ``scene`` makes: a city expands to its quadrants (blueprints, plus the
     dynamic twin of its dynamic quadrant); ``variant`` is ``"all"``, ``"blueprint"`` or ``"dynamic"``."""
+    if variant == MOVING_VARIANT:
+        raise InvalidSettingError(
+            f"--variant {MOVING_VARIANT}: moving twins are not built by `make dataset` / build(): their snapshots will "
+            "be traced by the moving builder (upcoming)",
+            hint=f"build --variant blueprint, dynamic or all; read the moving twin with "
+            f"dtradar_data.scenes.load_moving_scene({str(scene)!r}) (spec_at(k) is snapshot k as a static scene)",
+        )
     if variant != "all" and variant not in VARIANTS:
         raise unknown_name("variant", variant, ("all", *VARIANTS))
     wanted = VARIANTS if variant == "all" else (variant,)

@@ -11,6 +11,8 @@ A city is one file (``dallas.toml``, ``houston.toml`` beside this module are com
     [rt]           [samples_per_src, max_num_paths_per_src]      (instead of the indoor RTSettings defaults)
     [quadrants.qN] tx_m = [x, y, z]                      (N = 1..4; the paper's Tables III and IV)
     [dynamic]      quadrant, seed, cars, buses, roads = [{name, from_m, to_m}, ...] or "auto"
+    [moving]       quadrant, description, [base, dt_s, horizon_s], [[moving.mover]] (vehicles driving along lanes:
+                   :mod:`dtradar_data.scenes.movers`; read only for the moving twin, :func:`city_moving_scene`)
 
 Each quadrant is its own dataset, ``<city>-qN/blueprint`` (and ``<city>-qN/dynamic`` for the dynamic quadrant): its
 grid covers the quadrant, the geometry is the whole city (buildings outside the quadrant still reflect), the
@@ -68,6 +70,7 @@ from dtradar_data.scenes.model import (
     SceneSpec,
     TxSpec,
 )
+from dtradar_data.scenes.movers import MOVING_VARIANT, MovingScene, moving_scene_from_section
 from dtradar_data.scenes.names import check_user_scene_name
 from dtradar_data.scenes.options import check_cell_m
 
@@ -168,6 +171,8 @@ class CityDocument(SceneFileModel):
     rt: CityRt = CityRt()
     quadrants: dict[Literal["q1", "q2", "q3", "q4"], Quadrant]
     dynamic: CityDynamic | None = None
+    moving: dict[str, Any] | None = None
+    """Checked only when the moving twin is read (:func:`city_moving_scene`), so it never touches the others."""
 
     @property
     def box(self) -> LonLatBox:
@@ -307,6 +312,11 @@ def city_spec(
 ) -> SceneSpec:
     """One quadrant of a city as a scene: ground plane, buildings, lots and roads, the quadrant's grid and TX."""
     scene = f"{doc.scene.name}-{quadrant}"
+    if variant == MOVING_VARIANT:
+        raise SceneFileError(
+            f"{scene}/{MOVING_VARIANT} is a moving twin, a series of scenes, not one",
+            hint="read it with city_moving_scene / load_city_moving (a MovingScene: spec_at(k) is snapshot k)",
+        )
     if quadrant not in doc.quadrants:
         raise unknown_name(f"quadrant of {doc.scene.name}", quadrant, sorted(doc.quadrants))
     dyn = doc.dynamic
@@ -431,3 +441,50 @@ def load_city_spec(
         raise unknown_name("city quadrant", scene, [s for c in city_names() for s in quadrant_scenes(c)])
     city, quadrant = parts
     return city_spec(read_city_file(city_file(city)), quadrant, variant, footprints=footprints, cell_m=cell_m)
+
+
+def city_moving_scene(
+    doc: CityDocument, quadrant: str, *, footprints: str | None = None, cell_m: float | None = None
+) -> MovingScene:
+    """The moving twin of the city's ``[moving]`` quadrant: its movers (vehicles driving along lanes) over that
+    quadrant's blueprint (or dynamic twin, ``base = "dynamic"``); ``footprints`` and ``cell_m`` as for
+    :func:`city_spec` (the default step follows ``cell_m``)."""
+    city, scene, section = doc.scene.name, f"{doc.scene.name}-{quadrant}", doc.moving
+    if quadrant not in doc.quadrants:
+        raise unknown_name(f"quadrant of {city}", quadrant, sorted(doc.quadrants))
+    if section is None:
+        raise UnknownNameError(
+            f"{scene} has no moving twin ({city} declares none)",
+            hint=f"add a [moving] section with quadrant = {quadrant!r} and [[moving.mover]] tables to {city}.toml",
+        )
+    has = section.get("quadrant")
+    if has not in doc.quadrants:
+        close = did_you_mean(str(has), doc.quadrants)
+        raise SceneFileError(
+            f"{city}.toml: [moving]: "
+            + ("missing field 'quadrant'" if has is None else f"quadrant {has!r} is not a quadrant of the city")
+            + (f"; {close}" if close and has is not None else ""),
+            hint="give the quadrant the movers move in: quadrant = one of " + ", ".join(sorted(doc.quadrants)),
+        )
+    if has != quadrant:
+        raise UnknownNameError(
+            f"{scene} has no moving twin (the moving twin of {city} is {city}-{has}/{MOVING_VARIANT})",
+            hint=f"use {city}-{has}",
+        )
+    rest = {k: v for k, v in section.items() if k != "quadrant"}
+    return moving_scene_from_section(
+        rest,
+        lambda variant: city_spec(doc, quadrant, variant, footprints=footprints, cell_m=cell_m),
+        origin=f"{city}.toml",
+        title=f"{doc.scene.title} {quadrant.upper()} ({MOVING_VARIANT})",
+        description=doc.scene.description,
+    )
+
+
+def load_city_moving(scene: str, *, footprints: str | None = None, cell_m: float | None = None) -> MovingScene:
+    """The moving twin of a built-in city quadrant by dataset scene name (``"dallas-q3"``)."""
+    parts = split_quadrant_scene(scene)
+    if parts is None:
+        raise unknown_name("city quadrant", scene, [s for c in city_names() for s in quadrant_scenes(c)])
+    city, quadrant = parts
+    return city_moving_scene(read_city_file(city_file(city)), quadrant, footprints=footprints, cell_m=cell_m)

@@ -17,6 +17,9 @@ place. The layout (``cubicle.toml`` beside this module is a commented example)::
     [[objects]]      name, kind, x_m, y_m, [material, width_m, length_m, height_m, z_m, yaw_deg]
     [dynamic]        description, [[dynamic.add]] (like objects), [[dynamic.move]] (name + fields to change),
                      remove = [names]
+    [moving]         description, [base, dt_s, horizon_s], [[moving.mover]] (name, kind, speed_mps, waypoints,
+                     [mode, start_offset_s, material, width_m, length_m, height_m, mesh]): read only for the
+                     moving twin (:mod:`dtradar_data.scenes.movers`), so it never changes the other two
 """
 
 from __future__ import annotations
@@ -136,6 +139,8 @@ class RoomDocument(SceneFileModel):
     kinds: dict[Annotated[str, BeforeValidator(name_check("kind name", allow_dash=False))], KindDefaults] = {}
     objects: list[dict[str, Any]]
     dynamic: DynamicModel | None = None
+    moving: dict[str, Any] | None = None
+    """Checked only when the moving twin is read (:func:`dtradar_data.scenes.movers.moving_scene_from_section`)."""
 
 
 OBJECT_KEYS = tuple(ObjectModel.model_fields)

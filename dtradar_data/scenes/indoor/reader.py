@@ -7,7 +7,9 @@ inside the room, the transmitter and grid inside it, unique names, changes that 
 a :class:`~dtradar_data.core.errors.SceneFileError` naming the file, the object and the field, and how to fix it. One
 file per scene holds the *blueprint* objects and a ``[dynamic]`` section that lists the *changes* (objects added,
 moved / re-oriented by name, removed): the dynamic twin is built here as blueprint + changes, so the two variants can
-never drift apart silently. The room frame: the interior floor spans ``[0, width_m] x [0, length_m]`` at ``z = 0``;
+never drift apart silently. A ``[moving]`` section declares people walking through the room: the *moving* twin
+(:func:`load_moving_room_file`, a :class:`~dtradar_data.scenes.movers.MovingScene`), read only when asked for, so the
+other two never depend on it. The room frame: the interior floor spans ``[0, width_m] x [0, length_m]`` at ``z = 0``;
 walls stand outside it.
 """
 
@@ -35,6 +37,7 @@ from dtradar_data.scenes.indoor.document import (
     TxModel,
 )
 from dtradar_data.scenes.model import Box, Room, SceneSpec, TxSpec
+from dtradar_data.scenes.movers import MOVING_VARIANT, MovingScene, moving_scene_from_section
 
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
 _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
@@ -43,6 +46,25 @@ _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
 # ------------------------------------------------------------------------------------------- entry points
 def load_room_file(path: str | Path, variant: str) -> SceneSpec:
     """Read and validate a room scene TOML file; :class:`SceneFileError` names the file and field of any problem."""
+    return parse_room(_read_toml(path), variant, origin=str(path))
+
+
+def load_moving_room_file(path: str | Path) -> MovingScene:
+    """The moving twin of a room scene TOML file (its ``[moving]`` section over its blueprint or dynamic twin)."""
+    return parse_moving_room(_read_toml(path), origin=str(path))
+
+
+def parse_room(data: dict[str, Any], variant: str, *, origin: str = "<scene>") -> SceneSpec:
+    """Build a :class:`SceneSpec` from an already parsed TOML document (tests and generated scenes)."""
+    return _Reader(origin, data).spec(variant)
+
+
+def parse_moving_room(data: dict[str, Any], *, origin: str = "<scene>") -> MovingScene:
+    """Build the moving twin from an already parsed TOML document (tests and generated scenes)."""
+    return _Reader(origin, data).moving()
+
+
+def _read_toml(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -57,12 +79,7 @@ def load_room_file(path: str | Path, variant: str) -> SceneSpec:
         raise SceneFileError(
             f"{path}: not valid TOML: {e}", hint="fix the syntax at the reported line (https://toml.io)"
         ) from e
-    return parse_room(data, variant, origin=str(path))
-
-
-def parse_room(data: dict[str, Any], variant: str, *, origin: str = "<scene>") -> SceneSpec:
-    """Build a :class:`SceneSpec` from an already parsed TOML document (tests and generated scenes)."""
-    return _Reader(origin, data).spec(variant)
+    return data
 
 
 # ------------------------------------------------------------------------------------------- the reader
@@ -70,14 +87,41 @@ class _Reader(DocumentErrors):
     """The :class:`SceneSpec` of one document, with the checks pydantic cannot make."""
 
     # -- the document
-    def spec(self, variant: str) -> SceneSpec:
+    def document(self) -> RoomDocument:
         fmt = self.data.get("format")
         if "format" in self.data and fmt != FORMAT:
             raise self.fail("format", f"unsupported format {fmt!r}", f"this dtradar reads format = {FORMAT}")
         try:
-            doc = RoomDocument.model_validate(self.data)
+            return RoomDocument.model_validate(self.data)
         except ValidationError as exc:
             self.raise_first(exc)
+            raise  # pragma: no cover (raise_first always raises)
+
+    def moving(self) -> MovingScene:
+        """The moving twin: the ``[moving]`` section over the variant it names as its base."""
+        doc = self.document()
+        if doc.moving is None:
+            raise self.fail(
+                "top level",
+                "missing section [moving]: this scene has no moving twin",
+                "add a [moving] table (description) with [[moving.mover]] tables: see cubicle.toml",
+            )
+        return moving_scene_from_section(
+            doc.moving,
+            self.spec,
+            origin=self.origin,
+            title=doc.scene.title + " (moving twin)",
+            description=doc.scene.description,
+        )
+
+    def spec(self, variant: str) -> SceneSpec:
+        if variant == MOVING_VARIANT:
+            raise self.fail(
+                "variant",
+                "the moving twin is a series of scenes, not one",
+                "read it with load_moving_room_file / parse_moving_room (a MovingScene: spec_at(k) is snapshot k)",
+            )
+        doc = self.document()
         room, structure = self.room(doc.room)
         grid = self.grid(doc.grid, room)
         tx = self.tx(doc.tx, room)
