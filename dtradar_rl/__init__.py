@@ -18,6 +18,7 @@ from __future__ import annotations
 
 _EXPORTS = {
     "GridMDP": "dtradar_rl.task.mdp",
+    "MovingGridMDP": "dtradar_rl.task.mdp",
     "ACTIONS": "dtradar_rl.task.mdp",
     "REWARDS": "dtradar_rl.task.mdp",
     "OBS_PRESETS": "dtradar_rl.task.observations",

@@ -2,15 +2,27 @@
 
 The radio features are those of a single line-of-sight path in free space from a transmitter at ``tx``
 (Friis gain, delay = distance / c, geometric angles), so they are physically consistent, smooth and unique per cell.
+
+:func:`synthetic_moving_dataset` is a *moving* twin (the format is in :mod:`dtradar_data.core.dataset`): the same
+static twin with a few 1-cell :class:`Mover` s walking back and forth along rows or columns, one snapshot per step of
+the movers. A mover's cell is blocked at that snapshot (``mover`` true) and its radio features are null there; every
+other cell keeps the static twin's features (a real re-traced twin would also change the features around a mover).
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
 
 from dtradar_data.core.dataset import Dataset, GridInfo
+from dtradar_data.core.errors import InvalidCoordinatesError
 from dtradar_data.core.schema import CELL_SCHEMA, SCHEMA_VERSION
+
+#: The two columns a moving twin adds to the per-cell table (see :mod:`dtradar_data.core.dataset`).
+MOVING_FIELDS = (pa.field("t", pa.int32(), nullable=False), pa.field("mover", pa.bool_(), nullable=False))
 
 C = 299_792_458.0
 
@@ -82,3 +94,118 @@ def synthetic_dataset(
     grid = GridInfo(x0_m=0.5 * cell_m, y0_m=0.5 * cell_m, cell_m=cell_m, nx=nx, ny=ny)
     meta = {"name": name, "schema_version": SCHEMA_VERSION, "grid": grid.to_dict(), "synthetic": True}
     return Dataset.from_table(table, meta, name=name)
+
+
+# -- moving twins ---------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Mover:
+    """A 1-cell mover walking back and forth along a row (``axis="x"``) or a column (``"y"``): from ``start`` to
+    ``length - 1`` cells further along the axis and back, one cell per snapshot (period ``2 * (length - 1)``; a
+    mover of length 1 stands still)."""
+
+    name: str
+    start: tuple[int, int]
+    axis: str = "x"
+    length: int = 3
+
+    def __post_init__(self) -> None:
+        if self.axis not in ("x", "y") or self.length < 1:
+            raise InvalidCoordinatesError(
+                f"mover {self.name!r}: axis must be 'x' or 'y' and length >= 1, got {self.axis!r} and {self.length}"
+            )
+
+    @property
+    def period(self) -> int:
+        return max(1, 2 * (self.length - 1))
+
+    def cell(self, k: int) -> tuple[int, int]:
+        """``(ix, iy)`` at snapshot ``k``."""
+        p = k % self.period
+        off = p if p < self.length else self.period - p
+        ix, iy = self.start
+        return (ix + off, iy) if self.axis == "x" else (ix, iy + off)
+
+
+def default_movers(blocked: np.ndarray, count: int = 3, max_length: int = 4) -> list[Mover]:
+    """``count`` deterministic movers on free segments of ``blocked`` (``bool[ny, nx]``): each walks up to
+    ``max_length`` cells of the longest free run of a row or column (rows ``ny/2``, ``3ny/4``, ``ny/4``, columns
+    ``nx/3``, ``2nx/3``, tried in turn) whose every cell has a free cell beside it (a robot can step aside, so no
+    mover plugs a one-cell-wide corridor for good), lengths alternating ``max_length`` and ``max_length - 1``."""
+    ny, nx = blocked.shape
+    open_ = np.pad(~blocked, 1, constant_values=False)
+    side_x = open_[:-2, 1:-1] | open_[2:, 1:-1]  # a free cell above or below (beside a row-walker)
+    side_y = open_[1:-1, :-2] | open_[1:-1, 2:]  # a free cell left or right (beside a column-walker)
+    lines = [("x", ny // 2), ("y", nx // 3), ("x", (3 * ny) // 4), ("y", (2 * nx) // 3), ("x", ny // 4)]
+    movers: list[Mover] = []
+    seen = set()
+    for axis, at in lines:
+        if len(movers) == count or (axis, at) in seen:
+            continue
+        seen.add((axis, at))
+        free = (~blocked[at, :] & side_x[at, :]) if axis == "x" else (~blocked[:, at] & side_y[:, at])
+        best, run_start, best_start = 0, 0, 0
+        for i, f in enumerate(list(free) + [False]):
+            if not f:
+                if i - run_start > best:
+                    best, best_start = i - run_start, run_start
+                run_start = i + 1
+        length = min(best, max_length - (len(movers) % 2), max_length)
+        if length < 2:
+            continue
+        first = best_start + (best - length) // 2  # centred in the run
+        start = (first, at) if axis == "x" else (at, first)
+        movers.append(Mover(f"walker-{len(movers)}", start, axis, length))
+    return movers
+
+
+def synthetic_moving_dataset(
+    nx: int = 8,
+    ny: int = 6,
+    snapshots: int | None = None,
+    movers: list[Mover] | None = None,
+    blocked: np.ndarray | None = None,
+    *,
+    dt_s: float = 1.0,
+    cell_m: float = 0.5,
+    name: str = "synthetic-moving/blueprint",
+    **kwargs,
+) -> Dataset:
+    """A moving twin: :func:`synthetic_table` with ``blocked`` as its static obstacles, plus ``movers`` (default
+    :func:`default_movers`), over ``snapshots`` snapshots ``dt_s`` apart (default: the least common multiple of the
+    movers' periods, so every mover loops seamlessly; with another count a mover jumps back at the wrap)."""
+    static = np.zeros((ny, nx), bool) if blocked is None else np.asarray(blocked, bool)
+    if static.shape != (ny, nx):
+        raise ValueError(f"blocked has shape {static.shape}, expected (ny, nx) = {(ny, nx)}")
+    movers = default_movers(static) if movers is None else list(movers)
+    if snapshots is None:
+        snapshots = math.lcm(*(m.period for m in movers)) if movers else 1
+    if isinstance(snapshots, bool) or int(snapshots) != snapshots or snapshots < 1:
+        raise InvalidCoordinatesError(f"snapshots must be a positive int, got {snapshots!r}")
+    snapshots = int(snapshots)
+    occupied = np.zeros((snapshots, ny, nx), bool)
+    for m in movers:
+        for k in range(snapshots):
+            ix, iy = m.cell(k)
+            if not (0 <= ix < nx and 0 <= iy < ny) or static[iy, ix]:
+                raise InvalidCoordinatesError(
+                    f"mover {m.name!r} is on ({ix}, {iy}) at snapshot {k}: off the {nx} x {ny} grid or on an obstacle",
+                    hint="movers walk on free cells",
+                )
+            occupied[k, iy, ix] = True
+    parts = []
+    for k in range(snapshots):
+        table = synthetic_table(nx, ny, static | occupied[k], cell_m=cell_m, **kwargs)
+        table = table.append_column(MOVING_FIELDS[0], pa.array(np.full(nx * ny, k, np.int32), pa.int32()))
+        parts.append(table.append_column(MOVING_FIELDS[1], pa.array(occupied[k].ravel())))
+    grid = GridInfo(x0_m=0.5 * cell_m, y0_m=0.5 * cell_m, cell_m=cell_m, nx=nx, ny=ny)
+    meta = {
+        "name": name,
+        "schema_version": SCHEMA_VERSION,
+        "grid": grid.to_dict(),
+        "synthetic": True,
+        "moving": {"snapshots": snapshots, "dt_s": float(dt_s), "movers": [m.name for m in movers]},
+        "synthetic_movers": [
+            {"name": m.name, "start": list(m.start), "axis": m.axis, "length": m.length} for m in movers
+        ],
+    }
+    return Dataset.from_table(pa.concat_tables(parts), meta, name=name)

@@ -34,6 +34,18 @@ look like steps away from the target and are rewarded -1 each; only the telescop
 ``replan`` rewards a detour that starts before the obstacle is visible to the robot, which its observation cannot
 explain; ``blueprint`` rewards only what the map said.
 With ``aug_obstacles=0`` nothing of this runs and the env is exactly the unaugmented one (same random streams).
+
+Moving twins
+------------
+On a moving twin (:class:`~dtradar_rl.task.mdp.MovingGridMDP`; the rules are in :mod:`dtradar_rl.task.mdp`)
+every robot has its own snapshot ``t`` (``env.t``): an episode starts at ``t0`` (``reset_where(..., t0=...)``, else
+drawn uniformly among the snapshots in which the start cell is free) and each step advances it by one, mod ``T``.
+A step reads the blocked masks of this snapshot and the next, and the observation of the robot's snapshot, from
+``[T, cells]`` tables (row ``t * cells + cell``); ``info`` adds ``mover_collision``, ``mover_hit`` and ``t``. Random
+pairs are connected on the static map; whether the movers leave the target reachable in time is not checked here (the
+evaluation's pairs are, :meth:`~dtradar_rl.task.mdp.MovingGridMDP.sample_episodes`). The ``geodesic`` shaping
+and :meth:`BatchedNavEnv.shortest_moves` use the static map's breadth-first distance (movers ignored; still a
+potential, so the optimum is unchanged). On a static twin none of this runs: the step is the one above, op for op.
 """
 
 from __future__ import annotations
@@ -45,6 +57,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
 from dtradar_rl.task.mdp import (
     GridMDP,
+    MovingGridMDP,
     NoConnectedPairError,
     check_max_steps,
     check_reward,
@@ -94,6 +107,14 @@ class BatchedNavEnv:
                 hint="use fewer robots (num_envs)",
             )
         self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
+        #: a moving twin (snapshots in time); decided here, once: a static twin's step is unchanged
+        self.moving = isinstance(mdp, MovingGridMDP)
+        self.snapshots = mdp.snapshots if self.moving else 1
+        if obs_table.snapshots != self.snapshots:
+            raise InvalidCoordinatesError(
+                f"the observation table has {obs_table.snapshots} snapshot(s), the MDP {self.snapshots}",
+                hint="build both from the same dataset",
+            )
         self.reward_name = check_reward(reward)
         self.potential = potential_kind(reward)
         self.max_steps = check_max_steps(max_steps) or mdp.max_steps
@@ -146,6 +167,12 @@ class BatchedNavEnv:
         self.target = torch.zeros(n, dtype=torch.long, device=dev)
         self.tpool = torch.zeros(n, dtype=torch.long, device=dev)
         self.steps = torch.zeros(n, dtype=torch.long, device=dev)
+        if self.moving:
+            #: ``long[num_envs]``: each robot's snapshot
+            self.t = torch.zeros(n, dtype=torch.long, device=dev)
+            #: ``bool[T * cells]``: blocked at snapshot t (static obstacle or mover), row ``t * cells + cell``
+            self.covered = t(mdp.covered.ravel(), torch.bool)
+            self.t_next = t((np.arange(self.snapshots) + 1) % self.snapshots, torch.long)
 
         # Obstacle augmentation (only allocated when on; see the module docstring).
         self.aug_obstacles, self.aug_obstacle_size = int(aug_obstacles), int(aug_obstacle_size)
@@ -192,6 +219,7 @@ class BatchedNavEnv:
         """Attributes that hold the episodes' state (what a training checkpoint saves to resume exactly)."""
         return (
             ("cell", "target", "tpool", "steps")
+            + (("t",) if self.moving else ())
             + (("extra", "adist") if self.aug_obstacles else ())
             + (("errors",) if self.noise is not None else ())
         )
@@ -214,8 +242,12 @@ class BatchedNavEnv:
         self.reset_where(torch.ones(self.num_envs, dtype=torch.bool, device=self.device))
         return self.observe()
 
-    def reset_where(self, mask: torch.Tensor, starts=None, targets=None) -> None:
-        """Start new episodes where ``mask`` is true: random connected pairs, or the given cell indices."""
+    def reset_where(self, mask: torch.Tensor, starts=None, targets=None, t0=None) -> None:
+        """Start new episodes where ``mask`` is true: random connected pairs, or the given cell indices.
+
+        ``t0``: the start snapshot of a moving twin, one int for all or one per robot reset (0 .. T-1; a static twin
+        has one snapshot, 0); the start must be free then. Default: drawn per robot among the snapshots in which its
+        start is free (a static twin draws nothing)."""
         idx = torch.nonzero(mask.to(self.device), as_tuple=True)[0]
         k = idx.numel()
         if k == 0:
@@ -224,6 +256,7 @@ class BatchedNavEnv:
             raise InvalidCoordinatesError(
                 "reset_where got starts without targets", hint="pass both (cell indices), or targets alone"
             )
+        t0 = None if t0 is None else self._snapshot_arg(t0, k)
         if targets is None:
             tp = torch.randint(self.pool.numel(), (k,), generator=self.gen, device=self.device)
             tgt = self.pool[tp]
@@ -242,9 +275,66 @@ class BatchedNavEnv:
             j = (torch.rand(k, generator=self.gen, device=self.device) * (self.comp_size[c] - 1)).long()
             j = j + (j >= self.rank[tgt]).long()
             st = self.members[self.comp_first[c] + j]
+        if self.moving:
+            self.t[idx] = self._start_snapshots(idx, st, tgt, t0, explicit=starts is not None)
         self.cell[idx], self.target[idx], self.tpool[idx] = st, tgt, tp
         self.steps[idx] = 0
         self._draw_errors(idx)
+
+    def _snapshot_arg(self, t0, k: int) -> torch.Tensor:
+        """``t0`` (one int, or ``k``) as a long tensor of snapshots, or :class:`InvalidCoordinatesError`."""
+        try:
+            t = torch.as_tensor(t0, device=self.device)
+        except (TypeError, ValueError, RuntimeError) as e:
+            raise InvalidCoordinatesError(f"reset_where t0 is {t0!r}, not snapshot indices", hint="pass ints") from e
+        if t.dtype.is_floating_point or t.dtype == torch.bool or t.is_complex():
+            raise InvalidCoordinatesError(
+                f"reset_where t0 must be integer snapshot indices, got {t.dtype}", hint=f"pass an int or {k} ints"
+            )
+        if t.numel() not in (1, k) or t.dim() > 1:
+            raise InvalidCoordinatesError(
+                f"reset_where t0: {t.numel()} snapshots for {k} robots", hint=f"pass one int, or one per robot ({k})"
+            )
+        t = t.reshape(-1).long().expand(k).clone()
+        if not bool(((t >= 0) & (t < self.snapshots)).all()):
+            raise InvalidCoordinatesError(
+                f"reset_where t0: a snapshot is outside 0..{self.snapshots - 1}",
+                hint="a static twin has one snapshot (0)"
+                if not self.moving
+                else f"pass ints in 0..{self.snapshots - 1}",
+            )
+        return t
+
+    def _start_snapshots(self, idx, st, tgt, t0, explicit: bool) -> torch.Tensor:
+        """The start snapshots of robots ``idx`` (moving twins); random starts a mover covers at a given ``t0`` are
+        redrawn (in place in ``st``) among the cells free then."""
+        n, dev = self.mdp.num_cells, self.device
+        if t0 is None:  # uniform among the snapshots in which the start is free (one exists: it is no wall)
+            free = ~self.covered.view(self.snapshots, n)[:, st].T
+            return torch.multinomial(free.float(), 1, generator=self.gen).squeeze(1)
+        bad = self.covered[t0 * n + st]
+        if bool(bad.any()):
+            if explicit:
+                c = int(st[bad][0])
+                raise InvalidCoordinatesError(
+                    f"reset_where: start cell {tuple(int(v) for v in self.mdp.xy(c))} is covered by a mover at "
+                    f"snapshot {int(t0[bad][0])}",
+                    hint="pick a start that is free at t0, or another t0",
+                )
+            b = torch.nonzero(bad, as_tuple=True)[0]
+            cells = torch.arange(n, device=dev)
+            if self.aug_obstacles:
+                ok = self.adist[idx[b]] > 0
+            else:
+                ok = (self.component[None] == self.component[tgt[b]][:, None]) & (cells[None] != tgt[b][:, None])
+            ok &= ~self.covered.view(self.snapshots, n)[t0[b]]
+            if not bool(ok.any(1).all()):
+                raise InvalidCoordinatesError(
+                    "reset_where: movers cover every start cell that reaches the target at t0",
+                    hint="pass another t0, or no t0",
+                )
+            st[b] = torch.multinomial(ok.float(), 1, generator=self.gen).squeeze(1)
+        return t0
 
     def _cells(self, name: str, cells, k: int) -> torch.Tensor:
         """``cells`` (``k`` free cell indices, one per robot reset) as a long tensor, or
@@ -361,14 +451,18 @@ class BatchedNavEnv:
         return torch.as_tensor([self._pool_pos[c] for c in cells], dtype=torch.long, device=self.device)
 
     def observe(self) -> torch.Tensor:
-        """``float32[num_envs, obs_dim]`` observations of the current cells."""
+        """``float32[num_envs, obs_dim]`` observations of the current cells (at each robot's snapshot)."""
         obs = torch.cat(self._table_rows(), 1)
-        return obs if self.noise is None else self.noise.apply(obs, self.cell, self.errors)
+        return obs if self.noise is None else self.noise.apply(obs, self._rows(), self.errors)
+
+    def _rows(self) -> torch.Tensor:
+        """The cell-part rows of the robots: their cells, or on a moving twin ``t * cells + cell``."""
+        return self.t * self.mdp.num_cells + self.cell if self.moving else self.cell
 
     def _table_rows(self) -> list[torch.Tensor]:
         """The observation's two parts looked up in the tables, before any noise: the current cells' rows (with
         the extra obstacles) and the targets' rows."""
-        cell_part = self.cell_part[self.cell]
+        cell_part = self.cell_part[self._rows()]
         if self.aug_obstacles and self._nbr_cols is not None:
             # An extra-blocked neighbour reads like a blocked one: radio features 0 (missing) and flag 0.
             hidden = self.extra.gather(1, self.next_cell[self.cell])  # [N, 4]
@@ -391,7 +485,8 @@ class BatchedNavEnv:
         This is the twin's own answer, known because the table is: :mod:`dtradar_rl.train.dqn` uses it as the expert of
         a large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin
         (:mod:`dtradar_rl.experiments.adapt`). A robot with no such move (cut off from its target) gets an all-false
-        row. Needs the ``geodesic`` reward, whose distance tables it reads."""
+        row. Needs the ``geodesic`` reward, whose distance tables it reads. On a moving twin: the static map's
+        moves (movers ignored)."""
         if self.potential != "geodesic":
             raise InvalidCoordinatesError(
                 "shortest moves read the breadth-first distance tables of the geodesic "
@@ -408,7 +503,9 @@ class BatchedNavEnv:
     def step(self, actions: torch.Tensor):
         """Move every robot; returns ``(next_obs, reward, terminated, truncated, info)`` (no auto-reset).
 
-        ``info``: ``collision`` (bool[N]), ``is_success`` (= terminated), ``steps`` (steps taken this episode).
+        ``info``: ``collision`` (bool[N]: the move failed), ``is_success`` (= terminated), ``steps`` (steps taken
+        this episode); on a moving twin also ``mover_collision`` (the failed move aimed at a mover), ``mover_hit`` (a
+        mover walked onto the robot) and ``t`` (each robot's snapshot now).
         """
         a = actions.to(self.device, torch.long)
         cell = self.cell
@@ -418,6 +515,17 @@ class BatchedNavEnv:
             hit = self.extra.gather(1, nxt[:, None]).squeeze(1)
             nxt = torch.where(hit, cell, nxt)
             collision = collision | hit
+        penalised = collision
+        if self.moving:  # the next snapshot's blocked mask: a mover there refuses the move; one may walk onto us
+            t1 = self.t_next[self.t]
+            now, base = self.t * self.mdp.num_cells, t1 * self.mdp.num_cells
+            swap = self.covered[now + nxt] & self.covered[base + cell]  # a mover coming the other way
+            mover_collision = (self.covered[base + nxt] | swap) & ~collision
+            nxt = torch.where(mover_collision, cell, nxt)
+            mover_hit = self.covered[base + nxt]
+            collision = collision | mover_collision
+            penalised = collision | mover_hit
+            self.t = t1
         reached = nxt == self.target
         dx, dy = self.ix[self.target] - self.ix[nxt], self.iy[self.target] - self.iy[nxt]
         if self.potential:
@@ -429,7 +537,7 @@ class BatchedNavEnv:
             d2_after=dx * dx + dy * dy,
             pot_before=pb,
             pot_after=pa,
-            collision=collision.float(),
+            collision=penalised.float(),
             reached=reached.float(),
             diag2=self.mdp.diag2,
         ).float()
@@ -439,4 +547,6 @@ class BatchedNavEnv:
         terminated = reached
         truncated = (self.steps >= self.max_steps) & ~terminated
         info = {"collision": collision, "is_success": reached, "steps": self.steps.clone()}
+        if self.moving:
+            info.update(mover_collision=mover_collision, mover_hit=mover_hit, t=self.t.clone())
         return self.observe(), reward, terminated, truncated, info

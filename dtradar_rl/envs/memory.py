@@ -197,8 +197,8 @@ class MemoryNavEnv(BatchedNavEnv):
         if self.visits is not None:
             self.visits[rows, self._pad[cells]] += 1.0
 
-    def reset_where(self, mask: torch.Tensor, starts=None, targets=None) -> None:
-        super().reset_where(mask, starts=starts, targets=targets)
+    def reset_where(self, mask: torch.Tensor, starts=None, targets=None, t0=None) -> None:
+        super().reset_where(mask, starts=starts, targets=targets, t0=t0)
         idx = torch.nonzero(mask.to(self.device), as_tuple=True)[0]
         if idx.numel():
             self._maps[idx] = self._maps_init

@@ -13,7 +13,15 @@ from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError
-from dtradar_rl.task.mdp import ACTIONS, GridMDP, check_max_steps, check_reward, potential_kind, reward_fn
+from dtradar_rl.task.mdp import (
+    ACTIONS,
+    GridMDP,
+    MovingGridMDP,
+    check_max_steps,
+    check_reward,
+    potential_kind,
+    reward_fn,
+)
 from dtradar_rl.task.noise import NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
 from dtradar_rl.task.observations import Normalizer, build_observations, check_preset
 from dtradar_rl.task.twins import load_dataset
@@ -23,9 +31,30 @@ class InvalidActionError(DtradarError, ValueError):
     """An action that is not one of the environment's moves (gymnasium raises on invalid actions)."""
 
 
-#: The keys ``reset(options=...)`` reads; both cells together, as ``(ix, iy)`` integer pairs.
-RESET_OPTIONS = ("start", "target")
+#: The keys ``reset(options=...)`` reads: both cells together, as ``(ix, iy)`` integer pairs, and ``t0``, the start
+#: snapshot of a moving twin (with or without the cells).
+RESET_OPTIONS = ("start", "target", "t0")
+PAIR_OPTIONS = ("start", "target")
 CELL_FORM = "a pair of integers (ix, iy), e.g. (3, 2)"
+
+
+def parse_snapshot(value, snapshots: int) -> int:
+    """The reset option ``t0`` as a snapshot index in ``0 .. snapshots - 1``, or :class:`InvalidCoordinatesError`
+    naming the key (a fraction, NaN, a bool, a string, a sequence, or a snapshot the twin does not have)."""
+    whole = isinstance(value, numbers.Integral) or (
+        isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer()
+    )
+    if isinstance(value, (bool, np.bool_)) or not whole:
+        raise InvalidCoordinatesError(
+            f"reset option 't0' is {value!r}, not a snapshot index",
+            hint=f"pass t0=an integer in 0..{snapshots - 1}",
+        )
+    if not 0 <= int(value) < snapshots:
+        what = "a static twin has one snapshot, 0" if snapshots == 1 else f"this twin has snapshots 0..{snapshots - 1}"
+        raise InvalidCoordinatesError(
+            f"reset option 't0' is {int(value)}: {what}", hint=f"pass t0 in 0..{snapshots - 1}"
+        )
+    return int(value)
 
 
 def parse_cell(key: str, value, nx: int, ny: int) -> tuple[int, int]:
@@ -75,6 +104,13 @@ class DtradarNavEnv(gym.Env):
     ``Discrete(4)``: ``0: X-`` (one cell towards -x), ``1: X+``, ``2: Y-``, ``3: Y+``. A move into a blocked cell
     or off the grid is a collision: the robot stays where it was.
 
+    ## Moving twins
+    On a moving twin (snapshots in time, :mod:`dtradar_rl.task.mdp`) step ``n`` of an episode is in snapshot
+    ``(t0 + n) mod T``: a move into a cell a mover covers at the next snapshot is a collision too (the robot stays,
+    ``info["mover_collision"]``), a mover walking onto the robot is a *mover hit* (the robot stays,
+    ``info["mover_hit"]``, charged the collision penalty), and the robot observes its cell (and neighbours) as they
+    are in its snapshot. There is no wait action: the robot waits only by bumping.
+
     ## Observations
     ``Box(low, high, (D,), float32)`` (bounds: the range of the lookup tables), z-scored features of the
     chosen preset (:mod:`dtradar_rl.task.observations`):
@@ -93,6 +129,9 @@ class DtradarNavEnv(gym.Env):
     ``reset(options={"start": (ix, iy), "target": (ix, iy)})``: both keys, each a pair of integers (a float only when
     whole) naming distinct, free, connected cells; anything else (a fraction, NaN, another length, an unknown key)
     is an :class:`~dtradar_data.core.errors.InvalidCoordinatesError` naming the key, before the episode changes.
+    On a moving twin ``t0`` (an integer in 0..T-1, with or without the cells) is the start snapshot, default drawn
+    uniformly among the snapshots in which the start is free; the start must be free then. A static twin has one
+    snapshot: ``t0`` may only be 0.
 
     ## Episode End
     Termination: the robot reaches the target. Truncation: ``max_steps`` steps taken (default ``4 · (nx + ny)``).
@@ -108,7 +147,8 @@ class DtradarNavEnv(gym.Env):
 
     ## Info
     ``cell`` and ``target`` (ix, iy), ``collision``, ``is_success``, ``distance`` (breadth-first steps from the
-    current cell to the target).
+    current cell to the target); on a moving twin also ``t`` (the snapshot), ``mover_collision``, ``mover_hit``, and
+    ``distance`` is the space-time one (fewest steps from the cell at this snapshot, waiting allowed; -1: never).
 
     ## Version History
     * v0: initial version; the ``noise`` argument (default ``"none"``: unchanged) added later.
@@ -134,6 +174,8 @@ class DtradarNavEnv(gym.Env):
         self.normalizer = normalizer or Normalizer.fit(ds)
         self.mdp = GridMDP.from_dataset(ds)
         self.table = build_observations(ds, obs, self.normalizer)
+        self.moving = isinstance(self.mdp, MovingGridMDP)
+        self.snapshots = self.mdp.snapshots if self.moving else 1
         self.max_steps = check_max_steps(max_steps) or self.mdp.max_steps
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise InvalidCoordinatesError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
@@ -148,7 +190,9 @@ class DtradarNavEnv(gym.Env):
             self.observation_space = spaces.Box(-np.inf, np.inf, (self.table.dim,), np.float32)
         self._cell = self._target = 0
         self._steps = 0
+        self._t = 0  # the snapshot (moving twins)
         self._dist: np.ndarray | None = None
+        self._st_dist: np.ndarray | None = None  # int32[T, cells] space-time distances (moving twins)
         model = noise_model(noise)
         self.noise = None if model.is_zero else RadioNoise(model, self.table, self.normalizer, torch.device("cpu"))
         self.noise_gen = torch.Generator()
@@ -156,10 +200,11 @@ class DtradarNavEnv(gym.Env):
         self._errors = None
 
     def _observe(self) -> np.ndarray:
-        obs = self.table.observe(self._cell, self._target)
+        t = self._t if self.moving else None
+        obs = self.table.observe(self._cell, self._target, t)
         if self.noise is None:
             return obs
-        cells = torch.as_tensor([self._cell])
+        cells = torch.as_tensor([self._cell if t is None else self.table.row(self._cell, t)])
         return self.noise.apply(torch.from_numpy(obs[None]), cells, self._errors)[0].numpy()
 
     def _measure(self) -> None:
@@ -177,11 +222,11 @@ class DtradarNavEnv(gym.Env):
             )
         return c
 
-    def _pair_from(self, options) -> tuple[int, int] | None:
-        """The (start, target) cells that ``reset(options=...)`` asks for, None for a random pair; every key and
-        value is checked before the episode changes."""
+    def _episode_from(self, options) -> tuple[tuple[int, int] | None, int | None]:
+        """The (start, target) cells that ``reset(options=...)`` asks for (None for a random pair) and its ``t0``
+        (None: drawn); every key and value is checked before the episode changes."""
         if options is None:
-            return None
+            return None, None
         if not isinstance(options, Mapping):
             raise InvalidCoordinatesError(
                 f"reset options must be a dict, got {type(options).__name__}",
@@ -191,14 +236,27 @@ class DtradarNavEnv(gym.Env):
         if unknown:
             raise InvalidCoordinatesError(
                 f"unknown reset option(s) {', '.join(map(repr, unknown))}",
-                hint=f"the env reads {' and '.join(map(repr, RESET_OPTIONS))}, each {CELL_FORM}",
+                hint=f"the env reads {' and '.join(map(repr, PAIR_OPTIONS))}, each {CELL_FORM}, and 't0' (the start "
+                "snapshot of a moving twin)",
             )
+        t0 = parse_snapshot(options["t0"], self.snapshots) if "t0" in options else None
+        pair = self._pair_from({k: v for k, v in options.items() if k != "t0"})
+        if pair is not None and t0 is not None and self.moving and not self.mdp.free_at(t0)[pair[0]]:
+            raise InvalidCoordinatesError(
+                f"reset option 'start': cell {tuple(int(v) for v in self.mdp.xy(pair[0]))} is covered by a mover at "
+                f"snapshot t0={t0} in {self.dataset_name}",
+                hint="pick a start that is free at t0, or another t0",
+            )
+        return pair, t0
+
+    def _pair_from(self, options) -> tuple[int, int] | None:
+        """The (start, target) cells of ``options`` (a dict without ``t0``), None for a random pair."""
         if not options:
             return None
-        missing = [k for k in RESET_OPTIONS if k not in options]
+        missing = [k for k in PAIR_OPTIONS if k not in options]
         if missing:
             raise InvalidCoordinatesError(
-                f"reset options give {next(k for k in RESET_OPTIONS if k in options)!r} without {missing[0]!r}",
+                f"reset options give {next(k for k in PAIR_OPTIONS if k in options)!r} without {missing[0]!r}",
                 hint="pass both 'start' and 'target', each " + CELL_FORM,
             )
         start, target = self._cell_of("start", options["start"]), self._cell_of("target", options["target"])
@@ -216,15 +274,32 @@ class DtradarNavEnv(gym.Env):
         return start, target
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        pair = self._pair_from(options)  # checked first: a refused reset leaves the episode and the seed as they were
+        # checked first: a refused reset leaves the episode and the seed as they were
+        pair, t0 = self._episode_from(options)
         super().reset(seed=seed)
         if seed is not None:
             self.noise_gen.manual_seed(int(seed) + NOISE_SEED_OFFSET)
-        start, target = pair if pair is not None else self.mdp.sample_pairs(1, self.np_random)[0]
+        if self.moving and pair is None and t0 is not None:  # a random pair whose start is free at t0
+            start, target = self._pair_free_at(t0)
+        else:
+            start, target = pair if pair is not None else self.mdp.sample_pairs(1, self.np_random)[0]
         self._cell, self._target, self._steps = int(start), int(target), 0
         self._dist = self.mdp.bfs_distances(self._target)
+        if self.moving:
+            self._t = int(t0) if t0 is not None else int(self.mdp.draw_t0([self._cell], self.np_random)[0])
+            self._st_dist = self.mdp.space_time_distances(self._target)
         self._measure()
         return self._observe(), self._info(False)
+
+    def _pair_free_at(self, t0: int) -> tuple[int, int]:
+        """A random connected pair whose start is free at snapshot ``t0`` (moving twins)."""
+        for _ in range(1000):
+            start, target = self.mdp.sample_pairs(1, self.np_random)[0]
+            if self.mdp.free_at(t0)[start]:
+                return int(start), int(target)
+        raise InvalidCoordinatesError(
+            f"reset option 't0': movers cover every start cell drawn at snapshot {t0}", hint="pass another t0"
+        )
 
     def _potential(self, cell: int) -> float:
         if potential_kind(self.reward_name) == "geodesic":
@@ -244,7 +319,13 @@ class DtradarNavEnv(gym.Env):
             raise InvalidActionError("step() called before reset()", hint="call env.reset() first")
         action = int(action)
         before = self._cell
-        self._cell, collision = self.mdp.step(before, action)
+        if self.moving:
+            self._cell, self._t, wall, mover_collision, mover_hit = self.mdp.step_at(before, self._t, action)
+            collision = wall or mover_collision
+            penalised = collision or mover_hit
+        else:
+            self._cell, collision = self.mdp.step(before, action)
+            penalised = collision
         self._steps += 1
         reached = self._cell == self._target
         shaped = potential_kind(self.reward_name) is not None
@@ -253,16 +334,31 @@ class DtradarNavEnv(gym.Env):
             d2_after=float(self.mdp.d2(self._cell, self._target)),
             pot_before=self._potential(before) if shaped else 0.0,
             pot_after=self._potential(self._cell) if shaped else 0.0,
-            collision=collision,
+            collision=penalised,
             reached=reached,
             diag2=self.mdp.diag2,
         )
         truncated = self._steps >= self.max_steps and not reached
         self._measure()
         obs = self._observe()
-        return obs, float(np.float32(reward)), bool(reached), bool(truncated), self._info(collision)
+        info = self._info(collision)
+        if self.moving:
+            info.update(mover_collision=bool(mover_collision), mover_hit=bool(mover_hit))
+        return obs, float(np.float32(reward)), bool(reached), bool(truncated), info
 
     def _info(self, collision: bool) -> dict:
+        if self.moving:
+            known = self._st_dist is not None
+            return {
+                "cell": tuple(int(v) for v in self.mdp.xy(self._cell)),
+                "target": tuple(int(v) for v in self.mdp.xy(self._target)),
+                "collision": bool(collision),
+                "is_success": self._cell == self._target,
+                "distance": int(self._st_dist[self._t, self._cell]) if known else -1,
+                "t": int(self._t),
+                "mover_collision": False,
+                "mover_hit": False,
+            }
         return {
             "cell": tuple(int(v) for v in self.mdp.xy(self._cell)),
             "target": tuple(int(v) for v in self.mdp.xy(self._target)),
@@ -275,11 +371,16 @@ class DtradarNavEnv(gym.Env):
         if self.render_mode is None:
             return None
         grid = np.where(self.mdp.blocked, "#", ".").astype("<U1")
+        movers = self.mdp.mover[self._t].reshape(self.mdp.blocked.shape) if self.moving else None
+        if movers is not None:
+            grid[movers] = "M"
         (x, y), (tx, ty) = self.mdp.xy(self._cell), self.mdp.xy(self._target)
         grid[ty, tx], grid[y, x] = "T", "R"
         if self.render_mode == "ansi":
             return "\n".join("".join(row) for row in grid[::-1]) + "\n"  # +y up
         img = np.full((*self.mdp.blocked.shape, 3), 255, np.uint8)
         img[self.mdp.blocked] = (60, 60, 60)
+        if movers is not None:
+            img[movers] = (230, 140, 0)
         img[ty, tx], img[y, x] = (0, 170, 0), (220, 0, 0)
         return np.repeat(np.repeat(img[::-1], 8, 0), 8, 1)

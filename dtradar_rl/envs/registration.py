@@ -35,13 +35,14 @@ def env_id(name: str) -> str:
 
 
 def register_dataset_envs(**kwargs) -> list[str]:
-    """Register one env id per built dataset, plus ``dtradar/synthetic-{blueprint,dynamic}-v0``; returns the ids.
+    """Register one env id per built dataset, plus ``dtradar/synthetic-{blueprint,dynamic}-v0`` and the moving twin
+    ``dtradar/synthetic-moving-blueprint-v0``; returns the ids.
 
     ``kwargs`` (``obs``, ``reward``, ...) become the default arguments of every id; ``gym.make`` can override them.
     Datasets are loaded when an env is made, not here. Registering again replaces the ids.
     """
     ids = []
-    for name in ["synthetic/blueprint", "synthetic/dynamic", *built_datasets()]:
+    for name in ["synthetic/blueprint", "synthetic/dynamic", "synthetic-moving/blueprint", *built_datasets()]:
         eid = env_id(name)
         gym.registry.pop(eid, None)
         gym.register(

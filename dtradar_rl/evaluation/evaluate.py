@@ -8,6 +8,16 @@ Metrics over a set of seeded (start, target) pairs, drawn among connected free c
   (moves between cells; a collision does not move the robot, so it is counted in ``collisions`` instead);
 * ``collisions``: mean collisions per episode; ``steps``: mean decisions per episode (collisions included);
 * ``latency_ms``: median wall time of one greedy decision for one robot (table lookup + network), batch size 1.
+
+On a moving twin (:mod:`dtradar_rl.task.mdp`) an episode is ``(start, target, t0)``: the pairs of
+:func:`sample_eval_pairs` carry a third column, the start snapshot (uniform among those in which the start is free,
+redrawn until the target can be reached in time). There
+
+* ``spl`` compares *time*: ``l_i`` is the space-time shortest path (the fewest steps from the start at ``t0``,
+  waiting allowed; :meth:`~dtradar_rl.task.mdp.MovingGridMDP.space_time_distances_many`) and ``p_i`` the steps
+  the episode took (waits and bumps included: each step is one snapshot of time);
+* ``collisions`` counts every move that failed (into a wall or a mover), ``wall_collisions`` and
+  ``mover_collisions`` split it, and ``mover_hits`` counts the movers that walked onto the robot (per episode).
 """
 
 from __future__ import annotations
@@ -26,7 +36,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.agents.policy import Policy
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.mdp import GridMDP, MovingGridMDP
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runtime import DECISION_THREADS, torch_threads
 from dtradar_rl.task.twins import load_dataset
@@ -48,7 +58,12 @@ class Rollouts:
     success: np.ndarray  # bool[N]
     steps: np.ndarray  # int64[N] decisions taken
     collisions: np.ndarray  # int64[N]
-    shortest: np.ndarray  # int64[N] BFS shortest path length on the evaluated twin
+    shortest: np.ndarray  # int64[N] BFS shortest path length on the evaluated twin (moving: space-time, in steps)
+    #: moving twins only (else None): start snapshots and, per episode, wall collisions, mover collisions, mover hits
+    t0: np.ndarray | None = None
+    wall_collisions: np.ndarray | None = None
+    mover_collisions: np.ndarray | None = None
+    mover_hits: np.ndarray | None = None
 
 
 @dataclass
@@ -64,9 +79,21 @@ class Metrics:
     latency_ms: float | None = None
     latency_p99_ms: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    #: moving twins only (per episode; left out of :meth:`to_dict` on a static twin)
+    wall_collisions: float | None = None
+    mover_collisions: float | None = None
+    mover_hits: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        if self.mover_hits is None:
+            for key in MOVING_METRICS:
+                d.pop(key)
+        return d
+
+
+#: The metrics of a moving twin that a static one does not have.
+MOVING_METRICS: tuple[str, ...] = ("wall_collisions", "mover_collisions", "mover_hits")
 
 
 def path_length(path: Sequence[int]) -> int:
@@ -89,22 +116,30 @@ def spl(success: Sequence[bool], shortest: Sequence[int], travelled: Sequence[in
 def metrics_from_rollouts(r: Rollouts, latency_ms: tuple[float, float] | None = None) -> Metrics:
     """The metrics of ``r``; ``latency_ms`` is the (p50, p99) of :func:`decision_latency_ms`, if measured."""
     travelled = np.array([path_length(p) for p in r.paths])
+    moving = r.t0 is not None
+    moving_means = {key: float(getattr(r, key).mean()) for key in MOVING_METRICS} if moving else {}
     return Metrics(
         pairs=len(r.paths),
         success_rate=float(r.success.mean()),
-        spl=spl(r.success, r.shortest, travelled),
+        # on a moving twin the shortest length is in steps (time), so the travelled one is too
+        spl=spl(r.success, r.shortest, r.steps if moving else travelled),
         collisions=float(r.collisions.mean()),
         steps=float(r.steps.mean()),
         path_length=float(travelled.mean()),
         shortest=float(r.shortest.mean()),
         latency_ms=None if latency_ms is None else latency_ms[0],
         latency_p99_ms=None if latency_ms is None else latency_ms[1],
+        **moving_means,
     )
 
 
 def sample_eval_pairs(ds: Dataset, n: int, seed: int) -> np.ndarray:
-    """``n`` seeded connected (start, target) pairs on ``ds`` (the same pairs for the same twin and seed)."""
-    return GridMDP.from_dataset(ds).sample_pairs(n, np.random.default_rng(seed))
+    """``n`` seeded connected (start, target) pairs on ``ds`` (the same pairs for the same twin and seed); on a
+    moving twin ``int64[n, 3]`` (start, target, t0) episodes that the movers leave reachable."""
+    mdp = GridMDP.from_dataset(ds)
+    if isinstance(mdp, MovingGridMDP):
+        return mdp.sample_episodes(n, np.random.default_rng(seed))
+    return mdp.sample_pairs(n, np.random.default_rng(seed))
 
 
 def rollout(
@@ -122,23 +157,36 @@ def rollout(
 
     ``shield``: mask moves into neighbours sensed as occupied (see :meth:`Policy.act`). ``noise``: the robots
     observe the radio features as a receiver would measure them (:mod:`dtradar_rl.task.noise`), seeded by
-    ``noise_seed``."""
-    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    ``noise_seed``. On a moving twin ``pairs`` may carry a third column, the start snapshot ``t0``
+    (:func:`sample_eval_pairs`); without it each episode starts in the first snapshot in which its start is free."""
+    pairs = np.asarray(pairs, np.int64)
+    pairs = pairs.reshape(-1, 3 if pairs.ndim == 2 and pairs.shape[1] == 3 else 2)
     n = len(pairs)
     kw = {} if noise_model(noise).is_zero else {"noise": noise, "seed": noise_seed}
     env = policy.env_for(ds, n, reward="paper", max_steps=max_steps or None, device=device, **kw)
-    env.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
+    moving = isinstance(env.mdp, MovingGridMDP)
+    t0 = pairs[:, 2] if pairs.shape[1] == 3 else None
+    if moving and t0 is None:  # the first snapshot in which each start is free
+        t0 = (~env.mdp.covered[:, pairs[:, 0]]).argmax(0)
+    env.reset_where(
+        torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1], **({} if t0 is None else {"t0": t0})
+    )
     cells = [env.cell.clone()]
     done = torch.zeros(n, dtype=torch.bool, device=env.device)
     success = torch.zeros_like(done)
     steps = torch.zeros(n, dtype=torch.long, device=env.device)
     collisions = torch.zeros_like(steps)
+    if moving:
+        mover_collisions, mover_hits = torch.zeros_like(steps), torch.zeros_like(steps)
     while not bool(done.all()):
         actions = policy.act(env.observe(), shield=shield)
         _, _, terminated, truncated, info = env.step(actions)
         active = ~done
         steps += active.long()
         collisions += (info["collision"] & active).long()
+        if moving:
+            mover_collisions += (info["mover_collision"] & active).long()
+            mover_hits += (info["mover_hit"] & active).long()
         success |= terminated & active
         done |= terminated | truncated
         cells.append(env.cell.clone())
@@ -147,9 +195,24 @@ def rollout(
     paths = [trace[i, : steps_np[i] + 1].tolist() for i in range(n)]
     mdp = env.mdp
     targets, inverse = np.unique(pairs[:, 1], return_inverse=True)
-    dist = mdp.bfs_distances_many(targets)
-    shortest = dist[inverse, pairs[:, 0]]
-    return Rollouts(pairs, paths, success.cpu().numpy(), steps_np, collisions.cpu().numpy(), shortest)
+    if not moving:
+        dist = mdp.bfs_distances_many(targets)
+        shortest = dist[inverse, pairs[:, 0]]
+        return Rollouts(pairs, paths, success.cpu().numpy(), steps_np, collisions.cpu().numpy(), shortest)
+    shortest = mdp.space_time_distances_many(targets)[inverse, t0, pairs[:, 0]].astype(np.int64)
+    col, mc = collisions.cpu().numpy(), mover_collisions.cpu().numpy()
+    return Rollouts(
+        pairs,
+        paths,
+        success.cpu().numpy(),
+        steps_np,
+        col,
+        shortest,
+        t0=np.asarray(t0, np.int64),
+        wall_collisions=col - mc,
+        mover_collisions=mc,
+        mover_hits=mover_hits.cpu().numpy(),
+    )
 
 
 def decision_latency_ms(
@@ -255,15 +318,23 @@ COLUMNS = (
     ("latency_ms", "decision p50 (ms)", "{:.3f}"),
     ("latency_p99_ms", "p99 (ms)", "{:.3f}"),
 )
+#: Columns added when a row is of a moving twin.
+MOVING_COLUMNS = (
+    ("wall_collisions", "wall collisions/ep", "{:.2f}"),
+    ("mover_collisions", "mover collisions/ep", "{:.2f}"),
+    ("mover_hits", "mover hits/ep", "{:.2f}"),
+)
 
 
 def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
-    """Rows ``{"case": ..., **Metrics.to_dict()}`` as a Markdown table."""
-    head = ["case"] + [c[1] for c in COLUMNS]
+    """Rows ``{"case": ..., **Metrics.to_dict()}`` as a Markdown table (with the mover columns when a row has
+    them)."""
+    columns = COLUMNS + (MOVING_COLUMNS if any(row.get("mover_hits") is not None for row in rows) else ())
+    head = ["case"] + [c[1] for c in columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
         cells = [str(row["case"])]
-        for key, _, fmt in COLUMNS:
+        for key, _, fmt in columns:
             v = row.get(key)
             cells.append("-" if v is None else fmt.format(v))
         lines.append("| " + " | ".join(cells) + " |")

@@ -8,6 +8,8 @@ Conventions
 * A *cell index* is ``c = iy * nx + ix`` (row-major, the order of the per-cell table).
 * Free cells are states. Actions are ``0: X-``, ``1: X+``, ``2: Y-``, ``3: Y+`` (one cell per step).
 * A move into a blocked cell or off the grid is a **collision**: the robot stays where it was.
+* A moving twin (snapshots in time) is a :class:`MovingGridMDP`: a :class:`GridMDP` over its static map plus what
+  moves (below); :meth:`GridMDP.from_dataset` returns one for it.
 * Distances in rewards are in **cell units** (``dx = ix_target - ix``, ``dy = iy_target - iy``).
 
 Rewards (chosen by name, :data:`REWARDS`)
@@ -24,6 +26,41 @@ Rewards (chosen by name, :data:`REWARDS`)
                signal; the policy itself still sees only its observation. Being potential-based it leaves the
                shortest-path objective unchanged, and it makes every step informative, so it trains fastest;
                it is the tuned default.
+
+Moving twins: the MDP in time
+-----------------------------
+A moving twin (:mod:`dtradar_data.core.dataset`) holds ``T`` snapshots of one grid; snapshot ``k`` is the world at
+``k · dt_s`` and the world is periodic. An episode starts at snapshot ``t0``; after ``n`` steps the robot is in
+snapshot ``(t0 + n) mod T``. :class:`MovingGridMDP` is a :class:`GridMDP` whose own fields (``blocked``,
+``next_cell``, ``collides``, ``component``) describe the **static map** (the cells blocked in every snapshot: walls,
+furniture, a mover that never leaves its cell), so pairs, components and the static breadth-first distances work
+unchanged; ``covered[t]`` says what is blocked at snapshot ``t`` (static obstacles and movers).
+
+The rules of a step (robot on cell ``c`` at snapshot ``t``, action ``a``, next snapshot ``t' = (t + 1) mod T``;
+:meth:`MovingGridMDP.step_at`):
+
+* **wall collision**: ``a`` leads off the grid or into a static obstacle; the robot stays on ``c``;
+* **mover collision**: ``a`` leads into a cell a mover covers at ``t'``, or into a cell a mover covers at ``t``
+  while a mover covers ``c`` at ``t'`` (a mover coming the other way: the two would pass through each other); the
+  robot stays on ``c`` (like a wall bump). The table does not say which mover went where, so the second case also
+  refuses the rare move where one mover leaves the cell ahead while another arrives on ``c``;
+* **mover hit**: after the move (or the bump) a mover covers the robot's cell at ``t'``, i.e. a mover walked onto a
+  robot that stayed. The robot is not pushed: it stays on ``c`` and shares the cell with the mover for that
+  snapshot (it observes the cell as blocked: no radio features there); counted apart from collisions.
+
+In the environments a wall or mover collision is ``info["collision"]`` (the move failed, as on a static twin) and
+is told apart by ``info["mover_collision"]``; ``info["mover_hit"]`` flags a hit. The reward's collision term is
+charged once for a step with any of the three. The robot observes its own cell (and, with the ``neighbors``
+preset, its neighbours) at the snapshot it is in after the step. Agents keep their four moves: there is no wait
+action, a robot "waits" only by bumping (into a wall or a mover).
+
+Shortest paths in time: :meth:`MovingGridMDP.space_time_distances_many` is a breadth-first search over the states
+``(cell, t mod T)`` (backwards from the target, all starts at once): the fewest steps from ``(cell, t)`` to the
+target, where a step moves to a neighbour free at the next snapshot or **waits** on the cell (free at the next
+snapshot). ``waiting="free"`` (the default, what SPL on a moving twin compares with) allows a wait anywhere;
+``"bump"`` allows it only where one of the four moves bumps (a wall, the grid's edge or a mover next to the robot),
+which is the exact optimum of the four-action MDP. The search never enters or waits on a covered cell (it avoids
+hits).
 """
 
 from __future__ import annotations
@@ -31,12 +68,19 @@ from __future__ import annotations
 import math
 import numbers
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError, InvalidSettingError, unknown_name
+from dtradar_data.core.errors import (
+    DtradarError,
+    InvalidCoordinatesError,
+    InvalidSettingError,
+    SchemaMismatchError,
+    unknown_name,
+)
 
 ACTIONS: tuple[str, ...] = ("X-", "X+", "Y-", "Y+")
 #: ``(dx, dy)`` of each action, in cells.
@@ -128,6 +172,9 @@ class GridMDP:
 
     @classmethod
     def from_dataset(cls, ds: Dataset) -> GridMDP:
+        """The MDP of ``ds``; of a moving twin, its :class:`MovingGridMDP`."""
+        if ds.is_moving:
+            return MovingGridMDP.from_dataset(ds)
         return cls.from_blocked(np.asarray(ds.blocked, bool), name=ds.name)
 
     @classmethod
@@ -281,3 +328,252 @@ class GridMDP:
         """Squared straight-line distance in cell units."""
         (x, y), (tx, ty) = self.xy(cell), self.xy(target)
         return (tx - x) ** 2 + (ty - y) ** 2
+
+
+# -- moving twins: the MDP in time (module docstring) ------------------------------------------------------------------
+#: How the space-time search may wait (see the module docstring).
+WAITING: tuple[str, ...] = ("free", "bump")
+#: Above this many (target, snapshot, cell) entries the batched space-time search runs in chunks of targets.
+MAX_SPACE_TIME_TABLE = 16_000_000
+
+
+def moving_masks(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
+    """``(blocked, mover)``, each ``bool[T, H*W]``, of a moving twin, checked against the format: rows sorted by
+    ``(t, iy, ix)``, ``mover`` a subset of ``blocked``, and the static obstacles (``blocked & ~mover``) the same in
+    every snapshot; anything else is a :class:`SchemaMismatchError`."""
+    t_count = ds.snapshots
+    h, w = ds.shape
+    n = h * w
+    table = ds.table
+    if "mover" not in table.column_names:
+        raise SchemaMismatchError(f"{ds.name}: a moving twin needs a bool 'mover' column", hint="see DESIGN.md")
+    col = lambda name: table.column(name).to_numpy(zero_copy_only=False)  # noqa: E731
+    t, ix, iy = col("t"), col("ix"), col("iy")
+    iy_ref, ix_ref = np.divmod(np.arange(n), w)
+    if not (
+        (t.reshape(t_count, n) == np.arange(t_count)[:, None]).all()
+        and (ix.reshape(t_count, n) == ix_ref).all()
+        and (iy.reshape(t_count, n) == iy_ref).all()
+    ):
+        raise SchemaMismatchError(
+            f"{ds.name}: rows are not every cell of every snapshot in (t, iy, ix) order",
+            hint="sort the table by (t, iy, ix) (Dataset.from_table does) with all H x W cells per snapshot",
+        )
+    blocked = col("blocked").astype(bool).reshape(t_count, n)
+    mover = col("mover").astype(bool).reshape(t_count, n)
+    if (mover & ~blocked).any():
+        k, c = (int(v) for v in np.argwhere(mover & ~blocked)[0])
+        raise SchemaMismatchError(
+            f"{ds.name}: cell {tuple(int(v) for v in np.divmod(c, w)[::-1])} has a mover but is not blocked at "
+            f"snapshot {k}",
+            hint="blocked = static obstacle or mover",
+        )
+    static = blocked & ~mover
+    if (static != static[:1]).any():
+        k = int(np.flatnonzero((static != static[:1]).any(1))[0])
+        raise SchemaMismatchError(
+            f"{ds.name}: the static obstacles (blocked and not mover) of snapshot {k} differ from snapshot 0",
+            hint="mark every cell that changes over time as a mover",
+        )
+    return blocked, mover
+
+
+def background(ds: Dataset) -> Dataset:
+    """A moving twin as one static twin: every cell as it is in the first snapshot in which it is free (blocked only
+    where it is blocked in every snapshot), no ``t``/``mover`` columns, ``meta`` without ``"moving"``. A map and a
+    fingerprint table for a planner; a static twin is its own background."""
+    if not ds.is_moving:
+        return ds
+    blocked, _ = moving_masks(ds)
+    n = blocked.shape[1]
+    first_free = (~blocked).argmax(0)  # 0 where blocked in every snapshot
+    rows = first_free * n + np.arange(n)
+    table = ds.table.take(rows).drop_columns(["t", "mover"])
+    meta = {key: v for key, v in ds.meta.items() if key != "moving"}
+    return Dataset(ds.name, table, meta, ds.version, ds.path)
+
+
+@dataclass
+class MovingGridMDP(GridMDP):
+    """The MDP of a moving twin (module docstring): the static map as a :class:`GridMDP` plus what moves."""
+
+    #: ``bool[T, H*W]``: blocked at snapshot ``t`` (static obstacle or mover).
+    covered: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    #: ``bool[T, H*W]``: a mover covers the cell at snapshot ``t``.
+    mover: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    dt_s: float = 1.0
+    movers: tuple[str, ...] = ()
+
+    @classmethod
+    def from_dataset(cls, ds: Dataset) -> MovingGridMDP:
+        if not ds.is_moving:
+            raise SchemaMismatchError(f"{ds.name} is a static twin", hint="use GridMDP.from_dataset")
+        blocked, mover = moving_masks(ds)
+        h, w = ds.shape
+        info = ds.meta.get("moving", {})
+        return cls.from_masks(
+            blocked.reshape(-1, h, w),
+            mover.reshape(-1, h, w),
+            name=ds.name,
+            dt_s=float(info.get("dt_s", 1.0)),
+            movers=tuple(info.get("movers", ())),
+        )
+
+    @classmethod
+    def from_masks(
+        cls,
+        blocked: np.ndarray,
+        mover: np.ndarray | None = None,
+        *,
+        name: str = "grid",
+        dt_s: float = 1.0,
+        movers: Sequence[str] = (),
+    ) -> MovingGridMDP:
+        """From ``blocked`` (``bool[T, H, W]``: blocked at each snapshot) and ``mover`` (the movers' part; default
+        what is not blocked in every snapshot). Hand-made grids for tests."""
+        blocked = np.asarray(blocked, bool)
+        if blocked.ndim != 3 or blocked.size == 0:
+            raise InvalidCoordinatesError(f"blocked must be a non-empty [T, H, W] array, got shape {blocked.shape}")
+        static = blocked.all(0)  # blocked in every snapshot: a wall for every purpose
+        mover = blocked & ~static if mover is None else np.asarray(mover, bool)
+        base = GridMDP.from_blocked(static, name=name)
+        t_count = blocked.shape[0]
+        return cls(
+            name=base.name,
+            blocked=base.blocked,
+            next_cell=base.next_cell,
+            collides=base.collides,
+            component=base.component,
+            covered=blocked.reshape(t_count, -1),
+            mover=mover.reshape(t_count, -1),
+            dt_s=float(dt_s),
+            movers=tuple(movers),
+        )
+
+    @property
+    def snapshots(self) -> int:
+        return int(self.covered.shape[0])
+
+    def free_at(self, t: int) -> np.ndarray:
+        """``bool[H*W]``: cells free at snapshot ``t`` (taken mod T)."""
+        return ~self.covered[int(t) % self.snapshots]
+
+    def blocked_at(self, t: int) -> np.ndarray:
+        """``bool[H, W]``: the blocked mask of snapshot ``t`` (taken mod T)."""
+        return self.covered[int(t) % self.snapshots].reshape(self.blocked.shape)
+
+    # -- stepping (numpy; the reference the environments are tested against) -----------------------------------
+    def step_at(self, cell: int, t: int, action: int) -> tuple[int, int, bool, bool, bool]:
+        """``(next cell, next snapshot, wall collision, mover collision, mover hit)`` of one move from ``cell`` at
+        snapshot ``t`` (the rules of the module docstring)."""
+        t = int(t) % self.snapshots
+        t1 = (t + 1) % self.snapshots
+        nxt = int(self.next_cell[cell, action])
+        wall = bool(self.collides[cell, action])
+        swap = bool(self.covered[t, nxt] and self.covered[t1, cell])
+        mover_collision = not wall and (bool(self.covered[t1, nxt]) or swap)
+        if mover_collision:
+            nxt = int(cell)
+        return nxt, t1, wall, mover_collision, bool(self.covered[t1, nxt])
+
+    # -- shortest paths over (cell, time) ------------------------------------------------------------------------
+    def _transitions(self, waiting: str) -> tuple[np.ndarray, np.ndarray]:
+        """``move_ok bool[T, cells, 4]``: the move succeeds from (cell, t); ``wait_ok bool[T, cells]``: the robot
+        may stay on the cell into t+1 (free then; with ``"bump"`` only where a move bumps)."""
+        if waiting not in WAITING:
+            raise unknown_name("waiting rule", waiting, WAITING)
+        cov_next = np.roll(self.covered, -1, axis=0)  # [t] -> covered at t+1
+        into = cov_next[:, self.next_cell]  # [T, cells, 4]
+        swap = self.covered[:, self.next_cell] & cov_next[:, :, None]  # a mover comes the other way
+        move_ok = ~self.collides[None] & ~into & ~swap
+        wait_ok = ~cov_next
+        if waiting == "bump":
+            wait_ok = wait_ok & (~move_ok).any(2)
+        return move_ok, wait_ok
+
+    def space_time_distances_many(self, targets: Sequence[int] | np.ndarray, waiting: str = "free") -> np.ndarray:
+        """``int32[K, T, H*W]``: the fewest steps from ``(cell, snapshot t)`` to each of ``targets`` (0 on the
+        target, -1 where it cannot be reached or the cell is a static obstacle). Backward breadth-first frontier
+        propagation over (cell, t mod T), all targets at once (in chunks above :data:`MAX_SPACE_TIME_TABLE`)."""
+        targets = np.asarray(targets, np.int64).ravel()
+        t_count, n = self.covered.shape
+        chunk = max(1, MAX_SPACE_TIME_TABLE // (t_count * n))
+        if targets.size > chunk:
+            return np.concatenate(
+                [self.space_time_distances_many(targets[i : i + chunk], waiting) for i in range(0, targets.size, chunk)]
+            )
+        move_ok, wait_ok = self._transitions(waiting)
+        k = targets.size
+        dist = np.full((k, t_count, n), -1, np.int32)
+        rows = np.arange(k)
+        dist[rows, :, targets] = 0
+        frontier = dist == 0
+        free = self.free
+        step = 0
+        while frontier.any():
+            step += 1
+            ahead = np.roll(frontier, -1, axis=1)  # [k, t] -> frontier at t+1
+            reach = wait_ok[None] & ahead
+            for a in range(4):
+                reach |= move_ok[None, :, :, a] & ahead[:, :, self.next_cell[:, a]]
+            new = reach & (dist < 0) & free[None, None]
+            dist[new] = step
+            frontier = new
+        return dist
+
+    def space_time_distances(self, target: int, waiting: str = "free") -> np.ndarray:
+        """``int32[T, H*W]``: :meth:`space_time_distances_many` for one target."""
+        return self.space_time_distances_many([target], waiting)[0]
+
+    def space_time_distance(self, start: int, target: int, t0: int, waiting: str = "free") -> int:
+        """The fewest steps from ``start`` at snapshot ``t0`` to ``target`` (-1: never)."""
+        return int(self.space_time_distances(target, waiting)[int(t0) % self.snapshots, start])
+
+    def space_time_shortest_path(self, start: int, target: int, t0: int, waiting: str = "free") -> list[int] | None:
+        """One shortest path ``[start, ..., target]`` over time, one cell per step (a repeated cell is a wait), or
+        ``None`` if the target cannot be reached from ``start`` at ``t0``."""
+        dist = self.space_time_distances(target, waiting)
+        t_count = self.snapshots
+        t, cell = int(t0) % t_count, int(start)
+        if dist[t, cell] < 0:
+            return None
+        move_ok, wait_ok = self._transitions(waiting)
+        path = [cell]
+        while cell != target:
+            t1, d = (t + 1) % t_count, dist[t, cell]
+            options = [int(self.next_cell[cell, a]) for a in range(4) if move_ok[t, cell, a]]
+            options += [cell] if wait_ok[t, cell] else []
+            cell = next(c for c in options if dist[t1, c] == d - 1)
+            t = t1
+            path.append(cell)
+        return path
+
+    # -- episodes ------------------------------------------------------------------------------------------------
+    def draw_t0(self, starts: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """``int64[n]``: a start snapshot for each start cell, uniform over the snapshots in which it is free."""
+        starts = np.asarray(starts, np.int64).ravel()
+        free = ~self.covered[:, starts]  # [T, n]
+        cum = free.cumsum(0)
+        pick = np.floor(rng.random(starts.size) * cum[-1]).astype(np.int64)
+        return (cum > pick[None]).argmax(0).astype(np.int64)
+
+    def sample_episodes(self, n: int, rng: np.random.Generator, waiting: str = "free") -> np.ndarray:
+        """``int64[n, 3]`` ``(start, target, t0)``: pairs as :meth:`GridMDP.sample_pairs` (connected on the static
+        map), ``t0`` uniform over the snapshots in which the start is free, redrawn until the target can be reached
+        from ``(start, t0)`` in time (movers can cut a pair off for a while, or for good)."""
+        out = np.zeros((n, 3), np.int64)
+        todo = np.arange(n)
+        for _ in range(100):
+            if todo.size == 0:
+                return out
+            pairs = self.sample_pairs(todo.size, rng)
+            t0 = self.draw_t0(pairs[:, 0], rng)
+            targets, inverse = np.unique(pairs[:, 1], return_inverse=True)
+            d = self.space_time_distances_many(targets, waiting)[inverse, t0, pairs[:, 0]]
+            ok = d > 0
+            out[todo[ok]] = np.stack([pairs[ok, 0], pairs[ok, 1], t0[ok]], 1)
+            todo = todo[~ok]
+        raise NoConnectedPairError(
+            f"{self.name}: could not draw {todo.size} (start, target, t0) episodes the movers leave reachable",
+            hint="check the movers of the twin: they may cut its free cells apart",
+        )

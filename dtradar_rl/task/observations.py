@@ -67,8 +67,14 @@ class Normalizer:
 
     @classmethod
     def fit(cls, ds: Dataset, columns: tuple[str, ...] = PAPER_COLUMNS) -> Normalizer:
-        values = ds.grid(list(columns))  # [H, W, F], NaN where null
-        free = ~np.asarray(ds.blocked, bool)
+        """Statistics of ``ds`` (of a moving twin: over the free cells of every snapshot)."""
+        if ds.is_moving:
+            snaps = [ds.snapshot(k) for k in range(ds.snapshots)]
+            values = np.concatenate([s.grid(list(columns)).reshape(-1, len(columns)) for s in snaps])
+            free = np.concatenate([~np.asarray(s.blocked, bool).ravel() for s in snaps])
+        else:
+            values = ds.grid(list(columns))  # [H, W, F], NaN where null
+            free = ~np.asarray(ds.blocked, bool)
         means, stds = [], []
         for k in range(len(columns)):
             v = values[..., k][free]
@@ -94,28 +100,44 @@ class Normalizer:
 
 @dataclass(frozen=True)
 class ObservationTable:
-    """Lookup tables of one preset on one dataset: ``obs(cell, target) = [cell_part[cell], target_part[target]]``."""
+    """Lookup tables of one preset on one dataset: ``obs(cell, target) = [cell_part[cell], target_part[target]]``.
+
+    On a moving twin of ``T`` snapshots the cell part has one block of rows per snapshot: the row of ``cell`` at
+    snapshot ``t`` is ``t * H*W + cell`` (:meth:`row`), so a static twin is the case ``T = 1``."""
 
     preset: str
-    cell_part: np.ndarray  # float32[H*W, Dc]
+    cell_part: np.ndarray  # float32[T*H*W, Dc]
     target_part: np.ndarray  # float32[H*W, Dt]
     names: tuple[str, ...]
-    #: ``bool[H*W]``: the cell is free and has radio features (the neighbours' has-radio flags read this)
+    #: ``bool[T*H*W]``: the cell is free and has radio features (the neighbours' has-radio flags read this)
     has_radio: np.ndarray | None = None
     #: the normaliser the tables were built with (measurement noise perturbs the raw values behind them)
     normalizer: Normalizer | None = None
+    #: snapshots of a moving twin (1: static)
+    snapshots: int = 1
 
     @property
     def dim(self) -> int:
         return self.cell_part.shape[1] + self.target_part.shape[1]
 
-    def observe(self, cell, target) -> np.ndarray:
-        return np.concatenate([self.cell_part[cell], self.target_part[target]], axis=-1)
+    def row(self, cell, t=0):
+        """The cell-part row of ``cell`` at snapshot ``t``."""
+        return t * self.target_part.shape[0] + cell
+
+    def observe(self, cell, target, t=None) -> np.ndarray:
+        """The observation on ``cell`` (at snapshot ``t`` of a moving twin) with ``target``."""
+        rows = cell if t is None else self.row(cell, t)
+        return np.concatenate([self.cell_part[rows], self.target_part[target]], axis=-1)
 
 
 def build_observations(ds: Dataset, preset: str, normalizer: Normalizer) -> ObservationTable:
-    """The lookup tables of ``preset`` on ``ds``, normalised with ``normalizer`` (fitted on the training twin)."""
+    """The lookup tables of ``preset`` on ``ds``, normalised with ``normalizer`` (fitted on the training twin).
+
+    On a moving twin: the tables of every snapshot stacked (each cell and its neighbours as they are in that
+    snapshot); the target part is the static one (a target's position does not change when a mover covers it)."""
     check_preset(preset)
+    if ds.is_moving:
+        return _build_moving(ds, preset, normalizer)
     h, w = ds.shape
     n = h * w
     raw = ds.grid(list(normalizer.columns)).reshape(n, -1).astype(np.float64)
@@ -145,4 +167,23 @@ def build_observations(ds: Dataset, preset: str, normalizer: Normalizer) -> Obse
     cell_part = np.ascontiguousarray(np.concatenate(parts, 1), np.float32)
     return ObservationTable(
         preset, cell_part, np.ascontiguousarray(target), tuple(names + tnames), has_radio > 0.5, normalizer
+    )
+
+
+def _build_moving(ds: Dataset, preset: str, normalizer: Normalizer) -> ObservationTable:
+    snaps = [build_observations(ds.snapshot(k), preset, normalizer) for k in range(ds.snapshots)]
+    n = snaps[0].target_part.shape[0]
+    has_radio = np.concatenate([s.has_radio for s in snaps])
+    # a target's part from a snapshot where its cell is free (a blocked cell's part is blanked)
+    free = np.stack([~np.asarray(ds.snapshot(k).blocked, bool).ravel() for k in range(ds.snapshots)])
+    first_free = free.argmax(0)
+    target = np.stack([s.target_part for s in snaps])[first_free, np.arange(n)]
+    return ObservationTable(
+        preset,
+        np.ascontiguousarray(np.concatenate([s.cell_part for s in snaps]), np.float32),
+        np.ascontiguousarray(target, np.float32),
+        snaps[0].names,
+        has_radio,
+        normalizer,
+        snapshots=len(snaps),
     )

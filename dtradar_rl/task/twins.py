@@ -8,6 +8,10 @@ Names
                                      obstacles; the
                                      ``dynamic`` variant adds a chair and two people, like the paper's dynamic twin.
 ``"synthetic-<nx>x<ny>/<variant>"``  the same generator at another size (tests use tiny ones).
+``"synthetic-moving[-<nx>x<ny>]/<variant>"``  a *moving* twin (:func:`dtradar_data.pipeline.synthetic.
+                                     synthetic_moving_dataset`): the same static obstacles plus three 1-cell movers
+                                     walking back and forth along rows and columns, one snapshot per second, as many
+                                     snapshots as the movers need to loop (6 at 12 x 8, 12 at 42 x 18).
 """
 
 from __future__ import annotations
@@ -19,10 +23,10 @@ import numpy as np
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError, DtradarError, unknown_name
 from dtradar_data.core.ids import VARIANTS
-from dtradar_data.pipeline.synthetic import synthetic_dataset
+from dtradar_data.pipeline.synthetic import synthetic_dataset, synthetic_moving_dataset
 from dtradar_data.publish.loading import load
 
-_SYNTH = re.compile(r"^synthetic(?:-(\d+)x(\d+))?$")
+_SYNTH = re.compile(r"^synthetic(-moving)?(?:-(\d+)x(\d+))?$")
 
 
 def is_synthetic(scene: str) -> bool:
@@ -72,11 +76,13 @@ def load_dataset(name: str) -> Dataset:
     variant, _, revision = variant.partition("@")
     m = _SYNTH.match(scene)
     if m:
-        nx, ny = (int(m.group(1)), int(m.group(2))) if m.group(1) else (42, 18)
+        nx, ny = (int(m.group(2)), int(m.group(3))) if m.group(2) else (42, 18)
         variant = variant or "blueprint"
         blocked = synthetic_blocked(nx, ny, variant)
         cell_m = 0.25
         tx = (nx * cell_m / 2, ny * cell_m / 2, 3.0)
+        if m.group(1):
+            return synthetic_moving_dataset(nx, ny, blocked=blocked, cell_m=cell_m, tx=tx, name=f"{scene}/{variant}")
         return synthetic_dataset(nx, ny, blocked, cell_m=cell_m, tx=tx, name=f"{scene}/{variant}")
     return load(f"{scene}/{variant}", revision or None)
 

@@ -7,6 +7,7 @@ import math
 import pytest
 
 from dtradar_rl.cli import main
+from dtradar_rl.evaluation.normalized import normalized, reference_scores
 from dtradar_rl.experiments import offline_bench
 from dtradar_rl.experiments.offline_bench import (
     BenchJob,
@@ -17,7 +18,6 @@ from dtradar_rl.experiments.offline_bench import (
     run_jobs,
 )
 from dtradar_rl.experiments.offline_report import aggregate, spearman
-from dtradar_rl.evaluation.normalized import normalized, reference_scores
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.task.twins import load_dataset
