@@ -148,7 +148,9 @@ def true_value(
     n = len(pairs)
     if n == 0:
         raise ValueError("no (start, target) pairs to roll out from")
-    env = policy.env_for(twin, n, reward=reward, max_steps=max_steps or None, device=device)
+    # target_pool=1: the shaped reward's distance rows are computed for the rolled-out targets only (added by
+    # reset_where), not for every free cell: 19 s -> 1.7 s on a Dallas quadrant, the same rewards
+    env = policy.env_for(twin, n, reward=reward, max_steps=max_steps or None, device=device, target_pool=1)
     env.reset_where(torch.ones(n, dtype=torch.bool), starts=pairs[:, 0], targets=pairs[:, 1])
     done = torch.zeros(n, dtype=torch.bool, device=env.device)
     ret = torch.zeros(n, dtype=torch.float64, device=env.device)

@@ -72,6 +72,20 @@ def test_the_true_value_is_the_discounted_return_worked_out_by_hand(tiny):
         true_value(policy, tiny, np.array([along]), gamma=0.0)
 
 
+class AlwaysXPlusFullTable(AlwaysXPlus):
+    """The same policy in an env whose shaped-reward table holds every free cell as a target."""
+
+    def env_for(self, ds, num_envs, **kwargs):
+        kwargs.pop("target_pool", None)
+        return super().env_for(ds, num_envs, **kwargs)
+
+
+def test_the_true_value_does_not_depend_on_which_targets_the_reward_table_holds(tiny):
+    pairs = GridMDP.from_dataset(tiny).sample_pairs(24, np.random.default_rng(3))
+    got = true_value(AlwaysXPlus(tiny), tiny, pairs, gamma=0.9, max_steps=12)
+    assert got == true_value(AlwaysXPlusFullTable(tiny), tiny, pairs, gamma=0.9, max_steps=12)
+
+
 def _bc(tmp_path, logged, name):
     cfg = OfflineConfig(
         scene=TINY,
