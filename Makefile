@@ -43,7 +43,7 @@ docs:
 test-all:
 	$(PY) -m pytest -q -m ''
 
-# Ray-trace both variants (blueprint and dynamic) of a scene into the data root.
+# Ray-trace both variants (blueprint and dynamic) of a scene into the data root (VARIANT=moving: its moving twin).
 dataset:
 	$(PY) -m dtradar_data build --scene $(SCENE) --variant $(VARIANT) $(if $(OSM),--osm $(OSM)) $(ARGS)
 

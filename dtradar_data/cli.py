@@ -225,6 +225,7 @@ class InfoCmd:
             f"  cells:       {stats.get('num_cells', '-')} ({stats.get('num_free', '-')} free, "
             f"{stats.get('num_with_paths', '-')} with paths)"
         )
+        _moving_info(meta)
         keys = ("frequency_hz", "max_depth", "samples_per_src", "seed")
         print("  rt:          " + ", ".join(f"{k}={rt[k]}" for k in keys if k in rt))
         print(f"  licence:     {meta.get('licence') or (meta.get('scene_spec') or {}).get('licence', '-')}")
@@ -236,6 +237,23 @@ class InfoCmd:
             mark = "*" if v.version == version else " "
             print(f"   {mark} {v.tag or '-':<4} {v.version}  {v.created_utc or '-':<26} {human_size(v.size_bytes):>10}")
         return 0
+
+
+def _moving_info(meta: dict) -> None:
+    """``info``'s lines about a moving twin: snapshots, movers, and how many cells each snapshot re-traced."""
+    moving = meta.get("moving")
+    if not isinstance(moving, dict):
+        return
+    build = meta.get("moving_build") or {}
+    snapshots, dt_s = moving.get("snapshots"), moving.get("dt_s")
+    print(f"  moving:      {snapshots} snapshots, {dt_s} s apart; movers: {', '.join(moving.get('movers') or [])}")
+    if build:
+        print(
+            f"  traced:      snapshot 0 in full ({build.get('full_seconds')} s), the others differentially from the "
+            f"one before (radius {build.get('radius_m')} m): {build.get('retraced_cells_mean')} of "
+            f"{build.get('free_cells_mean')} free cells per snapshot on average, "
+            f"{build.get('differential_seconds_mean')} s each"
+        )
 
 
 @dataclass(frozen=True)
@@ -272,8 +290,9 @@ def _fix_hint(name: str, bad: list[str]) -> str:
         pull = f"`python -m dtradar_data pull {lid.name}@<tag>`"
         folder = str(logged_dir(lid) / bad[0]) if len(bad) == 1 else None
         return f"{relog_hint(lid, meta, folder)}; or re-pull a published one ({pull})"
+    variant = " VARIANT=moving" if parsed.variant == "moving" else ""
     return (
-        f"rebuild them (`make dataset SCENE={parsed.scene}`) or re-pull them "
+        f"rebuild them (`make dataset SCENE={parsed.scene}{variant}`) or re-pull them "
         f"(`python -m dtradar_data pull {parsed.name}@<tag>`)"
     )
 

@@ -13,7 +13,8 @@ Modelled on Minari (``namespace/name-v0``) and huggingface_hub (``repo@revision`
 
 * ``scene``    — ``[a-z0-9][a-z0-9_-]*``, e.g. ``cubicle``, ``meeting``, ``dallas-q3``; a name ending in ``-txpose``
   is an antenna-pose-error twin of the scene before it (``cubicle-txpose``), never a scene file's name;
-* ``variant``  — ``blueprint`` (static objects) or ``dynamic`` (blueprint + movable objects);
+* ``variant``  — ``blueprint`` (static objects), ``dynamic`` (blueprint + movable objects) or ``moving`` (people
+  and vehicles moving through it: one table of snapshots in time, :data:`MOVING_VARIANT`);
 * ``revision`` — optional: a tag ``v0``, ``v1``, ... or a version hash (hex, a prefix of at least 7 characters);
   without one, the newest version.
 
@@ -31,7 +32,13 @@ from typing import Any
 
 from dtradar_data.core.errors import UnknownNameError, did_you_mean, unknown_name
 
+#: The static twins' variants: what ``--variant all`` builds, what a logged dataset may sit on.
 VARIANTS: tuple[str, ...] = ("blueprint", "dynamic")
+#: The moving twin (``cubicle/moving``): snapshots in time in one table (:mod:`dtradar_data.core.dataset`), built
+#: by ``build --variant moving`` (:mod:`dtradar_data.pipeline.moving`) only, never by ``--variant all``.
+MOVING_VARIANT = "moving"
+#: Every variant a stored RT dataset may have.
+DATASET_VARIANTS: tuple[str, ...] = (*VARIANTS, MOVING_VARIANT)
 #: The suffix of an antenna-pose-error twin's scene (``cubicle-txpose``: :mod:`dtradar_data.scenes.tx_pose`). Scene
 #: files may not use it, so such a twin never shares a name with a built-in or a user's scene.
 TX_POSE_SUFFIX = "-txpose"
@@ -121,8 +128,8 @@ def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
             f"malformed dataset id {text!r}" + (f"; {suggestion}" if suggestion else ""), hint=f"use {GRAMMAR}"
         )
     scene, variant = parts
-    if variant not in VARIANTS or (check_known and scene not in scenes):
-        raise unknown_name("dataset", name, candidates if check_known else [f"{scene}/{v}" for v in VARIANTS])
+    if variant not in DATASET_VARIANTS or (check_known and scene not in scenes):
+        raise unknown_name("dataset", name, candidates if check_known else [f"{scene}/{v}" for v in DATASET_VARIANTS])
     return DatasetId(scene, variant, revision)
 
 

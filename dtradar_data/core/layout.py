@@ -23,6 +23,10 @@ DEFAULT_DATA_ROOT = Path("~/.cache/dtradar")
 CELLS_FILE = "cells.parquet"
 PATHS_FILE = "paths.parquet"
 COVERAGE_FILE = "coverage.png"
+#: Pictures a card may show besides the coverage map: a city quadrant's place in its city, a moving twin's
+#: animation.
+CITY_FILE = "city.png"
+MOVING_GIF_FILE = "moving.gif"
 META_FILE = "meta.json"
 CARD_FILE = "README.md"
 REFS_FILE = "refs.json"

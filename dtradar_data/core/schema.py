@@ -10,6 +10,14 @@ Angles follow Sionna: ``*_zen_rad`` is the **zenith** angle θ ∈ [0, π] measu
 
 Changing a schema means bumping ``SCHEMA_VERSION`` and checking in a new golden file
 (``dtradar_data/core/golden/cells_v{N}.json``); ``tests/data/test_schema.py`` enforces both.
+
+A *moving* twin (:mod:`dtradar_data.core.dataset`: ``T`` snapshots in one table) has its own schemas,
+:data:`MOVING_CELL_SCHEMA` and :data:`MOVING_PATH_SCHEMA`: the static ones plus an int32 ``t`` (snapshot index)
+and, in the cell table, a bool ``mover`` (a mover covers the cell at ``t``). They are versioned on their own
+(:data:`MOVING_SCHEMA_VERSION`, golden files ``moving_cells_v{N}.json`` and ``moving_paths_v{N}.json``) rather
+than by a bump of ``SCHEMA_VERSION``: ``SCHEMA_VERSION`` is hashed into every dataset version, so a bump would
+give every unchanged static build a new version. A moving table is always its static schema of the same
+``SCHEMA_VERSION`` plus these columns; a change of the static columns bumps both.
 """
 
 from __future__ import annotations
@@ -63,15 +71,35 @@ _PATH_FIELDS: list[tuple[str, pa.DataType, bool, str]] = [
 ]
 
 
-def _schema(fields: list[tuple[str, pa.DataType, bool, str]], kind: str) -> pa.Schema:
+#: The version of the moving-twin schemas (static schema + ``t`` + ``mover``): bump it, with new golden files, when
+#: the columns a moving twin adds change; hashed into moving twins' versions only.
+MOVING_SCHEMA_VERSION = 1
+
+_T_FIELD = ("t", pa.int32(), False, "snapshot index, 0-based: the world at time t · dt_s (meta moving.dt_s)")
+_MOVING_CELL_FIELDS = [
+    *_CELL_FIELDS,
+    _T_FIELD,
+    ("mover", pa.bool_(), False, "a mover (person, vehicle) covers the cell at snapshot t (then blocked is true too)"),
+]
+_MOVING_PATH_FIELDS = [*_PATH_FIELDS, _T_FIELD]
+
+
+def _schema(fields: list[tuple[str, pa.DataType, bool, str]], kind: str, version: int = SCHEMA_VERSION) -> pa.Schema:
+    metadata = {"dtradar.table": kind, "dtradar.schema_version": str(version)}
+    if kind.startswith("moving"):  # the static schema it extends
+        metadata["dtradar.static_schema_version"] = str(SCHEMA_VERSION)
     return pa.schema(
         [pa.field(n, t, nullable=nullable, metadata={"description": d}) for n, t, nullable, d in fields],
-        metadata={"dtradar.table": kind, "dtradar.schema_version": str(SCHEMA_VERSION)},
+        metadata=metadata,
     )
 
 
 CELL_SCHEMA: pa.Schema = _schema(_CELL_FIELDS, "cells")
 PATH_SCHEMA: pa.Schema = _schema(_PATH_FIELDS, "paths")
+#: A moving twin's per-cell table: :data:`CELL_SCHEMA` + ``t`` + ``mover``, rows sorted by ``(t, iy, ix)``.
+MOVING_CELL_SCHEMA: pa.Schema = _schema(_MOVING_CELL_FIELDS, "moving-cells", MOVING_SCHEMA_VERSION)
+#: A moving twin's per-path table: :data:`PATH_SCHEMA` + ``t``, rows sorted by ``(t, iy, ix, path)``.
+MOVING_PATH_SCHEMA: pa.Schema = _schema(_MOVING_PATH_FIELDS, "moving-paths", MOVING_SCHEMA_VERSION)
 
 CELL_COLUMNS: tuple[str, ...] = tuple(f[0] for f in _CELL_FIELDS)
 PATH_COLUMNS: tuple[str, ...] = tuple(f[0] for f in _PATH_FIELDS)
@@ -79,6 +107,18 @@ PATH_COLUMNS: tuple[str, ...] = tuple(f[0] for f in _PATH_FIELDS)
 RADIO_COLUMNS: tuple[str, ...] = tuple(f[0] for f in _CELL_FIELDS if f[2])
 COLUMN_DESCRIPTIONS: dict[str, str] = {f[0]: f[3] for f in _CELL_FIELDS}
 PATH_COLUMN_DESCRIPTIONS: dict[str, str] = {f[0]: f[3] for f in _PATH_FIELDS}
+MOVING_COLUMN_DESCRIPTIONS: dict[str, str] = {f[0]: f[3] for f in _MOVING_CELL_FIELDS}
+MOVING_PATH_COLUMN_DESCRIPTIONS: dict[str, str] = {f[0]: f[3] for f in _MOVING_PATH_FIELDS}
+
+
+def cell_schema(moving: bool) -> pa.Schema:
+    """The per-cell schema of a static twin, or of a moving one."""
+    return MOVING_CELL_SCHEMA if moving else CELL_SCHEMA
+
+
+def path_schema(moving: bool) -> pa.Schema:
+    """The per-path schema of a static twin, or of a moving one."""
+    return MOVING_PATH_SCHEMA if moving else PATH_SCHEMA
 
 
 def schema_to_json(schema: pa.Schema) -> str:

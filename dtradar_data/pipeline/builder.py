@@ -1,10 +1,11 @@
 """Scene → meshes → Sionna RT over the grid → per-cell table → versioned Parquet in the data root.
 
-``build(BuildConfig(scene="cubicle"))`` builds both variants. The version of a dataset is the hash of its inputs
-(scene description, RT settings, schema version, library versions), computed before any tracing: building the same
-thing twice reuses the stored version. Tracing runs in receiver batches; each finished batch is kept under
-``<data root>/work/`` so an interrupted build continues where it stopped, and the work folder is removed once the
-version is stored.
+``build(BuildConfig(scene="cubicle"))`` builds both static variants; ``variant="moving"`` builds the moving twin
+instead (snapshot 0 in full, each later snapshot differentially from the one before: :mod:`.moving`). The version of
+a dataset is the hash of its inputs (scene description, RT settings, schema version, library versions), computed
+before any tracing: building the same thing twice reuses the stored version. Tracing runs in receiver batches; each
+finished batch is kept under ``<data root>/work/`` so an interrupted build continues where it stopped, and the work
+folder is removed once the version is stored.
 """
 
 from __future__ import annotations
@@ -30,13 +31,13 @@ from dtradar_data.core.errors import (
     InvalidSettingError,
 )
 from dtradar_data.core.files import waiting_lock
-from dtradar_data.core.ids import DatasetId, format_id
+from dtradar_data.core.ids import MOVING_VARIANT, DatasetId, format_id
 from dtradar_data.core.layout import PATHS_FILE, data_root, refs_path, version_dir, work_root
-from dtradar_data.core.schema import SCHEMA_VERSION
+from dtradar_data.core.schema import MOVING_SCHEMA_VERSION, SCHEMA_VERSION
 from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.geometry.xml_meshes import ground_height
-from dtradar_data.pipeline import differential
+from dtradar_data.pipeline import differential, moving
 from dtradar_data.pipeline.batches import batch_path, load_batch, save_batch, trace_batch
 from dtradar_data.pipeline.coverage import COVERAGE_SUBCELLS, render_coverage_png
 from dtradar_data.pipeline.executors import check_ray_address, import_ray, trace_on_ray
@@ -44,7 +45,7 @@ from dtradar_data.pipeline.resources import check_resources
 from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
-from dtradar_data.scenes import build_targets, load_scene_spec
+from dtradar_data.scenes import build_targets, load_moving_scene, load_scene_spec
 from dtradar_data.scenes.model import Box
 from dtradar_data.scenes.options import check_scene_options
 from dtradar_data.scenes.tx_pose import check_tx_pose_error, tx_pose_error
@@ -66,8 +67,10 @@ class BuildConfig:
     city quadrant (dallas-q3), a scene bundled with Sionna (sionna:munich, sionna:etoile, sionna:florence,
     sionna:san_francisco, sionna:simple_street_canyon), or the path of your own scene file (.toml) or Mitsuba/Sionna
     XML (.xml, with --grid and --tx)."""
-    variant: Literal["blueprint", "dynamic", "all"] = "all"
-    """Which twin to build: blueprint (static objects), dynamic (blueprint + movable objects), or all."""
+    variant: Literal["blueprint", "dynamic", "all", "moving"] = "all"
+    """Which twin to build: blueprint (static objects), dynamic (blueprint + movable objects), all (both), or moving
+    (people or vehicles moving through the scene: one table of snapshots in time, snapshot 0 traced in full and each
+    later one re-traced differentially from the one before; the scene file's [moving] section; not part of all)."""
     rt: RTSettings = field(default_factory=RTSettings)
     """Ray-tracing settings."""
     per_path: bool = True
@@ -103,8 +106,8 @@ class BuildConfig:
     records the parent version. With --variant all the blueprint is traced in full first and the dynamic twin
     re-traced from it; --variant blueprint is refused (a blueprint has no parent)."""
     retrace_radius_m: float = 1.0
-    """With --differential (only): also re-trace cells within this distance of a changed object or of its line of
-    sight."""
+    """With --differential or --variant moving (only): also re-trace cells within this distance of a changed object
+    (a moved mover: its old and new place) or of its line of sight."""
     tx_pose_error: tuple[float, float] | None = None
     """OFFSET_M ANGLE_DEG: build the antenna-pose-error twin instead, its transmitter moved this far horizontally and
     its array turned this many degrees off its boresight (seeded by --tx-pose-seed; same pose for every variant),
@@ -129,10 +132,15 @@ class BuildConfig:
                 f"--retrace-radius-m {self.retrace_radius_m} must be >= 0",
                 hint="it is how far around a changed object cells are re-traced, in metres; e.g. 3",
             )
-        if self.retrace_radius_m != BuildConfig.retrace_radius_m and not self.differential:
+        if self.retrace_radius_m != BuildConfig.retrace_radius_m and not (
+            self.differential or self.variant == MOVING_VARIANT
+        ):
             raise InvalidSettingError(
-                "--retrace-radius-m applies to --differential only", hint="add --differential, or drop it"
+                "--retrace-radius-m applies to --differential and --variant moving only",
+                hint="add --differential, or drop it",
             )
+        if self.variant == MOVING_VARIANT:
+            self._check_moving()
         if self.differential and self.variant == "blueprint":
             raise InvalidSettingError(
                 "--differential applies to dynamic twins only: a blueprint has no parent to start from, it is always "
@@ -164,6 +172,31 @@ class BuildConfig:
         elif self.ray_address is not None or self.workers:
             raise InvalidSettingError(
                 "--ray-address and --workers apply to --executor ray only", hint="add --executor ray, or drop them"
+            )
+
+    def _check_moving(self) -> None:
+        """The options a moving twin's build refuses rather than ignores."""
+        if self.differential:
+            raise InvalidSettingError(
+                "--differential does not apply to --variant moving: a moving twin is always traced differentially, "
+                "each snapshot from the one before (snapshot 0 in full)",
+                hint="drop --differential (--retrace-radius-m still sets the radius)",
+            )
+        if self.tx_pose_error is not None:
+            raise InvalidSettingError(
+                "--tx-pose-error does not apply to --variant moving (no antenna-pose-error moving twin yet)",
+                hint="drop --tx-pose-error, or build --variant blueprint / dynamic / all with it",
+            )
+        if not self.coverage_map or self.coverage_samples != BuildConfig.coverage_samples:
+            raise InvalidSettingError(
+                "--no-coverage-map and --coverage-samples do not apply to --variant moving: a moving twin has no "
+                "coverage map (its card shows an animation of the traced table instead)",
+                hint="drop them",
+            )
+        if self.grid is not None or self.tx is not None:
+            raise InvalidSettingError(
+                "--grid and --tx apply to XML scenes, and a scene built on an XML file has no moving twin",
+                hint="drop --grid and --tx; moving twins are declared in a room or city scene file's [moving] section",
             )
 
     def check_scene(self, spec) -> None:
@@ -467,32 +500,7 @@ def _store(
             )
         num_free = int((~blocked).sum())
         meta = {
-            "name": name,
-            "scene": spec.scene,
-            "variant": spec.variant,
-            "version": version,
-            "schema_version": SCHEMA_VERSION,
-            "title": spec.title,
-            "description": spec.description,
-            "scene_spec": spec.to_dict(),
-            "scene_hash": spec.digest(),
-            "rt": {
-                **settings.hashed(),
-                "reduction": REDUCTION_DOC,
-                "solver": "sionna.rt.PathSolver",
-                "mitsuba_variant": active_variant() or "(reused cached batches)",
-            },
-            "transmitter": spec.tx.to_dict(),
-            "grid": spec.grid.to_dict(),
-            "rx_height_m": spec.rx_height_m,
-            "robot_height_m": spec.robot_height_m,
-            "library_versions": inputs["library_versions"],
-            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "licence": spec.licence,
-            "attribution": spec.attribution,
-            "source": spec.source,
-            **({"city": city} if (city := _provenance(spec)) else {}),
-            **({"tx_pose_error": spec.provenance["tx_pose_error"]} if "tx_pose_error" in spec.provenance else {}),
+            **_version_meta(spec, settings, name, version, inputs),
             **extra_meta,
             "build_inputs_hash": version,
             "stats": {
@@ -509,6 +517,38 @@ def _store(
     shutil.rmtree(work_dir, ignore_errors=True)
     print(f"{name}: stored version {version} in {out}")
     return local.load(name, revision=version)
+
+
+def _version_meta(spec, settings: RTSettings, name: str, version: str, inputs: dict) -> dict:
+    """The metadata every built version records about its scene, settings and libraries."""
+    return {
+        "name": name,
+        "scene": spec.scene,
+        "variant": spec.variant,
+        "version": version,
+        "schema_version": SCHEMA_VERSION,
+        "title": spec.title,
+        "description": spec.description,
+        "scene_spec": spec.to_dict(),
+        "scene_hash": spec.digest(),
+        "rt": {
+            **settings.hashed(),
+            "reduction": REDUCTION_DOC,
+            "solver": "sionna.rt.PathSolver",
+            "mitsuba_variant": active_variant() or "(reused cached batches)",
+        },
+        "transmitter": spec.tx.to_dict(),
+        "grid": spec.grid.to_dict(),
+        "rx_height_m": spec.rx_height_m,
+        "robot_height_m": spec.robot_height_m,
+        "library_versions": inputs["library_versions"],
+        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "licence": spec.licence,
+        "attribution": spec.attribution,
+        "source": spec.source,
+        **({"city": city} if (city := _provenance(spec)) else {}),
+        **({"tx_pose_error": spec.provenance["tx_pose_error"]} if "tx_pose_error" in spec.provenance else {}),
+    }
 
 
 def _original_scene(spec) -> str:
@@ -562,7 +602,10 @@ def build(config: BuildConfig) -> list[Dataset]:
     Everything that can refuse the build is checked before the first variant is traced, so `all` does not fail
     after the blueprint and a refused build changes nothing on disk: each variant's scene and resources, that
     ``--differential`` has a dynamic twin to apply to and a stored parent with the same inputs (unless this build
-    traces that blueprint first), and that a ``--ray-address`` cluster answers."""
+    traces that blueprint first), and that a ``--ray-address`` cluster answers. ``--variant moving``:
+    :func:`build_moving`."""
+    if config.variant == MOVING_VARIANT:
+        return build_moving(config)
     specs = build_specs(config)
     if config.differential:
         dynamic = [s for s in specs if s.variant == "dynamic"]
@@ -583,3 +626,136 @@ def build(config: BuildConfig) -> list[Dataset]:
     if config.executor == "ray" and not (config.differential and all(s.variant == "dynamic" for s in specs)):
         check_ray_address(config.ray_address)
     return [build_one(spec, config) for spec in specs]
+
+
+# ------------------------------------------------------------------------------------------- moving twins
+def moving_build_inputs(moving_scene, config: BuildConfig, *, libraries: dict[str, str] | None = None) -> dict:
+    """Everything that determines a moving twin's files; its hash is the version: the moving scene (its base's
+    digest, the movers, the step and the number of snapshots), the RT settings, both schema versions, the library
+    versions, the per-path table, and the differential rule and radius each snapshot after the first is traced
+    with. No coverage map is rendered (the animation is drawn from the table)."""
+    return {
+        **versions.build_inputs(moving_scene.to_dict(), config.rt.hashed(), SCHEMA_VERSION, libraries),
+        "moving_schema_version": MOVING_SCHEMA_VERSION,
+        "moving_digest": moving_scene.digest(),
+        "per_path": config.per_path,
+        "coverage": None,
+        "differential": {
+            "rule": differential.RULE,
+            "radius_m": max(config.retrace_radius_m, moving_scene.base.grid.cell_m),
+        },
+    }
+
+
+def moving_scenes(config: BuildConfig) -> list:
+    """The moving twins ``build(config)`` with ``variant="moving"`` traces (a city's: its ``[moving]`` quadrant's)."""
+    return [
+        load_moving_scene(scene, footprints=config.osm, cell_m=config.cell_m)
+        for scene, _ in build_targets(config.scene, MOVING_VARIANT)
+    ]
+
+
+def build_moving(config: BuildConfig, *, snapshots: int | None = None) -> list[Dataset]:
+    """Build (or reuse) the moving twin(s) of ``config.scene``: every check (scene, resources, Ray cluster) before
+    the first trace. ``snapshots`` (tests, quick looks): only the first this many snapshots (a twin of its own:
+    its scene says so, so it has its own version)."""
+    scenes = moving_scenes(config)
+    if snapshots is not None:
+        scenes = [
+            dataclasses.replace(
+                m,
+                snapshots=min(snapshots, m.snapshots),
+                provenance={**m.provenance, "snapshots": min(snapshots, m.snapshots), "horizon_from": "cut short"},
+            )
+            for m in scenes
+        ]
+    for m in scenes:
+        cfg = scene_config(config, m.base)
+        spec0 = m.spec_at(0)
+        cfg.check_scene(spec0)
+        free = int((~occupancy(spec0)).sum()) * m.snapshots
+        check_resources(m.name, free, cfg.rt, work_root(), per_path=cfg.per_path)
+    if config.executor == "ray":
+        check_ray_address(config.ray_address)
+    return [build_moving_one(m, config) for m in scenes]
+
+
+def build_moving_one(moving_scene, config: BuildConfig) -> Dataset:
+    """Build (or reuse) one moving twin: snapshot by snapshot, resumable (:mod:`.moving`), then one version."""
+    config = scene_config(config, moving_scene.base)
+    spec0 = moving_scene.spec_at(0)
+    config.check_scene(spec0)
+    ds_id = DatasetId(moving_scene.scene, MOVING_VARIANT, None)
+    name = format_id(ds_id)
+    inputs = moving_build_inputs(moving_scene, config)
+    version = versions.version_id(inputs)
+    local.check_can_store(ds_id, version)
+    work_dir = work_root() / moving_scene.scene / MOVING_VARIANT / version
+    work_dir.parent.mkdir(parents=True, exist_ok=True)
+    with waiting_lock(
+        work_dir.parent / f"{version}.lock",
+        f"building {name} version {version}",
+        then="this build reuses that version",
+        progress=lambda: moving.work_progress(work_dir, moving_scene.snapshots),
+    ):
+        if local.version_exists(ds_id, version):
+            print(f"{name}: version {version} already built, reusing it")
+            return local.load(name, revision=version)
+
+        def full_trace(spec, batch_dir: Path):
+            return trace_grid(
+                spec,
+                config.rt,
+                batch_dir,
+                per_path=config.per_path,
+                progress=config.progress,
+                executor=config.executor,
+                ray_address=config.ray_address,
+                workers=config.workers,
+            )
+
+        t0 = time.perf_counter()
+        snaps = moving.trace_snapshots(
+            moving_scene,
+            config.rt,
+            work_dir,
+            radius_m=config.retrace_radius_m,
+            per_path=config.per_path,
+            full_trace=full_trace,
+            progress=config.progress,
+        )
+        trace_s = time.perf_counter() - t0
+        cells, paths = moving.moving_tables(moving_scene, snaps)
+        record = moving.build_record(moving_scene, snaps, radius_m=config.retrace_radius_m)
+        free = sum(s.record["free_cells"] for s in snaps)
+        meta = {
+            **_version_meta(moving_scene.base, config.rt, name, version, inputs),
+            "variant": MOVING_VARIANT,
+            "title": moving_scene.title,
+            "description": moving_scene.description,
+            "scene_spec": moving_scene.base.to_dict(),
+            "scene_hash": moving_scene.digest(),
+            "moving_schema_version": MOVING_SCHEMA_VERSION,
+            "moving": {
+                "snapshots": moving_scene.snapshots,
+                "dt_s": float(moving_scene.dt_s),
+                "movers": [m.name for m in moving_scene.movers],
+            },
+            "moving_build": record,
+            "build_inputs_hash": version,
+            "stats": {
+                "num_cells": cells.num_rows,
+                "num_free": free,
+                "num_with_paths": int(np.count_nonzero(cells.column("num_paths").to_numpy() > 0)),
+                "num_paths_total": paths.num_rows if paths is not None else None,
+                "trace_seconds": round(trace_s, 2),
+                "snapshots": moving_scene.snapshots,
+                "cells_per_snapshot": spec0.grid.nx * spec0.grid.ny,
+            },
+        }
+        with tempfile.TemporaryDirectory(prefix="dtradar-build-") as tmp:
+            gif = moving.render_gif(moving_scene, cells, Path(tmp) / moving.GIF_FILE)
+            out = writing.write_version(ds_id, version, cells, meta, paths=paths, extra_files={moving.GIF_FILE: gif})
+        shutil.rmtree(work_dir, ignore_errors=True)
+        print(f"{name}: stored version {version} in {out}")
+        return local.load(name, revision=version)

@@ -18,6 +18,9 @@ The kept rows are the parent's, traced with the parent's inputs, while the card 
 used only when every input its rows depend on equals this build's (:func:`inherited_differences`): the scene except
 its objects (grid, transmitter, heights, room, buildings, base mesh), every RT setting that feeds the version (the
 frequency, depth, samples, seed, batch size ...), the schema and library versions, and the per-path table.
+
+A moving twin (:mod:`dtradar_data.pipeline.moving`) re-traces each snapshot from the one before with
+:func:`retrace`, the changed objects being the movers' old and new boxes.
 """
 
 from __future__ import annotations
@@ -110,12 +113,16 @@ def _segment_hits_box(p0: np.ndarray, p1: np.ndarray, lo: np.ndarray, hi: np.nda
     return (enter <= leave) & (leave >= 0) & (enter <= 1)
 
 
-def retrace_mask(parent_spec, spec, parent_cells: pa.Table, *, radius_m: float) -> tuple[np.ndarray, dict]:
-    """bool[ny, nx] of the free cells to re-trace, and how many cells each reason selected (see module doc)."""
+def retrace_mask(
+    parent_spec, spec, parent_cells: pa.Table, *, radius_m: float, changed: list | None = None
+) -> tuple[np.ndarray, dict]:
+    """bool[ny, nx] of the free cells to re-trace, and how many cells each reason selected (see module doc).
+    ``changed``: the changed boxes (old and new places) when the caller knows them (a moving twin's movers between
+    two snapshots); by default :func:`changed_boxes` of the two specs."""
     g = spec.grid
     radius_m = max(radius_m, g.cell_m)  # at metre-sized city cells a smaller radius reaches no neighbouring centre
     blocked = occupancy(spec)
-    changed = changed_boxes(parent_spec, spec)
+    changed = changed_boxes(parent_spec, spec) if changed is None else list(changed)
     xs, ys = g.centres()
     cx, cy = np.meshgrid(xs, ys)
     reasons = {r: np.zeros(g.shape, bool) for r in REASONS}
@@ -150,11 +157,48 @@ def retrace_mask(parent_spec, spec, parent_cells: pa.Table, *, radius_m: float) 
 
 def differential_trace(parent, parent_spec, spec, settings, *, radius_m: float, per_path: bool, tracer_factory):
     """``(cells, paths, blocked, tracer, record)``: the parent's tables with the selected cells re-traced."""
+    cells_tbl, paths_tbl, blocked, tracer, mask, counts = retrace(
+        parent.table,
+        parent.paths_table if per_path else None,
+        parent_spec,
+        spec,
+        settings,
+        radius_m=radius_m,
+        per_path=per_path,
+        tracer_factory=tracer_factory,
+    )
+    record = {
+        "parent": f"{parent.name}@{parent.version}",
+        "rule": RULE,
+        "radius_m": max(radius_m, spec.grid.cell_m),
+        "retraced_cells": int(mask.sum()),
+        "free_cells": int((~blocked).sum()),
+        "reasons": counts,
+    }
+    return cells_tbl, paths_tbl, blocked, tracer, record
+
+
+def retrace(
+    parent_cells: pa.Table,
+    parent_paths: pa.Table | None,
+    parent_spec,
+    spec,
+    settings,
+    *,
+    radius_m: float,
+    per_path: bool,
+    tracer_factory,
+    changed: list | None = None,
+):
+    """``(cells, paths, blocked, tracer, mask, counts)``: the parent's per-cell table (and per-path table, with
+    ``per_path``) with the cells :func:`retrace_mask` selects re-traced in ``spec``, in batches of
+    ``settings.batch_size`` in row-major order; ``tracer_factory()`` makes the tracer of ``spec`` (only when a cell
+    is re-traced; ``tracer`` is None otherwise). ``changed`` as for :func:`retrace_mask`."""
     blocked = occupancy(spec)
-    mask, counts = retrace_mask(parent_spec, spec, parent.table, radius_m=radius_m)
+    mask, counts = retrace_mask(parent_spec, spec, parent_cells, radius_m=radius_m, changed=changed)
     xs, ys = spec.grid.centres()
     free_iy, free_ix = np.nonzero(~blocked)
-    merged = {k: _column(parent.table, k)[~blocked.ravel()] for k in features.CELL_RADIO_KEYS}
+    merged = {k: _column(parent_cells, k)[~blocked.ravel()] for k in features.CELL_RADIO_KEYS}
     todo = np.flatnonzero(mask[free_iy, free_ix])  # positions among the free cells, row-major
     tracer, new_paths = None, []
     if len(todo):
@@ -172,16 +216,8 @@ def differential_trace(parent, parent_spec, spec, settings, *, radius_m: float, 
     cells_tbl = features.cells_table(xs, ys, blocked, merged)
     paths_tbl = None
     if per_path:
-        paths_tbl = features.paths_table([_keep_parent_paths(parent.paths_table, mask | blocked), *new_paths])
-    record = {
-        "parent": f"{parent.name}@{parent.version}",
-        "rule": RULE,
-        "radius_m": max(radius_m, spec.grid.cell_m),
-        "retraced_cells": int(len(todo)),
-        "free_cells": int(len(free_ix)),
-        "reasons": counts,
-    }
-    return cells_tbl, paths_tbl, blocked, tracer, record
+        paths_tbl = features.paths_table([_keep_parent_paths(parent_paths, mask | blocked), *new_paths])
+    return cells_tbl, paths_tbl, blocked, tracer, mask, counts
 
 
 def _column(table: pa.Table, name: str) -> np.ndarray:

@@ -31,8 +31,8 @@ def render_inputs(inputs: dict[str, Any]) -> str:
 
 
 def snapshot(name: str, out_dir: Path) -> Path:
-    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png[, city.png]}`` from the newest stored
-    version."""
+    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png[, city.png][, moving.gif]}`` from the
+    newest stored version."""
     _, version, vdir = local.resolve(name)
     entries = listing.history(name)
     meta = local.read_meta(vdir)
@@ -45,7 +45,7 @@ def snapshot(name: str, out_dir: Path) -> Path:
     target.mkdir(parents=True, exist_ok=True)
     (target / CARD_INPUTS).write_text(json.dumps(inputs, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
     (target / P.CARD_FILE).write_text(render_inputs(inputs))
-    for picture in (P.COVERAGE_FILE, CITY_FILE):  # the images the card shows
+    for picture in (P.COVERAGE_FILE, CITY_FILE, P.MOVING_GIF_FILE):  # the images the card shows
         if (vdir / picture).is_file():
             shutil.copyfile(vdir / picture, target / picture)
     return target

@@ -38,7 +38,8 @@ from dtradar_data.store.card import default_hub_repo, render_version_card
 from dtradar_data.store.catalog import as_id
 
 #: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
-DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, P.COVERAGE_FILE, P.META_FILE)
+# every file of a version but its card (rendered for the Hub); the pictures only where the version has them
+DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, P.COVERAGE_FILE, P.CITY_FILE, P.MOVING_GIF_FILE, P.META_FILE)
 
 
 def default_repo(did: DatasetId) -> str:

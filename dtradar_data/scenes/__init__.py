@@ -8,7 +8,8 @@ path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A 
 user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section. :func:`tx_pose_error` makes
 the antenna-pose-error twin of any of them (``<scene>-txpose``: the transmitter moved and turned a little).
 :func:`load_moving_scene` reads a room's or a city quadrant's *moving* twin (people and vehicles moving through its
-blueprint: :mod:`dtradar_data.scenes.movers`), a series of static scenes that no build traces yet. A user's
+blueprint: :mod:`dtradar_data.scenes.movers`), a series of static scenes that ``build --variant moving`` traces
+(:mod:`dtradar_data.pipeline.moving`). A user's
 scene file may not take a built-in name (:mod:`dtradar_data.scenes.names`), and the options that replace part of a
 scene are checked before any file is read (:mod:`dtradar_data.scenes.options`).
 """
@@ -147,7 +148,8 @@ def load_moving_scene(scene: str | Path, *, footprints: str | None = None, cell_
     its ``[moving]`` movers over its blueprint (or dynamic twin), every ``dt_s`` seconds for ``snapshots`` steps.
 
     ``footprints`` and ``cell_m`` apply to city quadrants as in :func:`load_scene_spec`. Scenes built on an XML file
-    have no moving twin. Not traced by any build yet: :meth:`MovingScene.spec_at` gives each snapshot as a scene.
+    have no moving twin. :meth:`MovingScene.spec_at` gives each snapshot as a scene; ``build --variant moving``
+    traces them all (:mod:`dtradar_data.pipeline.moving`).
     """
     check_scene_options(footprints=footprints, cell_m=cell_m)
     if is_scene_path(scene):
@@ -210,14 +212,10 @@ def builtin_names() -> list[str]:
 
 def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | Path, str]]:
     """``(scene, variant)`` pairs a build of ``scene`` makes: a city expands to its quadrants (blueprints, plus the
-    dynamic twin of its dynamic quadrant); ``variant`` is ``"all"``, ``"blueprint"`` or ``"dynamic"``."""
+    dynamic twin of its dynamic quadrant); ``variant`` is ``"all"``, ``"blueprint"``, ``"dynamic"`` or ``"moving"``
+    (the moving twin only, never part of ``"all"``: a city's is that of the quadrant its ``[moving]`` names)."""
     if variant == MOVING_VARIANT:
-        raise InvalidSettingError(
-            f"--variant {MOVING_VARIANT}: moving twins are not built by `make dataset` / build(): their snapshots will "
-            "be traced by the moving builder (upcoming)",
-            hint=f"build --variant blueprint, dynamic or all; read the moving twin with "
-            f"dtradar_data.scenes.load_moving_scene({str(scene)!r}) (spec_at(k) is snapshot k as a static scene)",
-        )
+        return _moving_targets(scene)
     if variant != "all" and variant not in VARIANTS:
         raise unknown_name("variant", variant, ("all", *VARIANTS))
     wanted = VARIANTS if variant == "all" else (variant,)
@@ -238,6 +236,28 @@ def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | P
             return [(text, v) for v in wanted if v == "blueprint" or has_dynamic or variant == "dynamic"]
         raise unknown_name("scene", text, available_scenes() + city_names())
     return [(scene, v) for v in wanted]
+
+
+def _moving_targets(scene: str | Path) -> list[tuple[str | Path, str]]:
+    """The moving twin a build of ``scene`` makes; a scene that cannot have one is refused with the reason."""
+    text = str(scene)
+    if is_scene_path(scene):
+        if _is_xml_scene(Path(scene)):
+            raise _no_moving_twin(text, "a scene built on an XML file")
+        return [(scene, MOVING_VARIANT)]
+    if is_sionna_name(text):
+        raise _no_moving_twin(text, "one of Sionna's bundled scenes")
+    if text in city_names():
+        section = read_city_file(city_file(text)).moving
+        if not isinstance(section, dict) or not section.get("quadrant"):
+            raise SceneFileError(
+                f"{text} has no moving twin: {text}.toml declares no [moving] section",
+                hint=f"add a [moving] section with quadrant = ... and [[moving.mover]] tables to {text}.toml",
+            )
+        return [(f"{text}-{section['quadrant']}", MOVING_VARIANT)]
+    if text in indoor_scenes() or text in available_scenes():
+        return [(scene, MOVING_VARIANT)]
+    raise unknown_name("scene", text, available_scenes() + city_names())
 
 
 def _is_xml_scene(path: Path) -> bool:

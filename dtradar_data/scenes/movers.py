@@ -63,8 +63,8 @@ __all__ = [
     "moving_scene_from_section",
 ]
 
-#: The variant name of a moving twin (``cubicle/moving``). Not one of the stored dataset variants
-#: (:data:`dtradar_data.core.ids.VARIANTS`) yet: the moving builder that traces its snapshots is still to come.
+#: The variant name of a moving twin (``cubicle/moving``), built by :mod:`dtradar_data.pipeline.moving`; a dataset
+#: variant (:data:`dtradar_data.core.ids.DATASET_VARIANTS`) apart from the static pair ``blueprint``/``dynamic``.
 MOVING_VARIANT = "moving"
 #: The variants a moving twin can start from: the blueprint's objects (the default) or the dynamic twin's.
 BASE_VARIANTS = ("blueprint", "dynamic")

@@ -21,6 +21,10 @@ from dtradar_data.core.record import VersionRecord
 from dtradar_data.core.schema import (
     CELL_SCHEMA,
     COLUMN_DESCRIPTIONS,
+    MOVING_CELL_SCHEMA,
+    MOVING_COLUMN_DESCRIPTIONS,
+    MOVING_PATH_COLUMN_DESCRIPTIONS,
+    MOVING_PATH_SCHEMA,
     PATH_COLUMN_DESCRIPTIONS,
     PATH_SCHEMA,
 )
@@ -31,7 +35,13 @@ VARIANT_TEXT = {
     "blueprint": "the static twin: walls, floor and the fixed furniture or buildings (agents are trained here).",
     "dynamic": "the blueprint plus movable objects added or re-oriented (people, chairs, vehicles); agents trained "
     "on the blueprint are evaluated here.",
+    "moving": "people or vehicles moving through the twin, one snapshot of the world per robot step: the table holds "
+    "every snapshot (column `t`), a cell a mover covers is blocked then (column `mover`).",
 }
+#: The animation a moving twin's version carries (written by :mod:`dtradar_data.pipeline.moving`).
+MOVING_GIF_FILE = P.MOVING_GIF_FILE
+#: A moving twin's card lists at most this many snapshots one by one (the first ones, then a summary).
+MOVING_ROWS = 40
 _UNITS = (("_rad", "rad"), ("_db", "dB"), ("_hz", "Hz"), ("_m", "m"), ("_s", "s"))
 # Hub licence identifiers (https://huggingface.co/docs/hub/repositories-licenses) for the licences scenes use.
 _LICENCES = {
@@ -186,9 +196,11 @@ def render_card(
     grid, rt, stats, libs = rec.grid, rec.rt, rec.stats, rec.library_versions
     n = rec.num_rows
     freq = rt.get("frequency_hz")
+    moving = _moving_section(rec)
+    over_time = f", in {moving['snapshots']} snapshots {moving['dt_s']} s apart," if moving else ","
     summary = (
         f"Radio features of every cell of a {grid.get('nx')} × {grid.get('ny')} grid over the "
-        f"**{rec.title or rec.scene}** digital twin ({rec.variant}), ray-traced with Sionna RT"
+        f"**{rec.title or rec.scene}** digital twin ({rec.variant}){over_time} ray-traced with Sionna RT"
         + (f" at {freq / 1e9:g} GHz" if isinstance(freq, (int, float)) else "")
         + ": complex coefficient, phase, delay and angles of departure and arrival of the strongest path, "
         "total path gain and delay spread. Built for radio-only robot navigation with reinforcement "
@@ -233,8 +245,21 @@ def render_card(
         sionna_version=f"sionna-rt {libs['sionna-rt']}" if "sionna-rt" in libs else "version not recorded",
         rt_rows=[(k, _fmt(v)) for k, v in _flatten(rt)] or [("(none recorded)", "—")],
         library_text=", ".join(f"{k} {v}" for k, v in sorted(libs.items())) or "not recorded",
-        columns=_columns(CELL_SCHEMA, COLUMN_DESCRIPTIONS),
-        path_columns=_columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS) if P.PATHS_FILE in rec.files else [],
+        columns=(
+            _columns(MOVING_CELL_SCHEMA, MOVING_COLUMN_DESCRIPTIONS)
+            if moving
+            else _columns(CELL_SCHEMA, COLUMN_DESCRIPTIONS)
+        ),
+        path_columns=(
+            (
+                _columns(MOVING_PATH_SCHEMA, MOVING_PATH_COLUMN_DESCRIPTIONS)
+                if moving
+                else _columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS)
+            )
+            if P.PATHS_FILE in rec.files
+            else []
+        ),
+        moving=moving,
         num_free=stats.get("num_free", "—"),
         num_with_paths=stats.get("num_with_paths", "—"),
         num_blocked=(n - stats["num_free"]) if "num_free" in stats else "—",
@@ -255,7 +280,65 @@ def render_card(
     return str(card).rstrip("\n") + "\n"
 
 
-CITY_FILE = "city.png"
+CITY_FILE = P.CITY_FILE
+
+
+def _moving_section(rec: VersionRecord) -> dict[str, Any] | None:
+    """What the card says about a moving twin (``meta["moving"]`` and the builder's ``meta["moving_build"]``)."""
+    extra = rec.model_extra or {}
+    moving = extra.get("moving")
+    if not isinstance(moving, dict):
+        return None
+    build = extra.get("moving_build") or {}
+    movers = []
+    for m in build.get("movers") or []:
+        movers.append(
+            {
+                "name": m.get("name"),
+                "kind": m.get("kind"),
+                "material": m.get("material"),
+                "speed": _fmt(m.get("speed_mps")),
+                "mode": m.get("mode"),
+                "waypoints": len(m.get("waypoints") or []),
+                "size": f"{_fmt(m.get('width_m'))} × {_fmt(m.get('length_m'))} × {_fmt(m.get('height_m'))}",
+                "offset": _fmt(m.get("start_offset_s")),
+            }
+        )
+    rows = build.get("per_snapshot") or []
+    provenance = build.get("provenance") or {}
+    grid = rec.grid
+    return {
+        "snapshots": moving.get("snapshots"),
+        "dt_s": _fmt(moving.get("dt_s")),
+        "horizon_s": _fmt(build.get("horizon_s")),
+        "names": ", ".join(f"`{n}`" for n in moving.get("movers") or []),
+        "movers": movers,
+        "base": (build.get("base") or {}).get("variant", "blueprint"),
+        "base_digest": str((build.get("base") or {}).get("digest", ""))[:16],
+        "dt_from": provenance.get("dt_from", "—"),
+        "horizon_from": provenance.get("horizon_from", "—"),
+        "rule": build.get("rule", "—"),
+        "radius_m": _fmt(build.get("radius_m")),
+        "full_seconds": _fmt(build.get("full_seconds")),
+        "diff_seconds": _fmt(build.get("differential_seconds_mean")),
+        "retraced_mean": _fmt(build.get("retraced_cells_mean")),
+        "free_mean": _fmt(build.get("free_cells_mean")),
+        "full_cells": rows[0].get("retraced_cells", "—") if rows else "—",
+        "rows": [
+            {
+                "t": r.get("t"),
+                "mode": r.get("mode"),
+                "retraced": r.get("retraced_cells"),
+                "free": r.get("free_cells"),
+                "moved": ", ".join(r.get("movers_moved") or []) or "—",
+                "seconds": _fmt(r.get("seconds")),
+            }
+            for r in rows[:MOVING_ROWS]
+        ],
+        "rows_left": max(0, len(rows) - MOVING_ROWS),
+        "cells_per_snapshot": int(grid.get("nx", 0)) * int(grid.get("ny", 0)),
+        "gif": MOVING_GIF_FILE if MOVING_GIF_FILE in rec.files else None,
+    }
 
 
 def _tx_pose_section(rec: VersionRecord) -> dict[str, Any] | None:

@@ -11,7 +11,7 @@ from typing import Any
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import CorruptDatasetError
-from dtradar_data.core.ids import VARIANTS, DatasetId, LoggedId, is_logged_name
+from dtradar_data.core.ids import DATASET_VARIANTS, DatasetId, LoggedId, is_logged_name
 from dtradar_data.scenes import builtin_names
 from dtradar_data.store.catalog import as_id, builtin_scenes
 from dtradar_data.store.local import (
@@ -111,7 +111,7 @@ def list_datasets() -> list[DatasetEntry]:
             for s in root.iterdir()
             if s.is_dir()
             for v in s.iterdir()
-            if v.is_dir() and v.name in VARIANTS
+            if v.is_dir() and v.name in DATASET_VARIANTS
         }
     rows = []
     for name in sorted(names):

@@ -26,9 +26,9 @@ from dtradar_data.core.errors import (
     SchemaMismatchError,
 )
 from dtradar_data.core.files import sha256_file
-from dtradar_data.core.ids import HASH_RE, DatasetId
+from dtradar_data.core.ids import HASH_RE, MOVING_VARIANT, DatasetId
 from dtradar_data.core.record import VersionRecord
-from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA
+from dtradar_data.core.schema import cell_schema, path_schema
 from dtradar_data.store.catalog import as_id
 from dtradar_data.store.versions import Refs, read_refs, resolve_revision
 
@@ -177,7 +177,9 @@ def resolve(
     if not versions:
         raise DatasetNotFoundError(
             f"{did.name} has not been built or pulled into {P.data_root()}",
-            hint=f"build it with `make dataset SCENE={did.scene}` (or `python -m dtradar_data build --scene "
+            hint=f"build it with `make dataset SCENE={did.scene}"
+            + (" VARIANT=moving" if did.variant == MOVING_VARIANT else "")
+            + "` (or `python -m dtradar_data build --scene "
             f"{did.scene} --variant {did.variant}`), or pull a published one with "
             f"`python -m dtradar_data pull {did.name}`",
         )
@@ -196,7 +198,8 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
     meta = read_meta(vdir)
     if verify:
         _check_hash(vdir, P.CELLS_FILE, meta)
-    table = read_table(vdir / P.CELLS_FILE, CELL_SCHEMA)
+    moving = _is_moving(meta)
+    table = read_table(vdir / P.CELLS_FILE, cell_schema(moving))
     paths_table = None
     if paths:
         if not (vdir / P.PATHS_FILE).is_file():
@@ -206,16 +209,24 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
             )
         if verify:
             _check_hash(vdir, P.PATHS_FILE, meta)
-        paths_table = read_table(vdir / P.PATHS_FILE, PATH_SCHEMA)
+        paths_table = read_table(vdir / P.PATHS_FILE, path_schema(moving))
     refs = read_refs(P.refs_path(did.scene, did.variant))
     meta["tag"] = refs.tag_of(version)  # tags live in refs.json; handed to consumers for logging
     grid = meta.get("grid", {})
-    if table.num_rows != int(grid.get("nx", -1)) * int(grid.get("ny", -1)):
+    snapshots = int((meta.get("moving") or {}).get("snapshots", 1)) if moving else 1
+    if table.num_rows != int(grid.get("nx", -1)) * int(grid.get("ny", -1)) * snapshots:
+        what = f" in each of {snapshots} snapshots" if moving else ""
         raise CorruptDatasetError(
-            f"{vdir / P.CELLS_FILE} has {table.num_rows} rows, meta.json grid is {grid.get('nx')}x{grid.get('ny')}",
+            f"{vdir / P.CELLS_FILE} has {table.num_rows} rows, meta.json grid is {grid.get('nx')}x{grid.get('ny')}"
+            + what,
             hint="rebuild the dataset or re-pull it",
         )
     return Dataset(name=did.name, table=table, meta=meta, version=version, path=vdir, paths_table=paths_table)
+
+
+def _is_moving(meta: dict[str, Any]) -> bool:
+    """Whether a version is a moving twin (``meta["moving"]``): its tables have the moving schemas."""
+    return isinstance(meta.get("moving"), dict)
 
 
 def verify_dir(vdir: Path) -> list[str]:
@@ -234,7 +245,8 @@ def verify_dir(vdir: Path) -> list[str]:
             problems.append(f"{fname}: missing")
         elif f.stat().st_size != int(rec.get("bytes", -1)) or sha256_file(f) != rec.get("sha256"):
             problems.append(f"{fname}: sha256 differs from meta.json (changed or damaged)")
-    for fname, schema in ((P.CELLS_FILE, CELL_SCHEMA), (P.PATHS_FILE, PATH_SCHEMA)):
+    moving = _is_moving(meta)
+    for fname, schema in ((P.CELLS_FILE, cell_schema(moving)), (P.PATHS_FILE, path_schema(moving))):
         if (vdir / fname).is_file():
             try:
                 read_table(vdir / fname, schema)

@@ -7,6 +7,10 @@ directories or changes ``refs.json``. Files are written into a staging directory
 zstd, page checksums and the build metadata as JSON under the schema-metadata key ``b"dtradar.meta"``; ``meta.json``
 with every data file's sha256 and size), renamed into ``<root>/datasets/<scene>/<variant>/<version>`` in one
 ``rename`` and tagged by replacing ``refs.json`` atomically; an existing version is never rewritten.
+
+A moving twin (``meta["moving"]``: :mod:`dtradar_data.core.dataset`) is stored the same way with its own schemas
+(:data:`~dtradar_data.core.schema.MOVING_CELL_SCHEMA`, ``MOVING_PATH_SCHEMA``), rows sorted by ``(t, iy, ix)`` and
+every snapshot checked to be the whole grid.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from dtradar_data.core.errors import CorruptDatasetError, DtradarError, SchemaMi
 from dtradar_data.core.files import json_safe, sha256_file, waiting_lock
 from dtradar_data.core.ids import HASH_RE, DatasetId
 from dtradar_data.core.record import RECORD_FORMAT
-from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA, SCHEMA_VERSION
+from dtradar_data.core.schema import MOVING_SCHEMA_VERSION, SCHEMA_VERSION, cell_schema, path_schema
 from dtradar_data.store.card import render_version_card
 from dtradar_data.store.catalog import as_id
 from dtradar_data.store.local import (
@@ -68,14 +72,40 @@ def conform(table: pa.Table, schema: pa.Schema, what: str) -> pa.Table:
             diff.append(f"column {f.name!r} has {table.column(f.name).null_count} nulls, expected none")
     if diff:
         raise SchemaMismatchError(
-            f"{what} does not match the schema (v{SCHEMA_VERSION}): " + "; ".join(diff),
+            f"{what} does not match the schema ({_schema_name(schema)}): " + "; ".join(diff),
             hint="fix the table producer, or bump SCHEMA_VERSION with a new golden file",
         )
     return pa.Table.from_arrays([table.column(f.name) for f in schema], schema=schema)
 
 
+def _schema_name(schema: pa.Schema) -> str:
+    """``v1``, or ``moving-cells v1`` for a moving twin's schema (they are versioned on their own)."""
+    meta = schema.metadata or {}
+    version = meta.get(b"dtradar.schema_version", str(SCHEMA_VERSION).encode()).decode()
+    kind = meta.get(b"dtradar.table", b"").decode()
+    return f"{kind} v{version}" if kind.startswith("moving") else f"v{version}"
+
+
+def moving_snapshots(meta: dict[str, Any]) -> int | None:
+    """``T`` of a moving twin's metadata (``meta["moving"]["snapshots"]``), None for a static twin."""
+    moving = meta.get("moving")
+    if moving is None:
+        return None
+    try:
+        t = int(moving["snapshots"])
+        if t < 1 or isinstance(moving["snapshots"], bool):
+            raise ValueError(t)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InvalidTableError(
+            f"meta['moving'] = {moving!r} has no usable 'snapshots' (a positive int)",
+            hint="pass meta['moving'] = {'snapshots': T, 'dt_s': ..., 'movers': [...]}",
+        ) from exc
+    return t
+
+
 def _check_grid(cells: pa.Table, meta: dict[str, Any]) -> pa.Table:
-    """Sort row-major and check that the rows are exactly the ``nx × ny`` grid of ``meta['grid']``."""
+    """Sort row-major (a moving twin: by ``(t, iy, ix)``) and check that the rows are exactly the ``nx × ny`` grid
+    of ``meta['grid']`` (a moving twin: that grid once per snapshot ``t = 0 .. T-1``)."""
     try:
         nx, ny = int(meta["grid"]["nx"]), int(meta["grid"]["ny"])
     except (KeyError, TypeError, ValueError) as exc:
@@ -83,16 +113,38 @@ def _check_grid(cells: pa.Table, meta: dict[str, Any]) -> pa.Table:
             "meta has no usable 'grid' (x0_m, y0_m, cell_m, nx, ny)",
             hint="pass meta['grid'] = scene_spec.grid.to_dict()",
         ) from exc
-    cells = cells.sort_by([("iy", "ascending"), ("ix", "ascending")])
+    snapshots = moving_snapshots(meta)
+    keys = [("iy", "ascending"), ("ix", "ascending")]
+    if snapshots is not None:
+        keys.insert(0, ("t", "ascending"))
+    cells = cells.sort_by(keys)
     ix = cells.column("ix").to_numpy()
     iy = cells.column("iy").to_numpy()
     gy, gx = np.divmod(np.arange(nx * ny), nx)
-    if cells.num_rows != nx * ny or not (np.array_equal(ix, gx) and np.array_equal(iy, gy)):
+    t_count = snapshots or 1
+    gx, gy = np.tile(gx, t_count), np.tile(gy, t_count)
+    ok = cells.num_rows == nx * ny * t_count and np.array_equal(ix, gx) and np.array_equal(iy, gy)
+    if ok and snapshots is not None:
+        t = cells.column("t").to_numpy()
+        ok = np.array_equal(t, np.repeat(np.arange(snapshots, dtype=t.dtype), nx * ny))
+    if not ok:
+        what = f"the {nx}x{ny} grid"
+        if snapshots is not None:
+            what += f" in each of {snapshots} snapshots t = 0 .. {snapshots - 1}"
         raise InvalidTableError(
-            f"cells has {cells.num_rows} rows that are not the {nx}x{ny} grid (one row per (ix, iy), "
-            f"0 <= ix < {nx}, 0 <= iy < {ny})",
-            hint="emit one row per grid cell, blocked cells included",
+            f"cells has {cells.num_rows} rows that are not {what} (one row per (ix, iy)"
+            + (", t" if snapshots else "")
+            + f", 0 <= ix < {nx}, 0 <= iy < {ny})",
+            hint="emit one row per grid cell, blocked cells included" + (", in every snapshot" if snapshots else ""),
         )
+    if snapshots is not None:
+        mover = cells.column("mover").to_numpy(zero_copy_only=False)
+        blocked = cells.column("blocked").to_numpy(zero_copy_only=False)
+        if (mover & ~blocked).any():
+            raise InvalidTableError(
+                f"{int((mover & ~blocked).sum())} cells have mover true and blocked false",
+                hint="a cell a mover covers is blocked at that snapshot (blocked = obstacle or mover)",
+            )
     return cells
 
 
@@ -177,10 +229,18 @@ def write_version(
             f"meta says schema_version {meta['schema_version']}, this library writes v{SCHEMA_VERSION}",
             hint="rebuild the table with this library version",
         )
-    cells = _check_grid(conform(cells, CELL_SCHEMA, f"cells table of {did.name}"), meta)
+    is_moving = moving_snapshots(meta) is not None
+    if is_moving and int(meta.get("moving_schema_version", MOVING_SCHEMA_VERSION)) != MOVING_SCHEMA_VERSION:
+        raise SchemaMismatchError(
+            f"meta says moving_schema_version {meta['moving_schema_version']}, this library writes "
+            f"v{MOVING_SCHEMA_VERSION}",
+            hint="rebuild the moving twin with this library version",
+        )
+    cells = _check_grid(conform(cells, cell_schema(is_moving), f"cells table of {did.name}"), meta)
     if paths is not None:
-        paths = conform(paths, PATH_SCHEMA, f"paths table of {did.name}").sort_by(
-            [("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")]
+        keys = [("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")]
+        paths = conform(paths, path_schema(is_moving), f"paths table of {did.name}").sort_by(
+            [("t", "ascending"), *keys] if is_moving else keys
         )
     extra_files = dict(extra_files or {})
     for fname, src in extra_files.items():
@@ -202,6 +262,8 @@ def write_version(
         schema_version=SCHEMA_VERSION,
         record_format=RECORD_FORMAT,
     )
+    if is_moving:
+        meta["moving_schema_version"] = MOVING_SCHEMA_VERSION
     meta.setdefault("created_utc", datetime.now(timezone.utc).isoformat(timespec="seconds"))
     meta.pop("files", None)
     # The Parquet copy of the metadata is the content description only: file hashes cannot include themselves.

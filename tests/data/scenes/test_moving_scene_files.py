@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from dtradar_data.core.errors import InvalidSettingError, SceneFileError, UnknownNameError
+from dtradar_data.core.errors import SceneFileError, UnknownNameError
 from dtradar_data.scenes import build_targets, load_moving_scene, load_scene_spec
 from dtradar_data.scenes.city.reader import city_file, city_moving_scene, city_spec, read_city_file
 from dtradar_data.scenes.movers import MAX_SNAPSHOTS, ROBOT_SPEED_MPS, MovingScene
@@ -110,5 +110,4 @@ def test_dallas_moving_twin_is_its_q3_and_other_quadrants_and_variants_say_where
         city_moving_scene(doc, "q2")
     with pytest.raises(SceneFileError, match="series of scenes"):
         city_spec(doc, "q3", "moving")
-    with pytest.raises(InvalidSettingError, match="moving builder"):
-        build_targets("dallas", "moving")
+    assert build_targets("dallas", "moving") == [("dallas-q3", "moving")]  # the city's [moving] quadrant
