@@ -82,7 +82,7 @@ train:
 
 # Evaluate runs/$(SCENE)/dqn/model.pt on the blueprint and dynamic twins, beside the classical planner.
 eval:
-	$(PY) -m dtradar_rl eval --scene $(SCENE) $(ARGS)
+	$(PY) -m dtradar_rl eval --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variants blueprint dynamic moving) $(ARGS)
 
 # Offline RL with d3rlpy on a named logged dataset (--logged NAME, else <scene>/blueprint/<behaviour>, logged or
 # reused), e.g. make offline SCENE=cubicle ARGS="--algorithm cql"

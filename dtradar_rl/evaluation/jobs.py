@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from dtradar_data.core.errors import DatasetNotFoundError, unknown_name
-from dtradar_data.core.ids import VARIANTS
+from dtradar_data.core.ids import DATASET_VARIANTS, VARIANTS
 from dtradar_rl.agents.checkpoints import TRAINING_STATE
 from dtradar_rl.agents.planner import planner_for_scene
 from dtradar_rl.evaluation.evaluate import cross_matrix, evaluate_twins, write_results
@@ -22,7 +22,7 @@ from dtradar_rl.task.runs import dqn_checkpoint, run_dir
 from dtradar_rl.task.twins import check_scenes, load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.viz.figures import plot_bars
-from dtradar_rl.viz.plots import plot_matrix, plot_paths
+from dtradar_rl.viz.plots import plot_matrix, plot_moving_paths, plot_paths
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class EvalConfig(Config):
     checkpoint: str = ""
     """model.pt to evaluate (default runs/<scene>/dqn/model.pt)"""
     variants: tuple[str, ...] = ("blueprint", "dynamic")
-    """twins to evaluate on"""
+    """twins to evaluate on (blueprint, dynamic, moving: the moving twin, `make dataset VARIANT=moving`)"""
     pairs: int = 500
     """seeded (start, target) pairs per twin"""
     seed: int = 2024
@@ -68,8 +68,8 @@ class EvalConfig(Config):
         if not self.variants:
             raise ConfigError("--variants is empty", hint="e.g. --variants blueprint dynamic")
         for v in self.variants:
-            if v not in VARIANTS:
-                raise unknown_name("variant (--variants)", v, VARIANTS)
+            if v not in DATASET_VARIANTS:
+                raise unknown_name("variant (--variants)", v, DATASET_VARIANTS)
         check_unique(self.variants, "variants")
         check_device(self.device)
         noise_model(self.noise)
@@ -139,14 +139,14 @@ def run_eval(cfg: EvalConfig) -> str:
         k = min(cfg.plot_paths, len(roll.paths))
         out.mkdir(parents=True, exist_ok=True)
         noisy = "" if cfg.noise == "none" else f"_noise-{cfg.noise}"
-        png = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}{noisy}.png"
-        plot_paths(
-            ds,
-            roll.paths[:k],
-            out / png,
-            successes=list(roll.success[:k]),
-            title=f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}",
-        )
+        stem = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}{noisy}"
+        title = f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}"
+        if ds.is_moving:  # the episodes in time, robots among the movers: an animation
+            plot_moving_paths(
+                ds, roll.paths[:1], roll.t0[:1], out / f"{stem}.gif", title=title, successes=list(roll.success[:1])
+            )
+        else:
+            plot_paths(ds, roll.paths[:k], out / f"{stem}.png", successes=list(roll.success[:k]), title=title)
     if cfg.planner:
         rows += [
             row

@@ -98,6 +98,86 @@ def plot_paths(
     return _save(fig, path)
 
 
+def plot_moving_paths(
+    ds: Dataset,
+    paths: Sequence[Sequence[int]],
+    t0: Sequence[int],
+    path: Path,
+    *,
+    title: str = "",
+    successes: Sequence[bool] | None = None,
+    frames: int | None = None,
+) -> Path:
+    """An animated picture of episodes on a moving twin: frame ``n`` shows step ``n`` of every path (robot o, target
+    *, its trail), the movers' cells of each robot's snapshot ``(t0 + n) mod T`` in red (the first episode's snapshot
+    when they differ) and the static obstacles in grey, over the path gain of that snapshot. Saved as a GIF."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    g, T = ds.grid_info, ds.snapshots
+    extent = (
+        g.x0_m - g.cell_m / 2,
+        g.x0_m + (g.nx - 0.5) * g.cell_m,
+        g.y0_m - g.cell_m / 2,
+        g.y0_m + (g.ny - 0.5) * g.cell_m,
+    )
+    snaps = [ds.snapshot(k) for k in range(T)]
+    gains = [s.grid(["path_gain_db"])[..., 0] for s in snaps]
+    movers = [s.table.column("mover").to_numpy(zero_copy_only=False).reshape(g.ny, g.nx) for s in snaps]
+    walls = snaps[0].blocked & ~movers[0]
+    xy = [np.divmod(np.asarray(p), g.nx) for p in paths]
+    n_frames = frames or max(len(p) for p in paths)
+    aspect = (extent[3] - extent[2]) / max(1e-9, extent[1] - extent[0])
+    fig, ax = plt.subplots(figsize=(9, max(3.0, 9 * aspect + 1.0)))
+    lo, hi = np.nanmin(np.stack(gains)), np.nanmax(np.stack(gains))
+    im = ax.imshow(gains[t0[0] % T], origin="lower", extent=extent, cmap="viridis", vmin=lo, vmax=hi)
+    fig.colorbar(im, ax=ax, label="path gain (dB)", fraction=0.03)
+    grey = np.ma.masked_where(~walls, np.ones(walls.shape))
+    ax.imshow(grey, origin="lower", extent=extent, cmap="Greys", vmin=0, vmax=1.4, interpolation="nearest")
+    red = ax.imshow(
+        np.ma.masked_where(~movers[t0[0] % T], np.ones(walls.shape)),
+        origin="lower",
+        extent=extent,
+        cmap="Reds",
+        vmin=0,
+        vmax=1,
+        interpolation="nearest",
+    )
+    trails, robots = [], []
+    for k, (iy, ix) in enumerate(xy):
+        c = f"C{k % 10}"
+        x, y = g.x0_m + ix * g.cell_m, g.y0_m + iy * g.cell_m
+        ax.plot(x[-1], y[-1], "*", color=c, ms=12, mec="white")  # where it ended (the target when reached)
+        trails.append(ax.plot([], [], color=c, lw=2, ls="-" if successes is None or successes[k] else "--")[0])
+        robots.append(ax.plot([], [], "o", color=c, ms=8, mec="white")[0])
+    ax.set_xlim(extent[:2])
+    ax.set_ylim(extent[2:])
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+    def draw(n: int):
+        t = (int(t0[0]) + n) % T
+        im.set_data(gains[t])
+        red.set_data(np.ma.masked_where(~movers[t], np.ones(walls.shape)))
+        for k, (iy, ix) in enumerate(xy):
+            m = min(n, len(ix) - 1)
+            x, y = g.x0_m + ix[: m + 1] * g.cell_m, g.y0_m + iy[: m + 1] * g.cell_m
+            trails[k].set_data(x, y)
+            robots[k].set_data(x[-1:], y[-1:])
+        ax.set_title((title or ds.name) + f"\nstep {n}, snapshot {t} of {T} (movers red)", fontsize=9)
+        return [im, red, *trails, *robots]
+
+    anim = FuncAnimation(fig, draw, frames=n_frames, blit=False)
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp.gif")
+    try:
+        anim.save(tmp, writer=PillowWriter(fps=4))
+        tmp.replace(path)
+    finally:
+        plt.close(fig)
+        tmp.unlink(missing_ok=True)
+    return path
+
+
 def plot_matrix(
     matrix: np.ndarray,
     rows: Sequence[str],

@@ -115,3 +115,22 @@ def test_the_planner_replanning_on_the_current_snapshot_reaches_its_targets_amon
     # planned on the static blueprint instead of the moving twin's background: the same map and fingerprints
     m_bp, _ = evaluate(FingerprintPlanner(load_dataset("synthetic-12x8/blueprint")), ds, pairs=100, latency=False)
     assert m_bp.success_rate >= 0.95
+
+
+def test_make_eval_takes_the_moving_twin_and_draws_its_episodes_as_an_animation(tmp_path):
+    from PIL import Image
+
+    from dtradar_data.core.errors import UnknownNameError
+    from dtradar_rl.evaluation.jobs import EvalConfig
+    from dtradar_rl.viz.plots import plot_moving_paths
+
+    assert EvalConfig(variants=("blueprint", "dynamic", "moving")).validate().variants[-1] == "moving"
+    with pytest.raises(UnknownNameError, match="did you mean .moving."):
+        EvalConfig(variants=("movin",)).validate()
+    ds = load_dataset("synthetic-moving-12x8/blueprint")
+    pairs = sample_eval_pairs(ds, 2, 0)
+    r = rollout(FingerprintPlanner(ds), ds, pairs)
+    gif = plot_moving_paths(ds, r.paths, r.t0, tmp_path / "paths_moving.gif", successes=list(r.success))
+    with Image.open(gif) as im:
+        assert im.n_frames == max(len(p) for p in r.paths) >= 2
+    assert not list(tmp_path.glob(".*tmp*"))  # written atomically, nothing left beside it
