@@ -475,7 +475,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     }
     ckpt, online = _online(cfg, twins, refs, say)
     datasets, ids = log_datasets(cfg, ckpt, twins, blueprint, refs)
-    head = {"references": refs, "online_dqn": online, "datasets": datasets, "log_s": time.perf_counter() - t_start}
+    head = {"references": refs, "online_dqn": online, "datasets": datasets, "setup_s": time.perf_counter() - t_start}
     jobs = [
         BenchJob(
             behaviour=beh,

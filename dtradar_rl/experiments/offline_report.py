@@ -222,7 +222,11 @@ def markdown(result: dict[str, Any]) -> str:
         "",
         f"Machine: {describe(mach['start'])}; load average (1/5/15 min) at start "
         f"{_load(mach['start'])}, at end {_load(mach['end'])}; total wall time {result['wall_s']:.0f} s"
-        + (f", of which logging the datasets {result['log_s']:.0f} s" if "log_s" in result else "")
+        + (
+            f", of which setup (references, online agent, datasets and their behaviours) {result['setup_s']:.0f} s"
+            if "setup_s" in result
+            else ""
+        )
         + (
             f" ({layout['jobs']} trainings in {layout['workers']} process(es), one torch thread each"
             + _gain(layout.get("parallel_gain"))
