@@ -1,5 +1,7 @@
 """The navigation MDP: moves, collisions, connectivity, shortest paths, and every term of the paper reward."""
 
+from collections import deque
+
 import numpy as np
 import pytest
 
@@ -127,3 +129,37 @@ def test_many_target_bfs_matches_single_target_bfs():
     many = mdp.bfs_distances_many(targets)
     for k, t in enumerate(targets):
         np.testing.assert_array_equal(many[k], mdp.bfs_distances(int(t)))
+
+
+def _deque_bfs(blocked: np.ndarray, target: int) -> np.ndarray:
+    """The textbook breadth-first search, one cell at a time: the oracle of the compiled one. A blocked cell has no
+    moves in or out (a blocked target is only at distance 0 from itself)."""
+    h, w = blocked.shape
+    dist = np.full(h * w, -1, np.int64)
+    dist[target] = 0
+    queue = deque([] if blocked.flat[target] else [target])
+    while queue:
+        u = queue.popleft()
+        y, x = divmod(u, w)
+        for vy, vx in ((y, x - 1), (y, x + 1), (y - 1, x), (y + 1, x)):
+            v = vy * w + vx
+            if 0 <= vy < h and 0 <= vx < w and not blocked[vy, vx] and dist[v] < 0:
+                dist[v] = dist[u] + 1
+                queue.append(v)
+    return dist
+
+
+def test_compiled_bfs_equals_a_textbook_bfs_on_random_grids_with_walls_islands_and_blocked_targets():
+    rng = np.random.default_rng(7)
+    for h, w, p in ((1, 9, 0.2), (6, 11, 0.3), (13, 8, 0.45)):
+        blocked = rng.random((h, w)) < p
+        mdp = GridMDP.from_blocked(blocked)
+        targets = np.arange(h * w)  # free and blocked targets alike
+        many = mdp.bfs_distances_many(targets)
+        for t in targets:
+            np.testing.assert_array_equal(many[t], _deque_bfs(blocked, int(t)))
+
+
+def test_bfs_to_no_targets_is_an_empty_table():
+    mdp = GridMDP.from_blocked(two_rooms())
+    assert mdp.bfs_distances_many(np.array([], np.int64)).shape == (0, mdp.num_cells)
