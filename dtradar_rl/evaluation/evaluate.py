@@ -279,11 +279,13 @@ def evaluate_twins(
     shield: bool = True,
     datasets: dict[str, Dataset] | None = None,
     noise: str = "none",
+    latency: bool = True,
 ) -> list[tuple[dict[str, Any], Dataset, Rollouts]]:
     """:func:`evaluate` on every twin ``<scene>/<variant>`` that is built (others are skipped with a message),
     unshielded and, with ``shield`` and the neighbors preset, shielded. Returns ``(row, dataset, rollouts)`` per
     case; a row is ``{"case": "<label><trained> -> <twin>[ (shielded)]", "dataset", "version", "shield",
-    **Metrics.to_dict()}``. ``datasets`` holds twins already loaded, by name."""
+    **Metrics.to_dict()}``. ``datasets`` holds twins already loaded, by name; ``latency=False`` leaves the decision
+    latency out (``None``)."""
     datasets = datasets or {}
     trained = policy.meta["dataset"]["name"]
     out = []
@@ -296,7 +298,15 @@ def evaluate_twins(
             continue
         for sh in [False] + ([True] if shield and policy.obs_preset == "neighbors" else []):
             metrics, roll = evaluate(
-                policy, ds, pairs=pairs, seed=seed, max_steps=max_steps, device=device, shield=sh, noise=noise
+                policy,
+                ds,
+                pairs=pairs,
+                seed=seed,
+                max_steps=max_steps,
+                device=device,
+                shield=sh,
+                noise=noise,
+                latency=latency,
             )
             noisy = "" if noise_model(noise).is_zero else f", noise {noise}"
             case = f"{label}{trained} -> {ds.name}" + (

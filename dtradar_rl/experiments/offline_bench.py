@@ -490,6 +490,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
                 pairs=cfg.pairs,
                 eval_variants=tuple(cfg.variants),
                 shield=False,
+                latency=False,  # not reported here; ~0.5 s per twin and run
                 device=cfg.device,
                 num_envs=cfg.num_envs,
                 threads=1,

@@ -73,6 +73,9 @@ class OfflineConfig(BehaviourConfig):
     """seed of the evaluation pairs (the same as `make eval`)"""
     shield: bool = True
     """also report the policy with the obstacle shield (neighbors preset only)"""
+    latency: bool = True
+    """time one greedy decision on every evaluated twin (the results' latency columns; the offline benchmark, which
+    does not report them, skips it: ~0.5 s per twin)"""
     logged: str = ""
     """train on this stored logged dataset (e.g. cubicle/blueprint/mixture@v0, see `dtradar_rl log`); default: log
     (or reuse) <scene>/<variant>/<behaviour> with --behaviour, --transitions and --seed"""

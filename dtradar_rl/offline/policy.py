@@ -115,6 +115,7 @@ def evaluate_offline(
         device=cfg.device,
         shield=cfg.shield,
         datasets=datasets,
+        latency=cfg.latency,
     )
     return [{**row, "algorithm": cfg.algorithm} for row, _, _ in rows]
 
