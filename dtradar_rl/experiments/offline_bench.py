@@ -35,7 +35,7 @@ scored on the normalised scale (0 = uniformly random moves, 100 = the shortest-p
    ``bench_fqe.png`` (FQE against the true value) go to ``--out`` (:mod:`dtradar_rl.experiments.offline_report`).
 
 The budget (``--n-steps``, ``--fqe-steps``) was chosen by measurement for 30 min of wall time per twin on this 2-core
-machine: the cubicle took 29 min, a Dallas quadrant 35 min (its larger twins cost more to evaluate); what each
+machine: the cubicle took 29 min, a Dallas quadrant 27 min; what each
 reaches is in docs/logged-datasets.md.
 """
 
@@ -86,7 +86,7 @@ NAMES = {
 EVAL_SEED = DEFAULT_SEED
 #: Behaviours that act with a memoryless online DQN checkpoint.
 NEED_ONLINE = ("epsilon-greedy", "mixture")
-#: The default budget, chosen by measurement (cubicle 29 min, Dallas Q3 35 min on 2 cores: docs/logged-datasets.md).
+#: The default budget, chosen by measurement (cubicle 29 min, Dallas Q3 27 min on 2 cores: docs/logged-datasets.md).
 BENCH_UPDATES = 4_000
 BENCH_FQE_STEPS = 1_000
 
