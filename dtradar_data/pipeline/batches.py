@@ -23,11 +23,45 @@ def batch_path(work_dir: Path, b: int) -> Path:
 def trace_batch(
     tracer, points: np.ndarray, ix: np.ndarray, iy: np.ndarray, *, per_path: bool
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Trace ``points`` (receivers of the cells ``ix``, ``iy``) and reduce them to ``(cells, paths)`` arrays."""
+    """Trace ``points`` (receivers of the cells ``ix``, ``iy``) and reduce them to ``(cells, paths)`` arrays.
+
+    With ``--rt.batch-independent``, besides the radio features, ``cells["retrace_depth"]`` (int8) says how many
+    times the cell's PathSolver call was halved because its path buffer filled (0: traced with the whole batch; -1:
+    the cell filled it on its own), for the dataset card: ``(retrace_depth != 0).sum()`` cells were re-traced."""
     batch = tracer.trace(points)
-    cells = features.reduce_cells(batch)
+    if not tracer.settings.batch_independent:  # Sionna's own solver: the rows of every stored version, unchanged
+        cells = features.reduce_cells(batch)
+        paths = features.path_rows(batch, ix, iy) if per_path else {}
+        return cells, paths
+    cells = _reduce_cells(batch)
+    cells["retrace_depth"] = np.asarray(tracer.last_retrace_depth, np.int8)
     paths = features.path_rows(batch, ix, iy) if per_path else {}
     return cells, paths
+
+
+def _reduce_cells(batch) -> dict[str, np.ndarray]:
+    """:func:`features.reduce_cells`, applied to the receivers of each path count separately, each trimmed to its own
+    paths: numpy's pairwise sums over a row depend on the row's padded width (the batch's most paths), which would
+    change a cell's delay spread in its last bits with the batch it was traced in."""
+    import dataclasses
+
+    width = np.where(batch.valid.any(axis=1), batch.valid.shape[1] - np.argmax(batch.valid[:, ::-1], axis=1), 0)
+    out: dict[str, np.ndarray] = {}
+    for w in np.unique(width):
+        rows = np.flatnonzero(width == w)
+        part = {}
+        for f in dataclasses.fields(batch):
+            x = getattr(batch, f.name)
+            if isinstance(x, np.ndarray):  # interactions is [D, N, P], the others [N, P]
+                x = x[:, rows, :w] if f.name == "interactions" else x[rows, :w]
+                x = np.ascontiguousarray(x)
+            part[f.name] = x
+        reduced = features.reduce_cells(dataclasses.replace(batch, **part))
+        for k, v in reduced.items():
+            if k not in out:
+                out[k] = np.empty(len(width), v.dtype)
+            out[k][rows] = v
+    return out
 
 
 def save_batch(path: Path, cells: dict[str, np.ndarray], paths: dict[str, np.ndarray]) -> None:

@@ -509,6 +509,7 @@ def _store(
                 "num_with_paths": int(np.count_nonzero(cells.column("num_paths").to_numpy() > 0)),
                 "num_paths_total": paths.num_rows if paths is not None else None,
                 "trace_seconds": round(trace_s, 2),
+                **(_retraced(work_dir) if settings.batch_independent else {}),
             },
         }
         out = writing.write_version(ds_id, version, cells, meta, paths=paths, extra_files=extra)
@@ -517,6 +518,17 @@ def _store(
     shutil.rmtree(work_dir, ignore_errors=True)
     print(f"{name}: stored version {version} in {out}")
     return local.load(name, revision=version)
+
+
+def _retraced(work_dir: Path) -> dict[str, int]:
+    """How many cells a batch-independent build re-traced because their call's path buffer filled (the batch files'
+    ``retrace_depth``), for the card."""
+    depth = [load_batch(p)[0].get("retrace_depth") for p in sorted(work_dir.glob("batch_*.npz"))]
+    depth = [d for d in depth if d is not None]
+    if not depth:
+        return {}
+    d = np.concatenate(depth)
+    return {"cells_retraced_for_full_path_buffer": int((d != 0).sum()), "cells_filling_it_alone": int((d < 0).sum())}
 
 
 def _version_meta(spec, settings: RTSettings, name: str, version: str, inputs: dict) -> dict:

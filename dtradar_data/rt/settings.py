@@ -17,6 +17,11 @@ from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS
 Device = Literal["auto", "cpu", "cuda"]
 
 
+#: What --rt.batch-independent means, hashed into the version: change it with anything that changes its rows
+#: (dtradar_data.rt.tracer.HASH_SLOTS_PER_RX, the packet width, the patched Sionna code).
+BATCH_INDEPENDENT_ENGINE = "dtradar-1: 65536 hash slots per receiver, 32-lane packets, buffer split (sionna-rt 2.2.0)"
+
+
 def flag(name: str) -> str:
     """The ``build`` flag of a settings field (tyro nests them under ``--rt.``)."""
     return "--rt." + name.replace("_", "-")
@@ -77,7 +82,14 @@ class RTSettings:
     """Receiver: one vertical short dipole (the paper's 1x1 dipole)."""
     batch_size: int = 1024
     """Receivers per PathSolver call. Each call shoots all samples_per_src rays again, so bigger batches are
-    cheaper per cell; results depend on the batch partition (measured), so it is part of the version."""
+    cheaper per cell; with Sionna's own solver results depend on the batch partition (measured), so it is part of
+    the version (not with --rt.batch-independent)."""
+    batch_independent: bool = False
+    """Trace every receiver independently of the others in its PathSolver call (dtradar_data.rt.tracer: a hash
+    region, SIMD packets and a buffer check of its own): a cell's rows are the same bytes whatever batch it is
+    traced in, so batch_size leaves the version. CPU (LLVM) only. Off by default for now: it keeps the ~25 % of
+    paths Sionna's shared hash table drops, which changes every table (every version would be rebuilt), and it
+    traced the cubicle 2x slower (82-85 against 164-209 cells/s, one batch, shared 2-core machine)."""
     deterministic: bool = True
     """Bit-identical tables for the same inputs. On the CPU: pin Dr.Jit to one thread while tracing (its
     multi-threaded path collection changes the weak-path count from run to run; measured no slower on 2 cores, and
@@ -139,6 +151,11 @@ class RTSettings:
         d = dataclasses.asdict(self)
         d.pop("device")
         d.pop("deterministic")  # changes only run-to-run noise, not what the table means
+        if self.batch_independent:
+            d.pop("batch_size")  # the partition no longer changes a row (tests/data/rt/test_batch_independence.py)
+            d["batch_independent"] = BATCH_INDEPENDENT_ENGINE
+        else:
+            d.pop("batch_independent")  # the versions traced with Sionna's own solver keep their hashes
         return d
 
     def solver_kwargs(self) -> dict[str, Any]:
