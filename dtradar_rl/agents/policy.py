@@ -67,6 +67,8 @@ class Policy:
     meta: dict[str, Any]
     #: the seeded generator of loop escapes (reset by :meth:`env_for`, so every evaluation repeats)
     escape_gen: torch.Generator | None = None
+    #: on a moving twin (set by :meth:`env_for`; None on a static one): the shield also gives way to movers
+    mover_guard: Any = None
 
     def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
         """Greedy actions. ``shield=True`` (``neighbors`` preset only) never picks a move into a neighbour that
@@ -75,7 +77,11 @@ class Policy:
         Loop escape (agents trained with ``memory_visits`` and ``escape_after`` = k > 0): a robot standing on a
         cell it has already stood on k times this episode (its memory's ``visits_here``) takes a random move
         instead (with the shield, one the shield allows); a greedy policy that deterministic observations lead into a
-        cycle would otherwise repeat it until the step limit."""
+        cycle would otherwise repeat it until the step limit.
+
+        On a moving twin the shield also gives way to a mover sensed next to the robot
+        (:class:`~dtradar_rl.agents.planner.MoverGuard`: the least risky move by
+        :func:`~dtradar_rl.agents.planner.predicted_risk`, the Q-values ordering moves of equal risk)."""
         with torch.no_grad():
             allowed = None
             if shield:
@@ -84,10 +90,12 @@ class Policy:
             stuck = self._stuck(obs)
             if stuck is not None and bool(stuck.all()):  # every robot escapes: the values are not needed
                 return self._escape_moves(obs, allowed)
-            q = self.q(obs)
+            q = values = self.q(obs)
             if allowed is not None:
                 q = torch.where(allowed, q, torch.full_like(q, -torch.inf))
             action = q.argmax(-1)
+            if shield and self.mover_guard is not None:  # it may bump into a wall on purpose: the raw values
+                action = self.mover_guard.give_way(obs, values, action)
             if stuck is not None:
                 action = torch.where(stuck, self._escape_moves(obs, allowed), action)
         return action
@@ -134,6 +142,11 @@ class Policy:
         """A batched env over ``ds`` that observes with this policy's preset and training normaliser (and restarts
         the loop escapes' generator, so the same evaluation gives the same moves)."""
         self.escape_gen = None
+        self.mover_guard = None
+        if ds.is_moving and self.obs_preset == "neighbors":
+            from dtradar_rl.agents.planner import MoverGuard  # the planner imports the envs this module does
+
+            self.mover_guard = MoverGuard(ds, self.normalizer, kwargs.get("device", "cpu"))
         return batched_env(
             ds,
             num_envs,

@@ -60,14 +60,17 @@ target, where a step moves to a neighbour free at the next snapshot or **waits**
 snapshot). ``waiting="free"`` (the default, what SPL on a moving twin compares with) allows a wait anywhere;
 ``"bump"`` allows it only where one of the four moves bumps (a wall, the grid's edge or a mover next to the robot),
 which is the exact optimum of the four-action MDP. The search never enters or waits on a covered cell (it avoids
-hits).
+hits). It is one compiled breadth-first search per target on the reversed space-time graph, and its tables are cached
+by twin content and target (:data:`SPACE_TIME_CACHE_BYTES`), so drawing an evaluation's episodes and scoring each of
+its rollouts search each target once.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 import numbers
-from collections import deque
+from collections import OrderedDict, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -338,8 +341,25 @@ class GridMDP:
 # -- moving twins: the MDP in time (module docstring) ------------------------------------------------------------------
 #: How the space-time search may wait (see the module docstring).
 WAITING: tuple[str, ...] = ("free", "bump")
-#: Above this many (target, snapshot, cell) entries the batched space-time search runs in chunks of targets.
-MAX_SPACE_TIME_TABLE = 16_000_000
+#: Targets per compiled space-time search call (its float64 output is ``chunk x T x cells``: 28 MB on meeting/moving).
+SPACE_TIME_CHUNK = 32
+#: The space-time distance tables kept between calls, in bytes (least recently used first out): the targets of an
+#: evaluation of 500 episodes on meeting/moving (48 snapshots x 1 520 cells) take about 150 MB.
+SPACE_TIME_CACHE_BYTES = 512 << 20
+#: ``((twin digest, waiting), target) -> int32[T, cells]`` (read-only); see ``space_time_distances_many``.
+_SPACE_TIME_CACHE: OrderedDict[tuple, np.ndarray] = OrderedDict()
+
+
+def _cache_space_time(key: tuple, row: np.ndarray) -> None:
+    _SPACE_TIME_CACHE[key] = row
+    size = sum(r.nbytes for r in _SPACE_TIME_CACHE.values())
+    while size > SPACE_TIME_CACHE_BYTES and _SPACE_TIME_CACHE:
+        size -= _SPACE_TIME_CACHE.popitem(last=False)[1].nbytes
+
+
+def clear_space_time_cache() -> None:
+    """Forget every cached space-time distance table (tests, memory)."""
+    _SPACE_TIME_CACHE.clear()
 
 
 def moving_masks(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
@@ -498,33 +518,76 @@ class MovingGridMDP(GridMDP):
 
     def space_time_distances_many(self, targets: Sequence[int] | np.ndarray, waiting: str = "free") -> np.ndarray:
         """``int32[K, T, H*W]``: the fewest steps from ``(cell, snapshot t)`` to each of ``targets`` (0 on the
-        target, -1 where it cannot be reached or the cell is a static obstacle). Backward breadth-first frontier
-        propagation over (cell, t mod T), all targets at once (in chunks above :data:`MAX_SPACE_TIME_TABLE`)."""
+        target, -1 where it cannot be reached or the cell is a static obstacle).
+
+        A backward breadth-first search over the states (cell, t mod T), one compiled search per target
+        (``scipy.sparse.csgraph``, unweighted, from a source node one step before the target at every snapshot) on
+        the reversed space-time graph, and each target's table is kept in a cache shared by every MDP of the same
+        twin (:data:`SPACE_TIME_CACHE_BYTES`): an evaluation draws its episodes, then scores each rollout on the
+        same targets, each with its own MDP. Measured on one core against the numpy frontier propagation it
+        replaces (all targets at once), 100 targets: cubicle/moving 1.27 -> 0.23 s, meeting/moving 10.5 -> 1.3 s,
+        identical distances (tested against it)."""
         targets = np.asarray(targets, np.int64).ravel()
         t_count, n = self.covered.shape
-        chunk = max(1, MAX_SPACE_TIME_TABLE // (t_count * n))
-        if targets.size > chunk:
-            return np.concatenate(
-                [self.space_time_distances_many(targets[i : i + chunk], waiting) for i in range(0, targets.size, chunk)]
-            )
+        if waiting not in WAITING:
+            raise unknown_name("waiting rule", waiting, WAITING)
+        key = (self._space_time_key(), waiting)
+        rows, missing = {}, []
+        for target in np.unique(targets).tolist():
+            row = _SPACE_TIME_CACHE.get((key, target))
+            if row is None:
+                missing.append(target)
+            else:
+                _SPACE_TIME_CACHE.move_to_end((key, target))
+                rows[target] = row
+        if missing:
+            graph = self._space_time_graph(waiting)
+            for i in range(0, len(missing), SPACE_TIME_CHUNK):
+                chunk = np.array(missing[i : i + SPACE_TIME_CHUNK], np.int64)
+                for target, row in zip(chunk.tolist(), self._space_time_search(chunk, graph)):
+                    row.flags.writeable = False  # shared through the cache: callers get copies
+                    rows[target] = row
+                    _cache_space_time((key, target), row)
+        out = np.empty((targets.size, t_count, n), np.int32)
+        for i, target in enumerate(targets.tolist()):
+            out[i] = rows[target]
+        return out
+
+    def _space_time_key(self) -> bytes:
+        """A digest of what the search reads (the static map and the covered cells of every snapshot): MDPs built
+        from the same twin share cache entries, and a change to ``covered`` is never served stale."""
+        h = hashlib.blake2b(digest_size=16)
+        for a in (np.asarray(self.blocked.shape), self.blocked, self.covered):
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.digest()
+
+    def _space_time_graph(self, waiting: str) -> tuple[np.ndarray, np.ndarray]:
+        """The reversed space-time graph's edges ``(from, to)`` as state indices ``t * cells + cell``: an edge from
+        ``(next cell, t + 1)`` back to ``(cell, t)`` for every move and wait the search allows from a free cell."""
         move_ok, wait_ok = self._transitions(waiting)
-        k = targets.size
-        dist = np.full((k, t_count, n), -1, np.int32)
-        rows = np.arange(k)
-        dist[rows, :, targets] = 0
-        frontier = dist == 0
-        free = self.free
-        step = 0
-        while frontier.any():
-            step += 1
-            ahead = np.roll(frontier, -1, axis=1)  # [k, t] -> frontier at t+1
-            reach = wait_ok[None] & ahead
-            for a in range(4):
-                reach |= move_ok[None, :, :, a] & ahead[:, :, self.next_cell[:, a]]
-            new = reach & (dist < 0) & free[None, None]
-            dist[new] = step
-            frontier = new
-        return dist
+        t_count, n = self.covered.shape
+        t, c = np.nonzero(move_ok.any(2) | wait_ok)
+        keep = self.free[c]
+        t, c = t[keep], c[keep]
+        step_ok = np.concatenate([move_ok[t, c], wait_ok[t, c, None]], 1)  # [edges, 5]: four moves, the wait
+        dest = np.concatenate([self.next_cell[c], c[:, None]], 1)
+        which = np.nonzero(step_ok)
+        src = ((t[which[0]] + 1) % t_count) * n + dest[which]
+        return src, t[which[0]] * n + c[which[0]]
+
+    def _space_time_search(self, targets: np.ndarray, graph: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:
+        """``int32[T, cells]`` per target, uncached: one compiled breadth-first search each on the reversed ``graph``
+        plus a source node per target with an edge to the target at every snapshot (distances one more)."""
+        t_count, n = self.covered.shape
+        states, k = t_count * n, targets.size
+        src, dst = graph
+        source = np.repeat(states + np.arange(k), t_count)
+        on_target = (np.arange(t_count)[None] * n + targets[:, None]).ravel()
+        rows, cols = np.concatenate([src, source]), np.concatenate([dst, on_target])
+        graph = csr_matrix((np.ones(rows.size, np.float32), (rows, cols)), shape=(states + k, states + k))
+        d = compiled_shortest_paths(graph, method="D", directed=True, unweighted=True, indices=states + np.arange(k))
+        d = np.where(np.isfinite(d[:, :states]), d[:, :states] - 1, -1).astype(np.int32).reshape(k, t_count, n)
+        return [row.copy() for row in d]  # one block each: the cache frees them one by one
 
     def space_time_distances(self, target: int, waiting: str = "free") -> np.ndarray:
         """``int32[T, H*W]``: :meth:`space_time_distances_many` for one target."""
