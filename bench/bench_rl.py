@@ -2,9 +2,11 @@
 
     python bench/bench_rl.py                 # `make bench-rl`; writes results/bench_rl.json and results/bench_rl.md
     python bench/bench_rl.py --scene meeting # -> results/bench_rl_meeting.{json,md}
+    python bench/bench_rl.py --env-only      # env throughput only -> results/bench_rl_env.{json,md}
     python bench/bench_rl.py --help
 
-Measures (paper figures in brackets): env steps/s of the batched torch env vs the gymnasium env; one greedy
+Measures (paper figures in brackets): env steps/s of the batched torch env (its fast path and, side by side, its
+general path: ``fast_path=False``; optionally at other torch thread counts) vs the gymnasium env; one greedy
 decision (vs the paper's 17 ms); wall time of the paper's budget of 600K env steps with the tuned DQN (vs the paper's
 46 min) and the success rate / SPL it reaches on blueprint -> blueprint and blueprint -> dynamic; the same for the
 ``robust`` preset (random extra obstacles while training; ``--no-robust`` skips it); and the same budget
@@ -41,6 +43,10 @@ from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
 
 PAPER_TRAIN_S = 46 * 60.0
+#: Steps of random actions drawn before a batched throughput measurement (more than an episode's 240-step cap on the
+#: cubicle, so no robot replays its own moves within an episode): drawing 4 096 actions with torch's CPU generator
+#: costs ~15-30 us a step (measured, 1 thread), a tenth of the env's step; that is the agent's cost, not the env's.
+ACTION_BANK = 256
 PAPER_DECISION_MS = 17.0
 
 
@@ -55,7 +61,16 @@ class BenchConfig:
     env_counts: tuple[int, ...] = (1, 256, 4096)
     """batched env sizes whose throughput is measured"""
     env_seconds: float = 2.0
-    """seconds per throughput measurement"""
+    """seconds per throughput measurement (split into env_rounds interleaved rounds; the median round is reported)"""
+    env_rounds: int = 5
+    """interleaved rounds of the throughput measurements (every variant once per round, so load hits all alike)"""
+    env_general: bool = True
+    """also measure the batched env's general path (fast_path=False), side by side with the fast path"""
+    env_threads: tuple[int, ...] = (1, 2)
+    """also measure the batched env (fast path) at these torch thread counts (other than --threads), interleaved
+    with the rest: on 2 shared cores 2 threads collapse at 4 096 robots when another process holds a core"""
+    env_only: bool = False
+    """only measure the env throughput (no training); writes <stem>_env.{json,md}"""
     pairs: int = 500
     """seeded (start, target) evaluation pairs per twin"""
     robust: bool = True
@@ -86,31 +101,65 @@ def _datasets(scene: str):
         return load_dataset("synthetic/blueprint"), load_dataset("synthetic/dynamic"), True
 
 
-def env_throughput(ds, counts, seconds, obs="neighbors", reward="geodesic") -> dict:
-    out = {}
-    env = DtradarNavEnv(ds, obs=obs, reward=reward)
-    env.reset(seed=0)
-    n, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        for _ in range(500):
-            _, _, te, tr, _ = env.step(int(env.action_space.sample()))
-            if te or tr:
-                env.reset()
-        n += 500
-    out["gymnasium"] = n / (time.perf_counter() - t0)
-    for k in counts:
-        benv = BatchedNavEnv.from_dataset(ds, k, obs=obs, reward=reward, seed=0)
-        benv.reset()
-        gen = torch.Generator().manual_seed(0)
-        steps, t0 = 0, time.perf_counter()
+def env_throughput(
+    ds,
+    counts,
+    seconds,
+    obs="neighbors",
+    reward="geodesic",
+    *,
+    rounds: int = 1,
+    general: bool = False,
+    threads: tuple[int, ...] = (),
+) -> dict:
+    """Env steps/s with random actions: the gymnasium env (``gymnasium``) and the batched env at each size in
+    ``counts`` (``batched_<k>``: step, ``reset_where(te | tr)``, ``observe()``, as a training loop does; the actions
+    come from a bank of :data:`ACTION_BANK` random steps drawn beforehand); with
+    ``general`` also its general path (``batched_general_<k>``), and its fast path at each torch thread count in
+    ``threads`` (``batched_<k>_t<n>``). Every variant runs ``seconds / rounds`` once per round, interleaved; the
+    median round is reported."""
+
+    def gym_round(env, seconds):
+        n, t0 = 0, time.perf_counter()
         while time.perf_counter() - t0 < seconds:
-            a = torch.randint(4, (k,), generator=gen)
-            _, _, te, tr, _ = benv.step(a)
+            for _ in range(500):
+                _, _, te, tr, _ = env.step(int(env.action_space.sample()))
+                if te or tr:
+                    env.reset()
+            n += 500
+        return n / (time.perf_counter() - t0)
+
+    def batched_round(benv, bank, at, seconds):
+        k, steps, t0 = benv.num_envs, 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            _, _, te, tr, _ = benv.step(bank[at[0] % ACTION_BANK])
             benv.reset_where(te | tr)
             benv.observe()
+            at[0] += 1
             steps += k
-        out[f"batched_{k}"] = steps / (time.perf_counter() - t0)
-    return out
+        return steps / (time.perf_counter() - t0)
+
+    env = DtradarNavEnv(ds, obs=obs, reward=reward)
+    env.reset(seed=0)
+    variants = {"gymnasium": (lambda s, env=env: gym_round(env, s), None)}
+    base = torch.get_num_threads()
+    for k in counts:
+        for key, fast, nthreads in (
+            [(f"batched_{k}", True, base)]
+            + ([(f"batched_general_{k}", False, base)] if general else [])
+            + [(f"batched_{k}_t{t}", True, t) for t in threads if t != base]
+        ):
+            benv = BatchedNavEnv.from_dataset(ds, k, obs=obs, reward=reward, seed=0, fast_path=fast)
+            benv.reset()
+            bank = torch.randint(4, (ACTION_BANK, k), generator=torch.Generator().manual_seed(0))
+            variants[key] = (lambda s, benv=benv, bank=bank, at=[0]: batched_round(benv, bank, at, s), nthreads)
+    rates: dict[str, list[float]] = {key: [] for key in variants}
+    for _ in range(max(1, rounds)):
+        for key, (run, nthreads) in variants.items():
+            torch.set_num_threads(nthreads or base)
+            rates[key].append(run(seconds / max(1, rounds)))
+    torch.set_num_threads(base)
+    return {key: sorted(r)[len(r) // 2] for key, r in rates.items()}
 
 
 def sb3_dqn(env, ours_cfg, seed: int = 0):
@@ -181,8 +230,26 @@ def main(cfg: BenchConfig) -> dict:
         f"torch threads {threads}, 1-min load before start {load_before}"
     )
 
-    thr = env_throughput(ds, cfg.env_counts, cfg.env_seconds)
+    thr = env_throughput(
+        ds, cfg.env_counts, cfg.env_seconds, rounds=cfg.env_rounds, general=cfg.env_general, threads=cfg.env_threads
+    )
     print("env steps/s:", {k: f"{v:,.0f}" for k, v in thr.items()})
+    stem = "bench_rl" if cfg.scene == "cubicle" else f"bench_rl_{cfg.scene}"
+    out = Path(cfg.out)
+    if cfg.env_only:
+        report = {
+            "dataset": {"name": ds.name, "version": ds.version, "synthetic": synthetic, "grid": list(ds.shape)[::-1]},
+            "machine": {**machine(), "torch_threads": threads, "load_1min_before": load_before},
+            "env_steps_per_s": thr,
+        }
+        out.mkdir(parents=True, exist_ok=True)
+        write_atomic(
+            out / f"{stem}_env.json", json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n"
+        )
+        md = "\n".join(_header(report) + _throughput_rows(thr)) + "\n"
+        write_atomic(out / f"{stem}_env.md", md)
+        print(md)
+        return report
 
     scene = ds.name.split("/")[0]
     ours_cfg = config_for(
@@ -266,9 +333,7 @@ def main(cfg: BenchConfig) -> dict:
     if "wall_s_for_budget" in sb3:
         report["train"]["speedup_vs_sb3"] = sb3["wall_s_for_budget"] / result.wall_s
 
-    out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    stem = "bench_rl" if cfg.scene == "cubicle" else f"bench_rl_{cfg.scene}"
     write_atomic(out / f"{stem}.json", json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n")
     md = render_markdown(report)
     write_atomic(out / f"{stem}.md", md)
@@ -276,25 +341,48 @@ def main(cfg: BenchConfig) -> dict:
     return report
 
 
-def render_markdown(r: dict) -> str:
-    d, t, sb3 = r["dataset"], r["train"], r["sb3"]
+def _header(r: dict) -> list[str]:
+    d = r["dataset"]
     src = "synthetic 42x18 stand-in (no ray-traced table built yet)" if d["synthetic"] else f"real twin {d['name']}"
-    lines = [
+    load = r["machine"]["load_1min_before"]
+    return [
         (
             f"## RL benchmark ({src}; {describe(r['machine'])}, torch {r['machine']['torch_threads']} threads, "
-            f"1-min load before start {r['machine']['load_1min_before']:.2f})"
+            f"1-min load before start {'n/a' if load is None else f'{load:.2f}'})"
         ),
         "",
         "| measure | ours | reference | ratio |",
         "|---|---|---|---|",
     ]
-    thr = r["env_steps_per_s"]
-    for k, v in thr.items():
-        if k != "gymnasium":
-            lines.append(
-                f"| env steps/s, {k.replace('_', ' ')} robots | {v:,.0f} | "
-                f"gymnasium env {thr['gymnasium']:,.0f} | {v / thr['gymnasium']:.2g}x |"
-            )
+
+
+def _throughput_label(key: str) -> str:
+    """``batched_4096`` -> ``batched 4096 robots``; ``batched_general_4096`` -> ``... (general path)``;
+    ``batched_4096_t1`` -> ``... (1 torch thread)``."""
+    parts = key.split("_")
+    general = "general" in parts
+    parts = [p for p in parts if p != "general"]
+    label = f"batched {parts[1]} robots"
+    if general:
+        label += " (general path)"
+    if len(parts) > 2:
+        n = parts[2][1:]
+        label += f" ({n} torch thread{'s' if n != '1' else ''})"
+    return label
+
+
+def _throughput_rows(thr: dict) -> list[str]:
+    return [
+        f"| env steps/s, {_throughput_label(k)} | {v:,.0f} | gymnasium env {thr['gymnasium']:,.0f} | "
+        f"{v / thr['gymnasium']:.2g}x |"
+        for k, v in thr.items()
+        if k != "gymnasium"
+    ]
+
+
+def render_markdown(r: dict) -> str:
+    t, sb3 = r["train"], r["sb3"]
+    lines = _header(r) + _throughput_rows(r["env_steps_per_s"])
     lines.append(
         f"| greedy decision latency | {r['decision_latency_ms']:.3f} ms | paper 17 ms | "
         f"{r['decision_speedup_vs_paper']:.0f}x faster |"
