@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-dynamic bench-latency bench-nav bench-offline-speed
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-nav bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -130,6 +130,10 @@ bench-rl:
 bench-diff:
 	$(PY) bench/bench_differential.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
+# A moving twin's snapshots against a full trace of each (time, agreement, seed floor) -> results/bench_moving_*
+bench-moving:
+	$(PY) bench/bench_moving.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
+
 # Navigation under change: the planner beside the memory agents, and twin-update curves -> results/bench_dynamic*
 bench-dynamic:
 	$(PY) bench/bench_dynamic.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
@@ -145,6 +149,16 @@ bench-latency:
 # The default agent, SB3 DQN and the planner on every twin, with and without noise and a tx pose error -> results/bench_nav.*
 bench-nav:
 	$(PY) bench/bench_nav.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
+
+# GPU figures (tracing, batched env, training; CUDA beside the CPU) -> results/bench_gpu.*; on a GPU machine
+# run bash bench/gpu.sh after make gpu-pack here
+bench-gpu:
+	$(PY) bench/bench_gpu.py $(ARGS)
+
+# Copy the twins bench/gpu.sh reads (dallas-q3, cubicle) into .gpu_data/, which travels with the working tree
+gpu-pack:
+	mkdir -p .gpu_data/datasets
+	for t in dallas-q3 cubicle; do cp -r "$$($(PY) -c 'from dtradar_data.core.layout import data_root; print(data_root())')/datasets/$$t" .gpu_data/datasets/; done
 
 # d3rlpy updates/s per algorithm: logging, sampler, threads, epochs, evaluators, worker processes -> results/bench_offline_speed.*
 bench-offline-speed:

@@ -78,6 +78,11 @@ def main() -> None:
         help="max_num_paths_per_src of the compared rows (default: the RTSettings default)",
     )
     ap.add_argument("--batch-size", type=int, default=RTSettings().batch_size)
+    ap.add_argument(
+        "--batch-independent",
+        action="store_true",
+        help="trace the reference and the rows with RTSettings.batch_independent (results to *_batch_independent.*)",
+    )
     ap.add_argument("--repeats", type=int, default=2, help="timed repeats per setting (best is reported)")
     ap.add_argument("--cell-m", type=float, default=None, help="city scenes: cell size instead of the scene's")
     ap.add_argument("--out", type=Path, default=Path("results"))
@@ -85,6 +90,8 @@ def main() -> None:
     stem = "bench_rt" if args.scene == "cubicle" else f"bench_rt_{args.scene}"
     if args.buffer != RTSettings().max_num_paths_per_src:
         stem += f"_buffer{args.buffer:.0e}".replace("+", "")
+    if args.batch_independent:
+        stem += "_batch_independent"
 
     spec = load_scene_spec(args.scene, args.variant, cell_m=args.cell_m)
     blocked = occupancy(spec)
@@ -93,7 +100,12 @@ def main() -> None:
     points = np.stack([xs[ix], ys[iy], np.full(ix.shape, spec.rx_height_m)], axis=1)
     print(f"{spec.name}: {len(points)} free cells of {blocked.size}")
 
-    base = RTSettings(device="cpu", batch_size=args.batch_size, max_num_paths_per_src=args.buffer)
+    base = RTSettings(
+        device="cpu",
+        batch_size=args.batch_size,
+        max_num_paths_per_src=args.buffer,
+        batch_independent=args.batch_independent,
+    )
     tracer = RayTracer(spec, base)
     t0 = time.perf_counter()
     tracer.trace(points[: min(len(points), args.batch_size)])
@@ -140,6 +152,7 @@ def main() -> None:
         "reference_cells_per_s": round(len(points) / ref_s, 1),
         "first_call_seconds_incl_jit": round(first_call_s, 2),
         "batch_size": args.batch_size,
+        "batch_independent": args.batch_independent,
         "max_depth": base.max_depth,
         "rows": rows,
         "meets_goal_300_cells_per_s_at_95pct": [r["samples_per_src"] for r in ok],

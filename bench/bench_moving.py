@@ -1,0 +1,516 @@
+"""A moving twin built snapshot by snapshot against a full trace of every snapshot, side by side in one run.
+
+For each scene: load its moving twin (:func:`dtradar_data.scenes.load_moving_scene`), compile the kernels first on a
+few cells (the first JIT compile, reported apart), then build the twin's ``T`` snapshots with the library's own code
+path, the one ``make dataset VARIANT=moving`` runs (:func:`dtradar_data.pipeline.moving.trace_snapshots` with the
+builder's :func:`~dtradar_data.pipeline.builder.trace_grid` for snapshot 0, then
+:func:`~dtradar_data.pipeline.moving.moving_tables`; into a temporary work folder), and trace every snapshot ``k >= 1``
+in full as well (``MovingScene.spec_at(k)``, a static scene, by ``trace_grid``); snapshot 0 of the build is itself a
+full trace and serves as its own reference. Reported per snapshot and in total: cells re-traced, differential and
+full seconds and their ratio, and how each differential snapshot agrees with the full trace of the same instant
+(the strongest-path rule of :mod:`dtradar_data.rt.compare`, in all free cells, the re-traced and the kept ones;
+absolute total-gain differences); beside it the seed-noise floor (a second full trace of a snapshot with seed + 1)
+and, as the price of not tracing the movers at all, snapshot 0 reused unchanged. Then whether the goals are met:
+every differential snapshot >= 3x cheaper than a full trace (on Dallas Q3) at the noise floor's agreement, and a
+60-snapshot cubicle twin built in <= 3 min.
+
+``--snapshots`` longer than the scene's own horizon (the movers' common period, 16 snapshots in the cubicle) runs the
+movers on round their routes (``dataclasses.replace(moving, snapshots=T)``: positions are periodic, so snapshot
+``k`` shows the movers where snapshot ``k mod period`` does), and every snapshot is still traced from the one before,
+so 60 cubicle snapshots are 59 differential steps. Writes ``results/bench_moving_<scene>.{json,md,png}``.
+
+    python bench/bench_moving.py                                   # cubicle 60 snapshots, dallas-q3 4
+    python bench/bench_moving.py --scenes cubicle --snapshots 20 --seed-floor 0 10 19
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.files import write_atomic
+from dtradar_data.core.machine import describe, machine
+from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.pipeline import differential, moving
+from dtradar_data.pipeline.builder import BuildConfig, scene_config, trace_grid
+from dtradar_data.rt.compare import compare
+from dtradar_data.rt.settings import RTSettings
+from dtradar_data.rt.tracer import RayTracer
+from dtradar_data.scenes import load_moving_scene
+
+#: Snapshots per scene by default: the issue's 60 in the cubicle (about 3 s per full trace here); Dallas Q3's full
+#: trace takes about 3 min on 2 cores, so a few snapshots only (each is one more full trace).
+DEFAULT_SNAPSHOTS = {"cubicle": 60, "dallas-q3": 4}
+FALLBACK_SNAPSHOTS = 8
+SPEEDUP_GOAL = 3.0  # each differential snapshot at least this many times cheaper than a full trace (Dallas Q3)
+BUILD_GOAL_S = 180.0  # a 60-snapshot cubicle twin in at most 3 min on 2 cores
+BUILD_GOAL_SNAPSHOTS = 60
+#: A full trace shorter than this is cheap enough to take the seed floor at three snapshots by default, not one.
+CHEAP_FULL_S = 30.0
+
+
+def log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def snapshot_counts(items: list[str] | None, scenes: list[str]) -> dict[str, int]:
+    """``--snapshots`` as ``{scene: T}``: each item ``N`` (every scene) or ``SCENE=N``; defaults per scene."""
+    out = {s: DEFAULT_SNAPSHOTS.get(s, FALLBACK_SNAPSHOTS) for s in scenes}
+    for item in items or []:
+        scene, sep, n = item.rpartition("=")
+        try:
+            count = int(n)
+        except ValueError:
+            raise SystemExit(f"--snapshots {item!r}: give N or SCENE=N, e.g. --snapshots cubicle=60") from None
+        if count < 2:
+            raise SystemExit(f"--snapshots {item!r}: at least 2 (snapshot 0 is a full trace, 1 the first differential)")
+        if sep and scene not in out:
+            raise SystemExit(f"--snapshots {item!r}: {scene!r} is not one of --scenes {' '.join(scenes)}")
+        for s in [scene] if sep else scenes:
+            out[s] = count
+    return out
+
+
+def with_horizon(moving_scene, snapshots: int):
+    """The moving twin over ``snapshots`` snapshots (longer or shorter than its own horizon: the movers are
+    periodic), recorded in its provenance; the scene unchanged when it already has that many."""
+    if snapshots == moving_scene.snapshots:
+        return moving_scene
+    provenance = {**moving_scene.provenance, "snapshots": snapshots, "horizon_from": "bench_moving --snapshots"}
+    return dataclasses.replace(moving_scene, snapshots=snapshots, provenance=provenance)
+
+
+def as_dataset(name: str, grid: dict, cells, paths) -> Dataset:
+    return Dataset(name=name, table=cells, meta={"grid": grid}, paths_table=paths)
+
+
+def stats(c: dict, where: np.ndarray | None = None) -> dict:
+    """Agreement rate and absolute total-gain differences of one comparison over the free cells (of ``where``)."""
+    sel = c["free"] if where is None else c["free"] & where
+    g = c["gain_diff_db"][sel]
+    g = g[~np.isnan(g)]
+    return {
+        "cells": int(sel.sum()),
+        "agreement": float(c["agree"][sel].mean()) if sel.any() else float("nan"),
+        "gain_median_db": float(np.median(g)) if g.size else float("nan"),
+        "gain_p95_db": float(np.percentile(g, 95)) if g.size else float("nan"),
+    }
+
+
+def seed_floor_snapshots(requested: list[int] | None, count: int, full0_s: float) -> list[int]:
+    """Where to take the seed-noise floor: as asked (in range), else snapshot 0, the middle one and the last when a
+    full trace is cheap (< :data:`CHEAP_FULL_S`), snapshot 0 only otherwise."""
+    if requested is not None:
+        return sorted({k for k in requested if 0 <= k < count})
+    if full0_s < CHEAP_FULL_S:
+        return sorted({0, count // 2, count - 1})
+    return [0]
+
+
+def bench_scene(
+    scene: str, count: int, radius_m: float, floor_at: list[int] | None, tol_pp: float, batch_independent: bool
+) -> dict:
+    host_before = machine()
+    base_moving = load_moving_scene(scene)
+    period = base_moving.snapshots
+    mv = with_horizon(base_moving, count)
+    base = BuildConfig(
+        scene=scene, variant="moving", progress=False, rt=RTSettings(batch_independent=batch_independent)
+    )
+    config = scene_config(base, mv.base)
+    rt = config.rt
+    spec0 = mv.spec_at(0)
+    grid = spec0.grid.to_dict()
+    log(f"{scene}: {count} snapshots of {mv.dt_s:g} s (own horizon {period}), {grid['nx']} x {grid['ny']} cells")
+
+    # the first JIT compile, on a few cells of snapshot 0, so that no timed trace pays for it
+    t0 = time.perf_counter()
+    warm = RayTracer(spec0, rt)
+    xs, ys = spec0.grid.centres()
+    free_iy, free_ix = np.nonzero(~occupancy(spec0))
+    pick = np.linspace(0, len(free_ix) - 1, 4).round().astype(int)
+    warm.trace(np.stack([xs[free_ix[pick]], ys[free_iy[pick]], np.full(4, spec0.rx_height_m)], axis=1))
+    warm.close()
+    compile_s = time.perf_counter() - t0
+    log(f"{scene}: first compile {compile_s:.1f} s")
+
+    # the moving twin, as `make dataset VARIANT=moving` builds it (builder.build_moving_one's calls)
+    with tempfile.TemporaryDirectory(prefix="dtradar-bench-moving-") as tmp:
+
+        def full_trace(spec, batch_dir: Path):
+            return trace_grid(spec, rt, batch_dir, per_path=config.per_path, progress=False)
+
+        t0 = time.perf_counter()
+        snaps = moving.trace_snapshots(
+            mv,
+            rt,
+            Path(tmp) / "work",
+            radius_m=config.retrace_radius_m,
+            per_path=config.per_path,
+            full_trace=full_trace,
+            progress=True,
+        )
+        trace_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        moving.moving_tables(mv, snaps)
+        tables_s = time.perf_counter() - t0
+    log(f"{scene}: built {count} snapshots in {trace_s:.1f} s (+ {tables_s:.1f} s joining the table)")
+
+    # every snapshot k >= 1 in full, compared with the differential one
+    full0 = as_dataset("full", grid, snaps[0].cells, snaps[0].paths)
+    rows = [
+        {
+            "k": 0,
+            "t_s": 0.0,
+            "mode": "full",
+            "retraced_cells": snaps[0].record["retraced_cells"],
+            "free_cells": snaps[0].record["free_cells"],
+            "differential_s": snaps[0].record["seconds"],
+            "full_s": snaps[0].record["seconds"],
+            "note": "the build's snapshot 0 is a full trace: it is its own reference",
+        }
+    ]
+    floor_ks = seed_floor_snapshots(floor_at, count, snaps[0].record["seconds"])
+    previous_full = full0
+    kept_full: dict[int, Dataset] = {0: full0}  # one period of full traces: a repeated instant is compared with it
+    for k in range(1, count):
+        spec = mv.spec_at(k)
+        t0 = time.perf_counter()
+        cells, paths, _, _ = trace_grid(spec, rt, per_path=config.per_path, progress=False)
+        full_s = time.perf_counter() - t0
+        full = as_dataset("full", grid, cells, paths)
+        snap = snaps[k]
+        changes = mv.changed_between(k - 1, k)
+        mask, _ = differential.retrace_mask(
+            mv.spec_at(k - 1),
+            spec,
+            snaps[k - 1].cells,
+            radius_m=config.retrace_radius_m,
+            changed=[c.before for c in changes] + [c.after for c in changes],
+        )
+        if int(mask.sum()) != snap.record["retraced_cells"]:
+            raise AssertionError(f"snapshot {k}: the re-trace mask differs from the build's")
+        retraced = mask.ravel()
+        c = compare(full, as_dataset("differential", grid, snap.cells, snap.paths))
+        diff_s = snap.record["seconds"]
+        row = {
+            "k": k,
+            "t_s": round(k * mv.dt_s, 6),
+            "mode": "differential",
+            "retraced_cells": snap.record["retraced_cells"],
+            "free_cells": snap.record["free_cells"],
+            "reasons": snap.record["reasons"],
+            "movers_moved": len(snap.record["movers_moved"]),
+            "differential_s": diff_s,
+            "full_s": round(full_s, 3),
+            "speedup": round(full_s / diff_s, 3) if diff_s > 0 else None,
+            "differential_vs_full": {
+                "all": stats(c),
+                "retraced": stats(c, retraced),
+                "kept": stats(c, ~retraced),
+            },
+            "previous_full_vs_full": stats(compare(full, previous_full)),
+            "snapshot0_vs_full": stats(compare(full, full0)),
+        }
+        if k >= period and mv.spec_at(k % period).objects == spec.objects:
+            # the movers are back where they were a whole number of periods ago: the same scene, the same seed
+            row["full_vs_full_periods_before"] = stats(compare(full, kept_full[k % period]))
+        if k < period or k in floor_ks:
+            kept_full[k] = full
+        previous_full = full
+        rows.append(row)
+        a = row["differential_vs_full"]
+        log(
+            f"{scene} t={k}: {row['retraced_cells']}/{row['free_cells']} re-traced, {diff_s:.2f} s vs {full_s:.2f} s "
+            f"full; agreement {100 * a['all']['agreement']:.1f} % (re-traced {100 * a['retraced']['agreement']:.1f} "
+            f"%, kept {100 * a['kept']['agreement']:.1f} %)"
+        )
+
+    # the seed-noise floor: a second full trace of a snapshot with seed + 1
+    floors = []
+    other = dataclasses.replace(rt, seed=rt.seed + 1)
+    for k in floor_ks:
+        cells2, paths2, _, _ = trace_grid(mv.spec_at(k), other, per_path=config.per_path, progress=False)
+        floors.append(
+            {"k": k, "seed": other.seed, **stats(compare(kept_full[k], as_dataset("seed", grid, cells2, paths2)))}
+        )
+        log(f"{scene}: seed floor at t={k}: {100 * floors[-1]['agreement']:.1f} %")
+    host_after = machine()
+    return summarize(
+        scene,
+        mv,
+        period,
+        rt,
+        config,
+        rows,
+        floors,
+        compile_s=compile_s,
+        trace_s=trace_s,
+        tables_s=tables_s,
+        tol_pp=tol_pp,
+        host_before=host_before,
+        host_after=host_after,
+    )
+
+
+def summarize(scene, mv, period, rt, config, rows, floors, *, compile_s, trace_s, tables_s, tol_pp, **hosts) -> dict:
+    diff = [r for r in rows if r["mode"] == "differential"]
+    agree = np.array([r["differential_vs_full"]["all"]["agreement"] for r in diff])
+    speed = np.array([r["speedup"] for r in diff], dtype=float)
+    diff_total = float(sum(r["differential_s"] for r in diff))
+    full_total = float(sum(r["full_s"] for r in diff))
+    floor_min = min(f["agreement"] for f in floors) if floors else float("nan")
+    at_floor = [bool(a >= floor_min - tol_pp / 100) for a in agree] if floors else []
+    build_s = trace_s + tables_s
+    goals = {
+        "speedup": {
+            "goal": f"every differential snapshot >= {SPEEDUP_GOAL:g}x cheaper than a full trace (set on dallas-q3)",
+            "min": float(speed.min()),
+            "snapshots_meeting": int((speed >= SPEEDUP_GOAL).sum()),
+            "of": len(diff),
+            "met": bool((speed >= SPEEDUP_GOAL).all()),
+        },
+        "agreement": {
+            "goal": f"every differential snapshot's agreement >= the seed floor's lowest - {tol_pp:g} pp",
+            "floor_min": floor_min,
+            "min": float(agree.min()),
+            "mean": float(agree.mean()),
+            "snapshots_meeting": int(sum(at_floor)),
+            "of": len(diff),
+            "met": bool(all(at_floor)) if floors else None,
+        },
+    }
+    goals["build_time"] = {
+        "goal": f"a {BUILD_GOAL_SNAPSHOTS}-snapshot cubicle twin in <= {BUILD_GOAL_S:g} s on 2 cores (set on cubicle)",
+        "snapshots": len(rows),
+        "warm_s": round(build_s, 2),
+        "with_first_compile_s": round(build_s + compile_s, 2),
+        "met": bool(build_s <= BUILD_GOAL_S) if len(rows) == BUILD_GOAL_SNAPSHOTS else None,
+    }
+    return {
+        "scene": scene,
+        "snapshots": len(rows),
+        "own_horizon": period,
+        "dt_s": mv.dt_s,
+        "movers": len(mv.movers),
+        "grid": [mv.base.grid.nx, mv.base.grid.ny],
+        "rt": {k: getattr(rt, k) for k in ("max_depth", "samples_per_src", "batch_size", "seed", "batch_independent")},
+        "radius_m": max(config.retrace_radius_m, mv.base.grid.cell_m),
+        "first_compile_s": round(compile_s, 2),
+        "build_trace_s": round(trace_s, 2),
+        "build_tables_s": round(tables_s, 2),
+        "differential_total_s": round(diff_total, 2),
+        "full_total_s": round(full_total, 2),
+        "speedup_total": round(full_total / diff_total, 3) if diff_total > 0 else None,
+        "speedup_median": float(np.median(speed)),
+        "retraced_fraction_mean": float(np.mean([r["retraced_cells"] / r["free_cells"] for r in diff])),
+        "agreement_mean": float(agree.mean()),
+        "agreement_min": float(agree.min()),
+        "seed_floor": floors,
+        "goals": goals,
+        "per_snapshot": rows,
+        "machine": describe(hosts["host_before"]),
+        "machine_after": describe(hosts["host_after"]),
+        "machine_details": hosts["host_before"],
+    }
+
+
+def plot(res: dict, path: Path) -> None:
+    rows = res["per_snapshot"]
+    ks = np.array([r["k"] for r in rows])
+    diff_s = np.array([r["differential_s"] for r in rows])
+    full_s = np.array([r["full_s"] for r in rows])
+    fig, (ax, bx) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    colours = ["#9ecae1" if r["mode"] == "differential" else "#404040" for r in rows]
+    ax.bar(ks, diff_s, color=colours, label="built: differential from k-1 (dark: snapshot 0, full)")
+    ax.plot(ks, full_s, "o-", color="#d62728", ms=3, lw=1, label="full trace of the same instant")
+    ax.set_ylabel("seconds per snapshot")
+    ax.set_ylim(0, max(full_s.max(), diff_s.max()) * 1.15)
+    frac = ax.twinx()
+    frac.plot(ks[1:], [r["retraced_cells"] / r["free_cells"] for r in rows[1:]], ":", color="0.4", lw=1)
+    frac.set_ylim(0, 1.05)
+    frac.set_ylabel("fraction of free cells re-traced (dotted)")
+    ax.legend(loc="lower left", fontsize=8)
+    ax.set_title(
+        f"{res['scene']}/moving, {res['snapshots']} snapshots: differential {res['differential_total_s']:.0f} s vs "
+        f"full {res['full_total_s']:.0f} s for t >= 1 ({res['speedup_total']:.2f}x); build "
+        f"{res['goals']['build_time']['warm_s']:.0f} s warm",
+        fontsize=9,
+    )
+    d = [r for r in rows if r["mode"] == "differential"]
+    kd = [r["k"] for r in d]
+    for key, style, label in (
+        ("all", "o-", "all free cells"),
+        ("retraced", "^--", "re-traced cells"),
+        ("kept", "v--", "kept cells"),
+    ):
+        vals = [100 * r["differential_vs_full"][key]["agreement"] for r in d]
+        bx.plot(kd, vals, style, ms=3 if key == "all" else 2, lw=1.2 if key == "all" else 0.7, label=label)
+    static = [100 * r["snapshot0_vs_full"]["agreement"] for r in d]
+    bx.plot(kd, static, ":", color="0.4", lw=1, label="snapshot 0 reused")
+    for i, f in enumerate(res["seed_floor"]):
+        bx.axhline(
+            100 * f["agreement"],
+            color="k",
+            ls="-.",
+            lw=0.8,
+            label="seed floor (two full traces, seed +1)" if i == 0 else None,
+        )
+    bx.set_ylabel("agreement with the full trace [%]")
+    bx.set_xlabel("snapshot k")
+    bx.legend(loc="lower left", fontsize=8, ncol=2)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def markdown(res: dict) -> str:
+    def pct(x):
+        return f"{100 * x:.1f} %"
+
+    g = res["goals"]
+
+    def verdict(goal):
+        return "not evaluated" if goal["met"] is None else ("**met**" if goal["met"] else "**not met**")
+
+    floors = ", ".join(f"{pct(f['agreement'])} (t = {f['k']})" for f in res["seed_floor"]) or "not run"
+    rt = res["rt"]
+    lines = [
+        f"# `{res['scene']}/moving`: differential snapshots vs full traces",
+        "",
+        f"{res['snapshots']} snapshots of {res['dt_s']:g} s (the twin's own horizon: {res['own_horizon']}; "
+        + (
+            "past it the movers go round again, each snapshot still traced from the one before"
+            if res["snapshots"] > res["own_horizon"]
+            else "cut short"
+            if res["snapshots"] < res["own_horizon"]
+            else "all of it"
+        )
+        + f"), {res['movers']} movers, {res['grid'][0]} × {res['grid'][1]} cells, re-trace radius "
+        f"{res['radius_m']:g} m, max_depth {rt.get('max_depth')}, {rt.get('samples_per_src'):g} samples, batches of "
+        f"{rt.get('batch_size')}, seed {rt.get('seed')}"
+        + (", `--rt.batch-independent`" if rt.get("batch_independent") else "")
+        + f". Machine: {res['machine']} at the start, "
+        f"{res['machine_after']} at the end.",
+        "",
+        f"- First JIT compile (excluded from every time below): {res['first_compile_s']:.1f} s.",
+        f"- Build (`moving.trace_snapshots` + `moving_tables`, warm): {g['build_time']['warm_s']:.1f} s for "
+        f"{res['snapshots']} snapshots ({res['build_tables_s']:.1f} s of it joining the table); "
+        f"{g['build_time']['with_first_compile_s']:.1f} s with the compile.",
+        f"- Snapshots 1–{res['snapshots'] - 1}: differential {res['differential_total_s']:.1f} s in all vs full "
+        f"{res['full_total_s']:.1f} s ({res['speedup_total']:.2f}× in total, median {res['speedup_median']:.2f}× per "
+        f"snapshot, worst {g['speedup']['min']:.2f}×); {pct(res['retraced_fraction_mean'])} of the free cells "
+        "re-traced on average.",
+        f"- Agreement with the full trace of the same instant (strongest path, free cells): mean "
+        f"{pct(res['agreement_mean'])}, lowest {pct(res['agreement_min'])}; seed-noise floor {floors}.",
+        "",
+        "Goals:",
+        "",
+        f"- {g['speedup']['goal']}: {verdict(g['speedup'])} ({g['speedup']['snapshots_meeting']} of "
+        f"{g['speedup']['of']} snapshots; worst {g['speedup']['min']:.2f}×).",
+        f"- {g['agreement']['goal']}: {verdict(g['agreement'])} ({g['agreement']['snapshots_meeting']} of "
+        f"{g['agreement']['of']} snapshots).",
+        f"- {g['build_time']['goal']}: {verdict(g['build_time'])} ({g['build_time']['warm_s']:.1f} s warm for "
+        f"{g['build_time']['snapshots']} snapshots).",
+        "",
+        "| k | re-traced | differential s | full s | ratio | agreement all / re-traced / kept | median / p95 "
+        "abs. gain diff | snapshot 0 reused | previous full reused |",
+        "|---:|---:|---:|---:|---:|---|---:|---:|---:|",
+    ]
+    for r in res["per_snapshot"]:
+        if r["mode"] == "full":
+            lines.append(
+                f"| {r['k']} | {r['retraced_cells']} of {r['free_cells']} (full) | {r['differential_s']:.2f} | "
+                f"{r['full_s']:.2f} | – | (the reference) | – | – | – |"
+            )
+            continue
+        a = r["differential_vs_full"]
+        kept = pct(a["kept"]["agreement"]) if a["kept"]["cells"] else "–"
+        redo = pct(a["retraced"]["agreement"]) if a["retraced"]["cells"] else "–"
+        lines.append(
+            f"| {r['k']} | {r['retraced_cells']} of {r['free_cells']} | {r['differential_s']:.2f} | "
+            f"{r['full_s']:.2f} | {r['speedup']:.2f}× | {pct(a['all']['agreement'])} / {redo} / {kept} | "
+            f"{a['all']['gain_median_db']:.3f} / {a['all']['gain_p95_db']:.2f} dB | "
+            f"{pct(r['snapshot0_vs_full']['agreement'])} | {pct(r['previous_full_vs_full']['agreement'])} |"
+        )
+    repeats = [r for r in res["per_snapshot"] if "full_vs_full_periods_before" in r]
+    if repeats:
+        same = [r["full_vs_full_periods_before"]["agreement"] for r in repeats]
+        lines += [
+            "",
+            f"Snapshots {repeats[0]['k']}–{repeats[-1]['k']} show the movers where snapshot k mod "
+            f"{res['own_horizon']} (the twin's own horizon) does: their full traces agree with those in "
+            f"{pct(min(same))}–{pct(max(same))} of the cells (same scene, same seed).",
+        ]
+    lines += [
+        "",
+        "Snapshot 0 of the build is a full trace and the reference of t = 0; the seed floor compares a full trace "
+        "with seed + 1 to the one with the build's seed at the same instant.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", nargs="+", default=["cubicle", "dallas-q3"])
+    ap.add_argument(
+        "--snapshots",
+        nargs="+",
+        metavar="[SCENE=]T",
+        help="snapshots per scene: T for every scene or SCENE=T (default: cubicle=60, dallas-q3=4: a full Dallas Q3 "
+        f"trace takes minutes; other scenes {FALLBACK_SNAPSHOTS})",
+    )
+    ap.add_argument("--radius-m", type=float, default=BuildConfig.retrace_radius_m)
+    ap.add_argument(
+        "--seed-floor",
+        nargs="*",
+        type=int,
+        metavar="K",
+        help="snapshots at which to trace a second full trace with seed + 1 (the noise floor); with no K none. "
+        f"Default: 0, the middle and the last one when a full trace takes < {CHEAP_FULL_S:g} s, else 0",
+    )
+    ap.add_argument(
+        "--floor-tolerance-pp",
+        type=float,
+        default=0.5,
+        help="a snapshot agrees 'at the noise floor' when within this many percentage points of the lowest floor",
+    )
+    ap.add_argument(
+        "--batch-independent",
+        action="store_true",
+        help="trace with --rt.batch-independent (a cell's rows the same bytes in any batch; CPU only, slower); "
+        "results go to bench_moving_<scene>-batch-independent.*",
+    )
+    ap.add_argument("--out", type=Path, default=Path("results"))
+    args = ap.parse_args()
+    counts = snapshot_counts(args.snapshots, args.scenes)
+    for scene in args.scenes:
+        res = bench_scene(
+            scene, counts[scene], args.radius_m, args.seed_floor, args.floor_tolerance_pp, args.batch_independent
+        )
+        md = markdown(res)
+        stem = f"bench_moving_{scene}" + ("-batch-independent" if args.batch_independent else "")
+        plot(res, args.out / f"{stem}.png")
+        write_atomic(args.out / f"{stem}.md", md)
+        write_atomic(args.out / f"{stem}.json", json.dumps(res, indent=2) + "\n")
+        print(md, flush=True)
+
+
+if __name__ == "__main__":
+    main()
