@@ -234,7 +234,8 @@ def markdown(r: dict) -> str:
             if "error" in x:
                 lines.append(f"| {k} | error: {x['error']} | | |")
             else:
-                lines.append(f"| {k} ({x['device']}) | {x['cells']} | {x['cells_per_s']:.1f} | {x['first_call_s']:.1f} |")
+                rate, first = f"{x['cells_per_s']:.1f}", f"{x['first_call_s']:.1f}"
+                lines.append(f"| {k} ({x['device']}) | {x['cells']} | {rate} | {first} |")
         if "agreement_device_vs_cpu" in t:
             lines += [
                 "",
