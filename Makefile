@@ -76,13 +76,16 @@ publish:
 pull:
 	$(PY) -m dtradar_data pull $(NAME) $(ARGS)
 
-# Train the default agent on $(SCENE)'s blueprint twin -> runs/$(SCENE)/dqn/model.pt (ARGS="--preset paper" etc.).
+# Train the default agent on $(SCENE)'s blueprint twin -> runs/$(SCENE)/dqn/model.pt (ARGS="--preset paper" etc.);
+# VARIANT=moving trains it among the movers of the moving twin -> runs/$(SCENE)/dqn-moving/model.pt
 train:
-	$(PY) -m dtradar_rl train --scene $(SCENE) $(ARGS)
+	$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving --out runs/$(SCENE)/dqn-moving) $(ARGS)
 
-# Evaluate runs/$(SCENE)/dqn/model.pt on the blueprint and dynamic twins, beside the classical planner.
+# Evaluate runs/$(SCENE)/dqn/model.pt on the blueprint and dynamic twins, beside the classical planner; VARIANT=moving
+# adds the moving twin, and the agent trained among movers (runs/$(SCENE)/dqn-moving) when there is one -> runs/$(SCENE)/eval-moving
 eval:
 	$(PY) -m dtradar_rl eval --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variants blueprint dynamic moving) $(ARGS)
+	$(if $(and $(filter moving,$(VARIANT)),$(wildcard runs/$(SCENE)/dqn-moving/model.pt)),$(PY) -m dtradar_rl eval --scene $(SCENE) --variants moving --checkpoint runs/$(SCENE)/dqn-moving/model.pt --out runs/$(SCENE)/eval-moving --no-planner $(ARGS))
 
 # Offline RL with d3rlpy on a named logged dataset (--logged NAME, else <scene>/blueprint/<behaviour>, logged or
 # reused), e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
