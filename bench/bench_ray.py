@@ -48,6 +48,14 @@ def main() -> None:
         help="batch size of the indoor scenes: the default 1024 is one batch for the cubicle, which "
         "cannot be split over workers",
     )
+    ap.add_argument(
+        "--city-batch", type=int, default=0, help="batch size of the city scenes (0 = their settings' 1024)"
+    )
+    ap.add_argument(
+        "--batch-independent",
+        action="store_true",
+        help="trace with RTSettings.batch_independent: small batches then change no row, so they can balance workers",
+    )
     ap.add_argument("--workers", type=int, default=0, help="Ray workers (0 = one per core)")
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
@@ -59,6 +67,10 @@ def main() -> None:
         spec = load_scene_spec(scene, "blueprint")
         cfg = scene_config(BuildConfig(scene=scene), spec)
         settings = cfg.rt if spec.prisms or spec.base else replace(cfg.rt, batch_size=args.cubicle_batch)
+        if (spec.prisms or spec.base) and args.city_batch:
+            settings = replace(settings, batch_size=args.city_batch)
+        if args.batch_independent:
+            settings = replace(settings, batch_independent=True)
         free = int((~occupancy(spec)).sum())
         batches = -(-free // settings.batch_size)
         print(
