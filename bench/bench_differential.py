@@ -37,24 +37,13 @@ from dtradar_data.pipeline.builder import (
     trace_grid,
 )
 from dtradar_data.rt.compare import compare
+from dtradar_data.rt.compare import summarize as stats
 from dtradar_data.rt.tracer import RayTracer
 from dtradar_data.scenes import load_scene_spec
 
 
 def as_dataset(name: str, parent: Dataset, cells, paths) -> Dataset:
     return Dataset(name=name, table=cells, meta={"grid": parent.meta["grid"]}, paths_table=paths)
-
-
-def stats(c: dict, where: np.ndarray) -> dict:
-    sel = c["free"] & where
-    g = c["gain_diff_db"][sel]
-    g = g[~np.isnan(g)]
-    return {
-        "cells": int(sel.sum()),
-        "agreement": float(c["agree"][sel].mean()) if sel.any() else float("nan"),
-        "gain_median_db": float(np.median(g)) if g.size else float("nan"),
-        "gain_p95_db": float(np.percentile(g, 95)) if g.size else float("nan"),
-    }
 
 
 def bench_scene(scene: str, radius_m: float, seed_floor: bool, out: Path) -> dict:

@@ -47,6 +47,7 @@ from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.pipeline import differential, moving
 from dtradar_data.pipeline.builder import BuildConfig, scene_config, trace_grid
 from dtradar_data.rt.compare import compare
+from dtradar_data.rt.compare import summarize as stats
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer
 from dtradar_data.scenes import load_moving_scene
@@ -95,19 +96,6 @@ def with_horizon(moving_scene, snapshots: int):
 
 def as_dataset(name: str, grid: dict, cells, paths) -> Dataset:
     return Dataset(name=name, table=cells, meta={"grid": grid}, paths_table=paths)
-
-
-def stats(c: dict, where: np.ndarray | None = None) -> dict:
-    """Agreement rate and absolute total-gain differences of one comparison over the free cells (of ``where``)."""
-    sel = c["free"] if where is None else c["free"] & where
-    g = c["gain_diff_db"][sel]
-    g = g[~np.isnan(g)]
-    return {
-        "cells": int(sel.sum()),
-        "agreement": float(c["agree"][sel].mean()) if sel.any() else float("nan"),
-        "gain_median_db": float(np.median(g)) if g.size else float("nan"),
-        "gain_p95_db": float(np.percentile(g, 95)) if g.size else float("nan"),
-    }
 
 
 def seed_floor_snapshots(requested: list[int] | None, count: int, full0_s: float) -> list[int]:

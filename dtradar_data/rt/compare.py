@@ -72,3 +72,17 @@ def compare(ref: Dataset, got: Dataset) -> dict[str, np.ndarray]:
         "gain_diff_db": np.abs(gain(ref) - gain(got)),
         "free": free,
     }
+
+
+def summarize(c: dict[str, np.ndarray], where: np.ndarray | None = None) -> dict[str, float]:
+    """A :func:`compare` result over its free cells (of ``where``): how many, the strongest-path agreement rate, and
+    the median and 95th percentile of the absolute total-gain differences (NaN where there is nothing to count)."""
+    sel = c["free"] if where is None else c["free"] & where
+    g = c["gain_diff_db"][sel]
+    g = g[~np.isnan(g)]
+    return {
+        "cells": int(sel.sum()),
+        "agreement": float(c["agree"][sel].mean()) if sel.any() else float("nan"),
+        "gain_median_db": float(np.median(g)) if g.size else float("nan"),
+        "gain_p95_db": float(np.percentile(g, 95)) if g.size else float("nan"),
+    }

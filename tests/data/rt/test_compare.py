@@ -51,3 +51,19 @@ def test_a_cell_with_a_path_in_one_trace_only_disagrees_and_one_without_in_both_
 def test_grids_of_different_shapes_cannot_be_compared(ds):
     with pytest.raises(ValueError, match="shapes"):
         compare(ds, synthetic_dataset(4, 4))
+
+
+def test_a_comparison_summary_counts_free_cells_only_and_skips_cells_without_gain():
+    import numpy as np
+
+    from dtradar_data.rt.compare import summarize
+
+    c = {
+        "agree": np.array([True, False, True, True]),
+        "gain_diff_db": np.array([0.5, 1.0, np.nan, 9.0]),
+        "free": np.array([True, True, True, False]),
+    }
+    s = summarize(c)
+    assert s["cells"] == 3 and s["agreement"] == 2 / 3 and s["gain_median_db"] == 0.75
+    assert summarize(c, np.array([False, True, False, True]))["agreement"] == 0.0
+    assert np.isnan(summarize(c, np.zeros(4, bool))["agreement"])
