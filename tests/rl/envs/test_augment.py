@@ -17,14 +17,7 @@ from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import PRESETS, config_for
 from dtradar_rl.train.dqn import train
 
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """Small tensors: one torch thread (two collapse when another process keeps a core busy)."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

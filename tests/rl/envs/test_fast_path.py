@@ -12,13 +12,7 @@ from dtradar_rl.task.mdp import REWARDS
 from dtradar_rl.task.observations import OBS_PRESETS, Normalizer
 from dtradar_rl.task.twins import load_dataset
 
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def assert_bits_equal(a, b, what: str) -> None:
