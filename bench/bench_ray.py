@@ -1,17 +1,21 @@
 """Serial vs Ray ray tracing, side by side in one run: cells/s, the speed-up, and a projection to N machines.
 
-For each scene, the whole free grid is traced twice into fresh work folders: once by the serial executor (this
-process, one tracing thread), once by Ray workers on all cores (a local Ray started for the run; its start-up and
-each worker's scene build and JIT compile are included, as a user pays them). Both tables must be identical. The
+For each entry of ``--scenes`` the whole free grid of its blueprint(s) is traced twice into fresh work folders: once
+by the serial executor (this process, one tracing thread), once by Ray workers on all cores in one
+:class:`~dtradar_data.pipeline.executors.RaySession`, as ``build --executor ray`` runs (Ray's start-up, each worker's
+start and each scene build and JIT compile are included, as a user pays them). A city name (``dallas``) is all its
+quadrants in one build, so the workers stay warm from one quadrant to the next. Every table must be identical. The
 projection for N machines multiplies the measured per-worker rate by the workers, ignoring start-up and network.
 Results go to ``results/bench_ray.json`` and ``results/bench_ray.md``.
 
-    python bench/bench_ray.py [--scenes cubicle dallas-q3] [--cubicle-batch 128] [--workers 0]
+    python bench/bench_ray.py [--scenes cubicle dallas-q3 dallas] [--cubicle-batch 128] [--workers 0]
+                              [--batch-independent] [--city-batch 0]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import tempfile
@@ -21,21 +25,45 @@ from pathlib import Path
 
 from dtradar_data.core.machine import describe, machine
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.pipeline.batches import batch_layout
 from dtradar_data.pipeline.builder import BuildConfig, scene_config, trace_grid
-from dtradar_data.scenes import load_scene_spec
+from dtradar_data.pipeline.executors import RaySession
+from dtradar_data.scenes import build_targets, load_scene_spec
 from dtradar_data.store.versions import library_versions
 
 
-def timed(spec, settings, executor: str, workers: int):
+def timed(jobs, executor: str, workers: int):
+    """Trace every ``(spec, settings)`` of ``jobs`` as one build does; the tables and the seconds it took."""
+    tables = []
     with tempfile.TemporaryDirectory(prefix="dtradar-bench-ray-") as work:
         t0 = time.perf_counter()
-        cells, _, _, tracer = trace_grid(
-            spec, settings, Path(work), per_path=True, progress=False, executor=executor, workers=workers
-        )
+        with RaySession(None, workers) if executor == "ray" else contextlib.nullcontext():
+            for k, (spec, settings) in enumerate(jobs):
+                cells, _, _, tracer = trace_grid(
+                    spec,
+                    settings,
+                    Path(work) / str(k),
+                    per_path=True,
+                    progress=False,
+                    executor=executor,
+                    workers=workers,
+                )
+                if tracer is not None:
+                    tracer.close()
+                tables.append(cells)
         seconds = time.perf_counter() - t0
-    if tracer is not None:
-        tracer.close()
-    return cells, seconds
+    return tables, seconds
+
+
+def settings_for(spec, args):
+    cfg = scene_config(BuildConfig(scene=spec.scene), spec)
+    city = bool(spec.prisms or spec.base)
+    settings = cfg.rt if city else replace(cfg.rt, batch_size=args.cubicle_batch)
+    if city and args.city_batch:
+        settings = replace(settings, batch_size=args.city_batch)
+    if args.batch_independent:
+        settings = replace(settings, batch_independent=True)
+    return settings
 
 
 def main() -> None:
@@ -59,38 +87,34 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=0, help="Ray workers (0 = one per core)")
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
-    import ray
-
     workers = args.workers or os.cpu_count() or 1
     rows = []
-    for scene in args.scenes:
-        spec = load_scene_spec(scene, "blueprint")
-        cfg = scene_config(BuildConfig(scene=scene), spec)
-        settings = cfg.rt if spec.prisms or spec.base else replace(cfg.rt, batch_size=args.cubicle_batch)
-        if (spec.prisms or spec.base) and args.city_batch:
-            settings = replace(settings, batch_size=args.city_batch)
-        if args.batch_independent:
-            settings = replace(settings, batch_independent=True)
-        free = int((~occupancy(spec)).sum())
-        batches = -(-free // settings.batch_size)
+    for entry in args.scenes:
+        specs = [load_scene_spec(scene, "blueprint") for scene, _ in build_targets(entry, "blueprint")]
+        jobs = [(spec, settings_for(spec, args)) for spec in specs]
+        free = sum(int((~occupancy(spec)).sum()) for spec in specs)
+        layouts = [(int((~occupancy(s)).sum()), batch_layout(int((~occupancy(s)).sum()), st)) for s, st in jobs]
+        batches = sum(-(-n // size) for n, size in layouts)
+        settings = jobs[0][1]
+        name = entry if len(specs) > 1 else specs[0].name
         print(
-            f"{spec.name}: {free} free cells in {batches} batches of {settings.batch_size}, "
-            f"{settings.samples_per_src:.0e} rays, buffer {settings.max_num_paths_per_src:.0e}"
+            f"{name}: {len(specs)} scene(s), {free} free cells in {batches} batches "
+            f"({', '.join(str(size) for _, size in layouts)} cells each), {settings.samples_per_src:.0e} rays, "
+            f"buffer {settings.max_num_paths_per_src:.0e}" + (", batch-independent" if args.batch_independent else "")
         )
-        serial, serial_s = timed(spec, settings, "serial", 0)
+        serial, serial_s = timed(jobs, "serial", 0)
         print(f"  serial: {serial_s:.1f} s ({free / serial_s:.1f} cells/s)")
-        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
-        try:
-            on_ray, ray_s = timed(spec, settings, "ray", workers)
-        finally:
-            ray.shutdown()
-        used = min(workers, batches)
+        on_ray, ray_s = timed(jobs, "ray", workers)
+        used = min(workers, max(-(-n // size) for n, size in layouts))
         print(f"  ray ({used} workers): {ray_s:.1f} s ({free / ray_s:.1f} cells/s), speed-up {serial_s / ray_s:.2f}x")
         rows.append(
             {
-                "scene": spec.name,
+                "scene": name,
+                "scenes": [s.name for s in specs],
                 "free_cells": free,
                 "batch_size": settings.batch_size,
+                "cells_per_batch": [size for _, size in layouts],
+                "batch_independent": bool(args.batch_independent),
                 "batches": batches,
                 "samples_per_src": settings.samples_per_src,
                 "max_num_paths_per_src": settings.max_num_paths_per_src,
@@ -100,7 +124,7 @@ def main() -> None:
                 "ray_s": round(ray_s, 2),
                 "ray_cells_per_s": round(free / ray_s, 1),
                 "speedup": round(serial_s / ray_s, 2),
-                "identical_tables": bool(on_ray.equals(serial)),
+                "identical_tables": all(a.equals(b) for a, b in zip(on_ray, serial)),
                 "per_worker_cells_per_s": round(free / ray_s / used, 1),
             }
         )
@@ -131,8 +155,31 @@ def main() -> None:
             f"{4 * per_machine:.0f} / {16 * per_machine:.0f} |"
         )
     (args.out / "bench_ray.md").write_text("\n".join(lines) + "\n")
+    plot(rows, workers, args.out / "bench_ray.png", described)
     print("\n".join(lines))
     assert all(r["identical_tables"] for r in rows), "Ray and serial tables differ"
+
+
+def plot(rows, workers: int, path: Path, described: str) -> None:
+    """Serial and Ray cells/s of each entry side by side, the speed-up written over Ray's bar."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(1.8 + 1.6 * len(rows), 3.6))
+    x = range(len(rows))
+    ax.bar([i - 0.2 for i in x], [r["serial_cells_per_s"] for r in rows], 0.4, label="serial (1 thread)")
+    ax.bar([i + 0.2 for i in x], [r["ray_cells_per_s"] for r in rows], 0.4, label=f"Ray ({workers} workers)")
+    for i, r in zip(x, rows):
+        ax.annotate(f"{r['speedup']}x", (i + 0.2, r["ray_cells_per_s"]), ha="center", va="bottom", fontsize=9)
+    ax.set_xticks(list(x), [r["scene"] for r in rows])
+    ax.set_ylabel("cells / s (start-up included)")
+    ax.set_title(described, fontsize=8)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,25 @@ def batch_path(work_dir: Path, b: int) -> Path:
     return work_dir / f"batch_{b:05d}.npz"
 
 
+def batch_layout(n_cells: int, settings) -> int:
+    """The cells per trace call for a grid of ``n_cells`` free cells.
+
+    Sionna's own solver: ``settings.batch_size``, a part of the version (a cell's row depends on its batch).
+    Batch-independent tracing: as few calls as ``batch_size`` allows, made even (Dallas Q3's 1 950 cells at 1 024:
+    two calls of 975 instead of 1 024 + 926), so that Ray's workers finish together; the rows do not change."""
+    if not settings.batch_independent:
+        return settings.batch_size
+    calls = max(1, -(-n_cells // settings.batch_size))
+    return max(1, -(-n_cells // calls))
+
+
+def batch_dir(work_dir: Path, settings, size: int) -> Path:
+    """Where a build's batch files go: its work folder, or with batch-independent tracing (whose version leaves the
+    batch size out) a folder per layout in it, so a build resumed with another ``--rt.batch-size`` never reads a
+    batch file of another size as one of its own."""
+    return work_dir / f"batches-of-{size}" if settings.batch_independent else work_dir
+
+
 def trace_batch(
     tracer, points: np.ndarray, ix: np.ndarray, iy: np.ndarray, *, per_path: bool
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:

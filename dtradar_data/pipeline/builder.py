@@ -10,6 +10,7 @@ folder is removed once the version is stored.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import shutil
@@ -38,9 +39,9 @@ from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.geometry.xml_meshes import ground_height
 from dtradar_data.pipeline import differential, moving
-from dtradar_data.pipeline.batches import batch_path, load_batch, save_batch, trace_batch
+from dtradar_data.pipeline.batches import batch_dir, batch_layout, batch_path, load_batch, save_batch, trace_batch
 from dtradar_data.pipeline.coverage import COVERAGE_SUBCELLS, render_coverage_png
-from dtradar_data.pipeline.executors import check_ray_address, import_ray, trace_on_ray
+from dtradar_data.pipeline.executors import RaySession, check_ray_address, import_ray, trace_on_ray
 from dtradar_data.pipeline.resources import check_resources
 from dtradar_data.rt import features
 from dtradar_data.rt.settings import RTSettings
@@ -256,8 +257,10 @@ def trace_grid(
             f"all {blocked.size} cells of {spec.name} are blocked: nothing to trace",
             hint="use smaller cells (--cell-m for a city) or fix the grid in the scene file",
         )
-    n_batches = max(1, -(-len(points) // settings.batch_size))
+    size = batch_layout(len(points), settings)
+    n_batches = max(1, -(-len(points) // size))
     if work_dir is not None:
+        work_dir = batch_dir(work_dir, settings, size)
         work_dir.mkdir(parents=True, exist_ok=True)
     cell_parts, path_parts = [], []
     bar = tqdm(total=len(points), unit="cell", desc=f"ray tracing {spec.name}", disable=not progress)
@@ -274,6 +277,7 @@ def trace_grid(
             iy,
             work_dir,
             sorted(on_ray),
+            size=size,
             per_path=per_path,
             address=ray_address,
             workers=workers,
@@ -282,7 +286,7 @@ def trace_grid(
     elif executor != "serial":
         raise InvalidSettingError(f"--executor {executor!r} is not an executor", hint="use serial or ray")
     for b in range(n_batches):
-        sl = slice(b * settings.batch_size, (b + 1) * settings.batch_size)
+        sl = slice(b * size, (b + 1) * size)
         cache = batch_path(work_dir, b) if work_dir is not None else None
         if cache is not None and cache.exists():
             cells, paths = load_batch(cache)
@@ -339,7 +343,7 @@ def build_one(spec, config: BuildConfig) -> Dataset:
         work_dir.parent / f"{version}.lock",
         f"building {name} version {version}" + (" (differential)" if parent is not None else ""),
         then="this build reuses that version",
-        progress=lambda: _work_progress(work_dir, spec, config.rt.batch_size),
+        progress=lambda: _work_progress(work_dir, spec, config.rt),
     ):
         if local.version_exists(ds_id, version):
             print(f"{name}: version {version} already built, reusing it")
@@ -376,12 +380,14 @@ def build_one(spec, config: BuildConfig) -> Dataset:
         return _trace_and_store(spec, config, ds_id, version, inputs, work_dir)
 
 
-def _work_progress(work_dir: Path, spec, batch_size: int) -> str:
+def _work_progress(work_dir: Path, spec, settings: RTSettings) -> str:
     """How far the build holding a version's lock has come, from its work folder's finished batch files."""
-    done = len(list(work_dir.glob("batch_*.npz"))) if work_dir.is_dir() else 0
+    size = batch_layout(int((~occupancy(spec)).sum()), settings)
+    where = batch_dir(work_dir, settings, size)
+    done = len(list(where.glob("batch_*.npz"))) if where.is_dir() else 0
     if not done:
         return "it has finished no trace batch yet"
-    return f"it has finished {done} of {-(-int((~occupancy(spec)).sum()) // batch_size)} trace batches"
+    return f"it has finished {done} of {-(-int((~occupancy(spec)).sum()) // size)} trace batches"
 
 
 def differential_parent(spec, config: BuildConfig):
@@ -509,7 +515,7 @@ def _store(
                 "num_with_paths": int(np.count_nonzero(cells.column("num_paths").to_numpy() > 0)),
                 "num_paths_total": paths.num_rows if paths is not None else None,
                 "trace_seconds": round(trace_s, 2),
-                **(_retraced(work_dir) if settings.batch_independent else {}),
+                **(_retraced(work_dir, settings, num_free) if settings.batch_independent else {}),
             },
         }
         out = writing.write_version(ds_id, version, cells, meta, paths=paths, extra_files=extra)
@@ -520,10 +526,11 @@ def _store(
     return local.load(name, revision=version)
 
 
-def _retraced(work_dir: Path) -> dict[str, int]:
+def _retraced(work_dir: Path, settings: RTSettings, free_cells: int) -> dict[str, int]:
     """How many cells a batch-independent build re-traced because their call's path buffer filled (the batch files'
-    ``retrace_depth``), for the card."""
-    depth = [load_batch(p)[0].get("retrace_depth") for p in sorted(work_dir.glob("batch_*.npz"))]
+    ``retrace_depth``, of this build's layout only), for the card."""
+    where = batch_dir(work_dir, settings, batch_layout(free_cells, settings))
+    depth = [load_batch(p)[0].get("retrace_depth") for p in sorted(where.glob("batch_*.npz"))]
     depth = [d for d in depth if d is not None]
     if not depth:
         return {}
@@ -637,7 +644,16 @@ def build(config: BuildConfig) -> list[Dataset]:
         check_resources(spec.name, int((~occupancy(spec)).sum()), cfg.rt, work_root(), per_path=cfg.per_path)
     if config.executor == "ray" and not (config.differential and all(s.variant == "dynamic" for s in specs)):
         check_ray_address(config.ray_address)
-    return [build_one(spec, config) for spec in specs]
+    with executor_session(config):
+        return [build_one(spec, config) for spec in specs]
+
+
+def executor_session(config: BuildConfig):
+    """The context a build's scenes are traced in: with ``--executor ray`` one :class:`RaySession` for all of them
+    (Ray started once, its workers warm from one scene to the next), else nothing."""
+    if config.executor == "ray":
+        return RaySession(config.ray_address, config.workers)
+    return contextlib.nullcontext()
 
 
 # ------------------------------------------------------------------------------------------- moving twins
@@ -689,7 +705,8 @@ def build_moving(config: BuildConfig, *, snapshots: int | None = None) -> list[D
         check_resources(m.name, free, cfg.rt, work_root(), per_path=cfg.per_path)
     if config.executor == "ray":
         check_ray_address(config.ray_address)
-    return [build_moving_one(m, config) for m in scenes]
+    with executor_session(config):
+        return [build_moving_one(m, config) for m in scenes]
 
 
 def build_moving_one(moving_scene, config: BuildConfig) -> Dataset:

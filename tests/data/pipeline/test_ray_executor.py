@@ -91,3 +91,19 @@ def test_asking_for_ray_without_ray_installed_names_the_install_command(monkeypa
     monkeypatch.setattr(builtins, "__import__", no_ray)
     with pytest.raises(MissingDependencyError, match=r"dtradar\[ray\]"):
         BuildConfig(scene="cubicle", executor="ray")
+
+
+def test_a_ray_session_keeps_its_workers_warm_from_one_scene_to_the_next(small_cubicle, local_ray, tmp_path):
+    from dtradar_data.pipeline.executors import RaySession
+
+    settings = replace(config().rt, batch_size=8)
+    meeting = load_scene_spec("meeting", "blueprint")
+    meeting = replace(meeting, grid=replace(meeting.grid, nx=5, ny=4))
+    with RaySession(workers=2) as session:
+        first = builder.trace_grid(small_cubicle, settings, tmp_path / "a", progress=False, executor="ray")[0]
+        pids = sorted(ray.get([a.pid.remote() for a in session.actors]))
+        second = builder.trace_grid(meeting, settings, tmp_path / "b", progress=False, executor="ray")[0]
+        assert sorted(ray.get([a.pid.remote() for a in session.actors])) == pids, "the same workers, not new ones"
+    assert ray.is_initialized(), "a Ray the caller started stays up"
+    assert first.equals(builder.trace_grid(small_cubicle, settings, None, progress=False)[0])
+    assert second.equals(builder.trace_grid(meeting, settings, None, progress=False)[0])
