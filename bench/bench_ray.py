@@ -55,6 +55,51 @@ def timed(jobs, executor: str, workers: int):
     return tables, seconds
 
 
+def _tracer_process(scene: str, settings, cells: int, barrier, out) -> None:
+    """One tracer process of :func:`contention`: the scene built and warmed first, then ``cells`` cells timed."""
+    import numpy as np
+
+    from dtradar_data.rt.tracer import RayTracer
+
+    spec = load_scene_spec(scene, "blueprint")
+    xs, ys = spec.grid.centres()
+    iy, ix = np.nonzero(~occupancy(spec))
+    points = np.stack([xs[ix], ys[iy], np.full(len(ix), spec.rx_height_m)], axis=1)
+    tracer = RayTracer(spec, settings)
+    tracer.trace(points[:4])  # scene build and kernel compile out of the timing
+    barrier.wait()
+    t0 = time.perf_counter()
+    tracer.trace(points[:cells])
+    out.put(time.perf_counter() - t0)
+
+
+def contention(scene: str, settings, workers: int, cells: int = 400) -> dict:
+    """What this machine itself allows ``workers`` tracers, without Ray: the same call timed in one process alone,
+    then in ``workers`` processes at once (started together; scene builds not timed). The ceiling of any executor is
+    ``workers * alone / together``."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    seconds = {}
+    for n in (1, workers):
+        barrier, out = ctx.Barrier(n), ctx.Queue()
+        procs = [ctx.Process(target=_tracer_process, args=(scene, settings, cells, barrier, out)) for _ in range(n)]
+        for proc in procs:
+            proc.start()
+        times = [out.get() for _ in procs]
+        for proc in procs:
+            proc.join()
+        seconds[n] = max(times)
+    return {
+        "scene": scene,
+        "cells": cells,
+        "alone_s": round(seconds[1], 2),
+        "together_s": round(seconds[workers], 2),
+        "processes": workers,
+        "ceiling_speedup": round(workers * seconds[1] / seconds[workers], 2),
+    }
+
+
 def settings_for(spec, args):
     cfg = scene_config(BuildConfig(scene=spec.scene), spec)
     city = bool(spec.prisms or spec.base)
@@ -68,7 +113,7 @@ def settings_for(spec, args):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scenes", nargs="+", default=["cubicle", "dallas-q3"])
+    ap.add_argument("--scenes", nargs="*", default=["cubicle", "dallas-q3"])
     ap.add_argument(
         "--cubicle-batch",
         type=int,
@@ -85,6 +130,11 @@ def main() -> None:
         help="trace with RTSettings.batch_independent: small batches then change no row, so they can balance workers",
     )
     ap.add_argument("--workers", type=int, default=0, help="Ray workers (0 = one per core)")
+    ap.add_argument(
+        "--contention",
+        default="dallas-q3",
+        help="scene of the machine's own ceiling: one tracer alone vs one per worker at once, no Ray ('' = skip)",
+    )
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
     workers = args.workers or os.cpu_count() or 1
@@ -128,6 +178,14 @@ def main() -> None:
                 "per_worker_cells_per_s": round(free / ray_s / used, 1),
             }
         )
+    ceiling = None
+    if args.contention:
+        spec = load_scene_spec(args.contention, "blueprint")
+        ceiling = contention(args.contention, settings_for(spec, args), workers)
+        print(
+            f"ceiling: {ceiling['cells']} cells of {args.contention} in {ceiling['alone_s']} s alone, "
+            f"{ceiling['together_s']} s with {workers} at once: at most {ceiling['ceiling_speedup']}x on this machine"
+        )
     host = machine()
     described = f"{describe(host)}, no GPU (LLVM backend)"
     load = host["load_average"][0] if host["load_average"] else None
@@ -136,6 +194,7 @@ def main() -> None:
         "load_average_at_end": load,
         "machine_details": host,
         "rows": rows,
+        "ceiling": ceiling,
         "library_versions": library_versions(),
     }
     args.out.mkdir(parents=True, exist_ok=True)
@@ -154,8 +213,16 @@ def main() -> None:
             f"{r['ray_workers']} | {r['ray_cells_per_s']} | {r['speedup']}× | {r['identical_tables']} | "
             f"{4 * per_machine:.0f} / {16 * per_machine:.0f} |"
         )
+    if ceiling:
+        lines += [
+            "",
+            f"The machine's own ceiling (no Ray): {ceiling['cells']} cells of {ceiling['scene']} traced in "
+            f"{ceiling['alone_s']} s by one process alone, {ceiling['together_s']} s by each of {workers} at once: "
+            f"at most {ceiling['ceiling_speedup']}× on {workers} workers before any start-up.",
+        ]
     (args.out / "bench_ray.md").write_text("\n".join(lines) + "\n")
-    plot(rows, workers, args.out / "bench_ray.png", described)
+    if rows:
+        plot(rows, workers, args.out / "bench_ray.png", described)
     print("\n".join(lines))
     assert all(r["identical_tables"] for r in rows), "Ray and serial tables differ"
 
