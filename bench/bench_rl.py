@@ -39,7 +39,7 @@ from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import auto_threads, describe, machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
-from dtradar_rl.train.config import config_for
+from dtradar_rl.train.config import DEFAULT_PRESET, config_for
 from dtradar_rl.train.dqn import train
 
 PAPER_TRAIN_S = 46 * 60.0
@@ -76,6 +76,9 @@ class BenchConfig:
     robust: bool = True
     """also train the robust preset (tuned + random extra obstacles while training) with the same budget, and
     report it side by side with the tuned agent"""
+    default: bool = True
+    """also train the default preset (what `make train` runs: the memory agent with noise) with the same budget, and
+    report its wall time beside SB3's (the run a user gets, so the ratio a user sees)"""
     sb3: bool = True
     """also train Stable-Baselines3 DQN with the same budget on the gymnasium env"""
     sb3_max_seconds: float = 300.0
@@ -303,6 +306,34 @@ def main(cfg: BenchConfig) -> dict:
         }
         print(f"robust DQN: {r_result.env_steps} env steps, {r_result.updates} updates in {r_result.wall_s:.1f} s")
 
+    default = None
+    if cfg.default:
+        d_cfg = config_for(
+            DEFAULT_PRESET,
+            scene=scene,
+            total_env_steps=cfg.budget,
+            out=f"{cfg.runs}/{scene}/dqn_default",
+            threads=threads,
+            checkpoint_every=0,
+        )
+        d_result = train(d_cfg, dataset=ds)
+        d_policy = load_policy(d_result.checkpoint)
+        label = f"ours (default, {DEFAULT_PRESET})"
+        m_dbp, _ = evaluate(d_policy, ds, pairs=cfg.pairs, latency=False)
+        rows.append({"case": f"{label}: {ds.name} -> {ds.name}", **m_dbp.to_dict()})
+        if dyn is not None:
+            m, _ = evaluate(d_policy, dyn, pairs=cfg.pairs, latency=False)
+            rows.append({"case": f"{label}: {ds.name} -> {dyn.name}", **m.to_dict()})
+        default = {
+            "config": d_cfg.to_dict(),
+            "env_steps": d_result.env_steps,
+            "updates": d_result.updates,
+            "wall_s": d_result.wall_s,
+            "blueprint_success": m_dbp.success_rate,
+            "blueprint_spl": m_dbp.spl,
+        }
+        print(f"default DQN: {d_result.env_steps} env steps, {d_result.updates} updates in {d_result.wall_s:.1f} s")
+
     sb3 = run_sb3(ds, dyn, cfg, ours_cfg, threads) if cfg.sb3 else {"skipped": "--no-sb3"}
     for twin in ("blueprint", "dynamic"):
         if twin in sb3:
@@ -327,11 +358,14 @@ def main(cfg: BenchConfig) -> dict:
             "goal_met": bool(result.wall_s <= 60 and m_bp.success_rate >= 0.95 and m_bp.spl >= 0.9),
         },
         "train_robust": robust,
+        "train_default": default,
         "eval": rows,
         "sb3": sb3,
     }
     if "wall_s_for_budget" in sb3:
         report["train"]["speedup_vs_sb3"] = sb3["wall_s_for_budget"] / result.wall_s
+        if default is not None:
+            default["speedup_vs_sb3"] = sb3["wall_s_for_budget"] / default["wall_s"]
 
     out.mkdir(parents=True, exist_ok=True)
     write_atomic(out / f"{stem}.json", json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n")
@@ -404,6 +438,13 @@ def render_markdown(r: dict) -> str:
             f"| wall time, same budget | {t['wall_s']:.1f} s | "
             f"SB3 DQN {sb3['wall_s_for_budget']:.0f} s{cap} | {t['speedup_vs_sb3']:.1f}x faster |"
         )
+        dft = r.get("train_default")
+        if dft and "speedup_vs_sb3" in dft:
+            lines.append(
+                f"| wall time, same budget, default preset ({dft['config']['preset']}, {dft['updates']:,} updates) | "
+                f"{dft['wall_s']:.1f} s | SB3 DQN {sb3['wall_s_for_budget']:.0f} s | "
+                f"{dft['speedup_vs_sb3']:.1f}x faster |"
+            )
     lines += [
         "",
         (
