@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-nav bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -148,6 +148,10 @@ bench-ray:
 # One robot's decision time: p50/p99 with 1 and 2 torch threads, idle and beside a busy process -> results/bench_latency_*
 bench-latency:
 	$(PY) bench/bench_latency.py --scene $(SCENE) $(ARGS)
+
+# The training loop's torch threads: 1 vs 2, idle and beside a busy process -> results/bench_threads_$(SCENE).*
+bench-threads:
+	$(PY) bench/bench_threads.py --scene $(SCENE) $(ARGS)
 
 # The default agent, SB3 DQN and the planner on every twin, with and without noise and a tx pose error -> results/bench_nav.*
 bench-nav:
