@@ -48,6 +48,7 @@ from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import RayTracer, active_variant
 from dtradar_data.scenes import build_targets, load_moving_scene, load_scene_spec
 from dtradar_data.scenes.model import Box
+from dtradar_data.scenes.movers import MAX_SNAPSHOTS
 from dtradar_data.scenes.options import check_scene_options
 from dtradar_data.scenes.tx_pose import check_tx_pose_error, tx_pose_error
 from dtradar_data.store import local, versions, writing
@@ -115,6 +116,10 @@ class BuildConfig:
     named <scene>-txpose (e.g. cubicle-txpose/blueprint); see dtradar_data.scenes.tx_pose."""
     tx_pose_seed: int = 0
     """With --tx-pose-error: the seed of the move's direction and of the turn's axis."""
+    horizon_s: float | None = None
+    """With --variant moving: how long the moving twin lasts, in seconds, instead of the scene file's horizon_s
+    (default: the movers' common period); rounded to whole robot steps (the file's dt_s); past the period the movers
+    go on walking. Part of the version."""
 
     def __post_init__(self) -> None:
         # the scene options as the command line checks them (NaN, infinity, sizes), for a config built in Python too
@@ -142,6 +147,10 @@ class BuildConfig:
             )
         if self.variant == MOVING_VARIANT:
             self._check_moving()
+        elif self.horizon_s is not None:
+            raise InvalidSettingError(
+                "--horizon-s applies to --variant moving only", hint="add --variant moving, or drop it"
+            )
         if self.differential and self.variant == "blueprint":
             raise InvalidSettingError(
                 "--differential applies to dynamic twins only: a blueprint has no parent to start from, it is always "
@@ -177,6 +186,11 @@ class BuildConfig:
 
     def _check_moving(self) -> None:
         """The options a moving twin's build refuses rather than ignores."""
+        if self.horizon_s is not None and (not math.isfinite(self.horizon_s) or self.horizon_s <= 0):
+            raise InvalidSettingError(
+                f"--horizon-s {self.horizon_s} must be a finite number of seconds > 0",
+                hint="e.g. --horizon-s 60, or drop it for the movers' common period",
+            )
         if self.differential:
             raise InvalidSettingError(
                 "--differential does not apply to --variant moving: a moving twin is always traced differentially, "
@@ -676,11 +690,29 @@ def moving_build_inputs(moving_scene, config: BuildConfig, *, libraries: dict[st
 
 
 def moving_scenes(config: BuildConfig) -> list:
-    """The moving twins ``build(config)`` with ``variant="moving"`` traces (a city's: its ``[moving]`` quadrant's)."""
-    return [
+    """The moving twins ``build(config)`` with ``variant="moving"`` traces (a city's: its ``[moving]`` quadrant's),
+    over ``config.horizon_s`` when given."""
+    scenes = [
         load_moving_scene(scene, footprints=config.osm, cell_m=config.cell_m)
         for scene, _ in build_targets(config.scene, MOVING_VARIANT)
     ]
+    return scenes if config.horizon_s is None else [with_horizon(m, config.horizon_s) for m in scenes]
+
+
+def with_horizon(moving_scene, horizon_s: float):
+    """``moving_scene`` over ``horizon_s`` seconds (``--horizon-s``): whole steps of its ``dt_s``, 1 to
+    :data:`~dtradar_data.scenes.movers.MAX_SNAPSHOTS`, else :class:`InvalidSettingError` saying which horizon fits."""
+    dt = moving_scene.dt_s
+    snapshots = round(horizon_s / dt)
+    if not 1 <= snapshots <= MAX_SNAPSHOTS:
+        raise InvalidSettingError(
+            f"--horizon-s {horizon_s:g} makes {snapshots} snapshots of {moving_scene.name} (one per robot step of "
+            f"{dt:g} s); a moving twin has 1 to {MAX_SNAPSHOTS}",
+            hint=f"give --horizon-s between {dt:g} and {MAX_SNAPSHOTS * dt:g}, or drop it for the movers' common "
+            f"period ({moving_scene.horizon_s:g} s)",
+        )
+    provenance = {**moving_scene.provenance, "snapshots": snapshots, "horizon_from": "--horizon-s"}
+    return dataclasses.replace(moving_scene, snapshots=snapshots, provenance=provenance)
 
 
 def build_moving(config: BuildConfig, *, snapshots: int | None = None) -> list[Dataset]:
