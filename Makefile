@@ -77,9 +77,10 @@ pull:
 	$(PY) -m dtradar_data pull $(NAME) $(ARGS)
 
 # Train the default agent on $(SCENE)'s blueprint twin -> runs/$(SCENE)/dqn/model.pt (ARGS="--preset paper" etc.);
-# VARIANT=moving trains it among the movers of the moving twin -> runs/$(SCENE)/dqn-moving/model.pt
+# VARIANT=moving trains it among the movers of the moving twin, sensing the cells up to 4 away (--sense-radius 4)
+# -> runs/$(SCENE)/dqn-moving/model.pt
 train:
-	$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving --out runs/$(SCENE)/dqn-moving) $(ARGS)
+	$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving --sense-radius 4 --out runs/$(SCENE)/dqn-moving) $(ARGS)
 
 # Evaluate runs/$(SCENE)/dqn/model.pt on the blueprint and dynamic twins, beside the classical planner; VARIANT=moving
 # adds the moving twin, and the agent trained among movers (runs/$(SCENE)/dqn-moving) when there is one -> runs/$(SCENE)/eval-moving

@@ -154,12 +154,18 @@ class Policy:
             memory_bumps=getattr(self.config, "memory_bumps", False),
             memory_visits=getattr(self.config, "memory_visits", False),
             obs=self.obs_preset,
+            sense_radius=self.sense_radius,
             normalizer=self.normalizer,
             **kwargs,
         )
 
+    @property
+    def sense_radius(self) -> int:
+        """Cells the policy senses around the robot (1: its four neighbours; configs from before the setting: 1)."""
+        return int(getattr(self.config, "sense_radius", 1))
+
     def observations(self, ds: Dataset):
-        return build_observations(ds, self.obs_preset, self.normalizer)
+        return build_observations(ds, self.obs_preset, self.normalizer, self.sense_radius)
 
 
 def _relink(module: QNetwork, _incompatible_keys) -> None:

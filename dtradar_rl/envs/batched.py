@@ -19,7 +19,9 @@ its next reset, an extra-blocked cell behaves like a blocked cell of the table:
 
 * a move into it is a **collision** (the robot stays, collision penalty);
 * seen from a neighbouring cell (``neighbors`` preset), its 8 radio features read as missing (normalised value 0)
-  and its has-radio flag as 0, exactly as a blocked neighbour in a ray-traced table.
+  and its has-radio flag as 0, exactly as a blocked neighbour in a ray-traced table; with a wider sensing radius
+  (:mod:`dtradar_rl.task.observations`) its flags in the ring read 0 too, now and in the snapshot before (it stands
+  there the whole episode).
 
 What it does *not* simulate: in a real re-traced twin a new object also changes the radio features of the free
 cells around it (new reflections, shadowing of the strongest path), the robot's own cell included. That needs a ray
@@ -85,7 +87,13 @@ from dtradar_rl.task.mdp import (
     reward_fn,
 )
 from dtradar_rl.task.noise import ERRORS, NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
-from dtradar_rl.task.observations import Normalizer, ObservationTable, build_observations, check_preset
+from dtradar_rl.task.observations import (
+    Normalizer,
+    ObservationTable,
+    build_observations,
+    check_preset,
+    ring_cells,
+)
 
 #: Above this many (target, cell) entries the geodesic distance table keeps only a random pool of targets.
 MAX_DISTANCE_TABLE = 32_000_000
@@ -209,6 +217,8 @@ class BatchedNavEnv:
             #: ``int32[num_envs, cells]``: BFS distance to each robot's target on its augmented grid (-1: cut off).
             self.adist = torch.full((n, mdp.num_cells), -1, dtype=torch.int32, device=dev)
             self._nbr_cols = self._neighbor_columns(obs_table)
+            #: ``long[cells, K]``: the wider ring around each cell (off the grid: cell 0, whose flag there is 0 anyway)
+            self._ring = t(ring_cells(mdp.nx, mdp.ny, obs_table.sense_radius).clip(min=0), torch.long)
 
         # Measurement noise (see dtradar_rl.task.noise): its own generator, so "none" leaves every draw unchanged.
         model = noise_model(noise)
@@ -352,12 +362,21 @@ class BatchedNavEnv:
 
     @classmethod
     def from_dataset(
-        cls, ds: Dataset, num_envs: int, *, obs: str = "goal", normalizer: Normalizer | None = None, **kwargs
+        cls,
+        ds: Dataset,
+        num_envs: int,
+        *,
+        obs: str = "goal",
+        normalizer: Normalizer | None = None,
+        sense_radius: int = 1,
+        **kwargs,
     ) -> BatchedNavEnv:
-        """Build from a dataset; ``normalizer`` defaults to statistics of ``ds`` itself."""
+        """Build from a dataset; ``normalizer`` defaults to statistics of ``ds`` itself; ``sense_radius`` widens the
+        ``neighbors`` observation (:func:`~dtradar_rl.task.observations.build_observations`)."""
         check_preset(obs)
         normalizer = normalizer or Normalizer.fit(ds)
-        return cls(GridMDP.from_dataset(ds), build_observations(ds, obs, normalizer), num_envs, **kwargs)
+        table = build_observations(ds, obs, normalizer, sense_radius)
+        return cls(GridMDP.from_dataset(ds), table, num_envs, **kwargs)
 
     @property
     def obs_dim(self) -> int:
@@ -614,6 +633,9 @@ class BatchedNavEnv:
             hidden = self.extra.gather(1, self.next_cell[self.cell])  # [N, 4]
             cols = self._nbr_cols.to(self.device)
             cell_part[:, cols.reshape(-1)] *= (~hidden).float().repeat_interleave(cols.shape[1], 1)
+        if self.aug_obstacles and self._ring.shape[1]:  # and in the wider ring, now and in the snapshot before
+            seen = (~self.extra.gather(1, self._ring.index_select(0, self.cell))).float()
+            cell_part[:, self.obs_table.ring_columns] *= seen.repeat(1, 2)
         return [cell_part, self.target_part.index_select(0, self.target)]
 
     def _potential(self, cell: torch.Tensor, target=None, tpool=None) -> torch.Tensor:

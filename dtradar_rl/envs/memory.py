@@ -17,7 +17,11 @@ episode, two maps of the grid:
 
 The observation is the ``neighbors`` one followed by a ``(2R+1) x (2R+1)`` window of each map centred on the robot
 (``memory_radius = R``; cells off the grid read as sensed). Everything the memory holds is derived from earlier
-observations, so the agent still moves from radio features alone; the window only keeps them.
+observations, so the agent still moves from radio features alone; the window only keeps them. With a wider sensing
+radius (:mod:`dtradar_rl.task.observations`) the ring's flags sit between the ``neighbors`` columns and the target's,
+and ``sensed`` still takes only the four neighbours: the map keeps what it sensed for the whole episode, so a mover
+seen passing 2..R cells away would stay in it as an obstacle long after it has gone (the ring is in the observation
+itself, now and a snapshot before).
 
 :class:`MemoryNavEnv` (batched torch) and :class:`MemoryGymEnv` (gymnasium) share one :class:`MemoryLayout` of index
 tables and are tested to agree step for step.
@@ -165,10 +169,18 @@ class MemoryNavEnv(BatchedNavEnv):
 
     @classmethod
     def from_dataset(
-        cls, ds: Dataset, num_envs: int, *, obs: str = "neighbors", normalizer: Normalizer | None = None, **kwargs
+        cls,
+        ds: Dataset,
+        num_envs: int,
+        *,
+        obs: str = "neighbors",
+        normalizer: Normalizer | None = None,
+        sense_radius: int = 1,
+        **kwargs,
     ) -> MemoryNavEnv:
         normalizer = normalizer or Normalizer.fit(ds)
-        return cls(GridMDP.from_dataset(ds), build_observations(ds, obs, normalizer), num_envs, **kwargs)
+        table = build_observations(ds, obs, normalizer, sense_radius)
+        return cls(GridMDP.from_dataset(ds), table, num_envs, **kwargs)
 
     @property
     def obs_dim(self) -> int:

@@ -116,7 +116,9 @@ class DtradarNavEnv(gym.Env):
     chosen preset (:mod:`dtradar_rl.task.observations`):
     ``paper`` (D = 10: x, y, AoA az/zen, AoD az/zen, coefficient real/imag, delay, phase; no target),
     ``goal`` (D = 12: paper + target x, y), ``neighbors`` (D = 48: paper + radio features and a has-radio flag of
-    the four neighbouring cells + target x, y).
+    the four neighbouring cells + target x, y). ``neighbors`` with ``sense_radius`` R > 1 adds, before the target,
+    the has-radio flags of the cells at Manhattan distance 2..R in this snapshot and in the one before
+    (``2 · (2R(R+1) - 4)`` columns).
 
     ## Rewards
     Chosen by name (:mod:`dtradar_rl.task.mdp`). ``paper``: ``-(dx² + dy²)`` (cell units, distance to the target after
@@ -143,7 +145,9 @@ class DtradarNavEnv(gym.Env):
     :class:`~dtradar_data.core.errors.InvalidSettingError`); ``normalizer``: feature statistics (default: fitted on
     ``dataset``; pass the training twin's when evaluating on another twin); ``render_mode``: ``None``, ``"ansi"`` or
     ``"rgb_array"``; ``noise``: measurement noise level (``"none"``, ``"realistic"``, ``"2x"``; see
-    :mod:`dtradar_rl.task.noise`), drawn anew at every reset and step from a generator seeded by ``reset(seed=...)``.
+    :mod:`dtradar_rl.task.noise`), drawn anew at every reset and step from a generator seeded by ``reset(seed=...)``;
+    ``sense_radius``: cells sensed around the robot (1: the four neighbours; more: ``neighbors`` only, see
+    :mod:`dtradar_rl.task.observations`).
 
     ## Info
     ``cell`` and ``target`` (ix, iy), ``collision``, ``is_success``, ``distance`` (breadth-first steps from the
@@ -151,7 +155,8 @@ class DtradarNavEnv(gym.Env):
     ``distance`` is the space-time one (fewest steps from the cell at this snapshot, waiting allowed; -1: never).
 
     ## Version History
-    * v0: initial version; the ``noise`` argument (default ``"none"``: unchanged) added later.
+    * v0: initial version; the ``noise`` argument (default ``"none"``: unchanged) and ``sense_radius`` (default 1:
+      unchanged) added later.
     """
 
     metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
@@ -165,6 +170,7 @@ class DtradarNavEnv(gym.Env):
         normalizer: Normalizer | dict | None = None,
         render_mode: str | None = None,
         noise: str | NoiseModel = "none",
+        sense_radius: int = 1,
     ):
         ds = load_dataset(dataset) if isinstance(dataset, str) else dataset
         self.dataset_name = ds.name
@@ -173,7 +179,7 @@ class DtradarNavEnv(gym.Env):
             normalizer = Normalizer.from_dict(normalizer)
         self.normalizer = normalizer or Normalizer.fit(ds)
         self.mdp = GridMDP.from_dataset(ds)
-        self.table = build_observations(ds, obs, self.normalizer)
+        self.table = build_observations(ds, obs, self.normalizer, sense_radius)
         self.moving = isinstance(self.mdp, MovingGridMDP)
         self.snapshots = self.mdp.snapshots if self.moving else 1
         self.max_steps = check_max_steps(max_steps) or self.mdp.max_steps

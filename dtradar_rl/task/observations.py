@@ -20,17 +20,30 @@ Presets (:data:`OBS_PRESETS`)
                     (as in ``paper`` without ``x, y``) and a flag that is 1 where the neighbour has radio features
                     (0 = blocked, off the grid or no path) + the target's ``x, y``. An agent can sense an obstacle
                     it has never seen (the dynamic twin) from the missing radio features next to it.
+
+Wider sensing (``sense_radius`` R > 1, ``neighbors`` only)
+---------------------------------------------------------
+The four neighbours sense a mover only once it is next to the robot, and a walker of the ray-traced rooms moves 2-3
+cells per snapshot. With ``sense_radius=R`` the cell part gets, after its 46 columns (so the ``neighbors`` layout that
+the memory env, the shield, :class:`~dtradar_rl.agents.planner.MoverGuard` and the noise read stays where it is),
+the has-radio flag of every cell at Manhattan distance 2..R (:func:`ring_offsets`: ``4 * d`` cells at distance
+``d``), first in the robot's snapshot ``t`` (``has_radio[dx,dy]``), then in the snapshot before, ``(t - 1) mod T``
+(``has_radio_before[dx,dy]``): two frames show a memoryless network which way a mover walks. At an episode's first
+step the snapshot before is the periodic world's, which is what a sensor running before the episode saw. On a
+static twin both blocks are the static map (a static and a moving twin's observations keep one width, so one agent
+acts on both). The flags are 0/1 like the neighbours' (not normalised). R = 1 adds nothing: the tables are the
+ones above, byte for byte.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import unknown_name
+from dtradar_data.core.errors import InvalidSettingError, unknown_name
 from dtradar_rl.task.mdp import ACTION_DELTAS
 
 #: The paper's ten inputs, in order (see the module docstring for the tenth).
@@ -55,6 +68,41 @@ def check_preset(name: str) -> str:
     if name not in OBS_PRESETS:
         raise unknown_name("observation preset", name, OBS_PRESETS)
     return name
+
+
+def check_sense_radius(radius, preset: str) -> int:
+    """``radius`` as the sensing radius of ``preset``, or :class:`InvalidSettingError`: a whole number >= 1, and
+    above 1 only with ``neighbors`` (the other presets sense no neighbour at all)."""
+    if isinstance(radius, (bool, np.bool_)) or not isinstance(radius, (int, np.integer)) or radius < 1:
+        raise InvalidSettingError(
+            f"sense radius must be an integer >= 1, got {radius!r}", hint="1 = the four neighbours only"
+        )
+    if radius > 1 and preset != "neighbors":
+        raise InvalidSettingError(
+            f"a sense radius above 1 widens the 'neighbors' observation, got preset {preset!r}",
+            hint="use obs='neighbors', or sense radius 1",
+        )
+    return int(radius)
+
+
+def ring_offsets(radius: int) -> np.ndarray:
+    """``int64[K, 2]``: the ``(dx, dy)`` of the cells at Manhattan distance 2..``radius`` (``K = 2R(R+1) - 4``), by
+    distance, then ``dy``, then ``dx``: the order of the wider sensing columns."""
+    out = []
+    for d in range(2, radius + 1):
+        for dy in range(-d, d + 1):
+            rest = d - abs(dy)
+            out += [(-rest, dy), (rest, dy)] if rest else [(0, dy)]
+    return np.array(out, np.int64).reshape(-1, 2)
+
+
+def ring_cells(nx: int, ny: int, radius: int) -> np.ndarray:
+    """``int64[cells, K]``: the cell at each of :func:`ring_offsets` around every cell, -1 off the grid."""
+    iy, ix = np.divmod(np.arange(nx * ny), nx)
+    off = ring_offsets(radius)
+    jx, jy = ix[:, None] + off[None, :, 0], iy[:, None] + off[None, :, 1]
+    inside = (jx >= 0) & (jx < nx) & (jy >= 0) & (jy < ny)
+    return np.where(inside, jy * nx + jx, -1)
 
 
 @dataclass(frozen=True)
@@ -115,6 +163,15 @@ class ObservationTable:
     normalizer: Normalizer | None = None
     #: snapshots of a moving twin (1: static)
     snapshots: int = 1
+    #: cells sensed around the robot: 1 = the four neighbours; R > 1 appends the wider ring's flags (module docstring)
+    sense_radius: int = 1
+
+    @property
+    def ring_columns(self) -> slice:
+        """The cell-part columns of the wider ring's flags (now, then the snapshot before); empty at radius 1."""
+        k = 2 * len(ring_offsets(self.sense_radius))
+        dc = self.cell_part.shape[1]
+        return slice(dc - k, dc)
 
     @property
     def dim(self) -> int:
@@ -130,14 +187,40 @@ class ObservationTable:
         return np.concatenate([self.cell_part[rows], self.target_part[target]], axis=-1)
 
 
-def build_observations(ds: Dataset, preset: str, normalizer: Normalizer) -> ObservationTable:
-    """The lookup tables of ``preset`` on ``ds``, normalised with ``normalizer`` (fitted on the training twin).
+def build_observations(ds: Dataset, preset: str, normalizer: Normalizer, sense_radius: int = 1) -> ObservationTable:
+    """The lookup tables of ``preset`` on ``ds``, normalised with ``normalizer`` (fitted on the training twin), with
+    the flags of the cells up to ``sense_radius`` away (``neighbors``; module docstring).
 
     On a moving twin: the tables of every snapshot stacked (each cell and its neighbours as they are in that
     snapshot); the target part is the static one (a target's position does not change when a mover covers it)."""
     check_preset(preset)
-    if ds.is_moving:
-        return _build_moving(ds, preset, normalizer)
+    radius = check_sense_radius(sense_radius, preset)
+    table = _build_moving(ds, preset, normalizer) if ds.is_moving else _build_static(ds, preset, normalizer)
+    return table if radius == 1 else _with_ring(table, ds.shape, radius)
+
+
+def _with_ring(table: ObservationTable, shape: tuple[int, int], radius: int) -> ObservationTable:
+    """``table`` with the wider ring's flags appended to its cell part, now and in the snapshot before."""
+    h, w = shape
+    n, snaps = h * w, table.snapshots
+    ring = ring_cells(w, h, radius)
+    has_radio = table.has_radio.reshape(snaps, n)
+    now = np.where(ring >= 0, has_radio[:, ring.clip(min=0)], False).astype(np.float32)  # [T, cells, K]
+    before = np.roll(now, 1, axis=0)  # row t holds snapshot t - 1 (mod T); a static twin's is itself
+    k = ring.shape[1]
+    cell_part = np.concatenate([table.cell_part, now.reshape(snaps * n, k), before.reshape(snaps * n, k)], 1)
+    dc = table.cell_part.shape[1]
+    labels = [f"[{dx:+d},{dy:+d}]" for dx, dy in ring_offsets(radius)]
+    names = (
+        table.names[:dc]
+        + tuple(f"has_radio{c}" for c in labels)
+        + tuple(f"has_radio_before{c}" for c in labels)
+        + table.names[dc:]
+    )
+    return replace(table, cell_part=np.ascontiguousarray(cell_part, np.float32), names=names, sense_radius=radius)
+
+
+def _build_static(ds: Dataset, preset: str, normalizer: Normalizer) -> ObservationTable:
     h, w = ds.shape
     n = h * w
     raw = ds.grid(list(normalizer.columns)).reshape(n, -1).astype(np.float64)
@@ -171,7 +254,7 @@ def build_observations(ds: Dataset, preset: str, normalizer: Normalizer) -> Obse
 
 
 def _build_moving(ds: Dataset, preset: str, normalizer: Normalizer) -> ObservationTable:
-    snaps = [build_observations(ds.snapshot(k), preset, normalizer) for k in range(ds.snapshots)]
+    snaps = [_build_static(ds.snapshot(k), preset, normalizer) for k in range(ds.snapshots)]
     n = snaps[0].target_part.shape[0]
     has_radio = np.concatenate([s.has_radio for s in snaps])
     # a target's part from a snapshot where its cell is free (a blocked cell's part is blanked)

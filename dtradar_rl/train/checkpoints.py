@@ -36,6 +36,7 @@ class RunFolderError(InvalidSettingError):
 RESUME_FAMILY: tuple[str, ...] = (
     "preset",
     "obs",
+    "sense_radius",
     "reward",
     "hidden",
     "num_envs",

@@ -42,6 +42,10 @@ class DQNConfig(TwinConfig):
     that no ray reached, which reads as "no radio" like an obstacle, can be told from a wall by trying it"""
     memory_visits: bool = False
     """memory agent: also observe how many times the robot has stood on its cell this episode (visits_here)"""
+    sense_radius: int = 1
+    """cells the robot senses around it: 1 = its four neighbours; R > 1 also observes whether each cell at Manhattan
+    distance 2..R has radio features, now and one snapshot before, so a mover is seen coming (needs --obs neighbors;
+    see dtradar_rl.task.observations)"""
     escape_after: int = 0
     """loop escape when acting (needs --memory-visits): a robot standing on a cell for the (k+1)-th time this episode
     takes a random move, so a greedy policy cannot repeat a cycle until the step limit (0 = off)"""
@@ -112,6 +116,7 @@ class DQNConfig(TwinConfig):
         super().check_ranges()
         self.check_at_least(
             1,
+            "sense_radius",
             "total_env_steps",
             "batch_size",
             "buffer_size",
@@ -160,6 +165,12 @@ class DQNConfig(TwinConfig):
             raise ConfigError(
                 f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
                 f"radio features), got --obs {self.obs}"
+            )
+        if self.sense_radius > 1 and self.obs != "neighbors":
+            raise ConfigError(
+                f"--sense-radius {self.sense_radius} widens the neighbours' flags, which only --obs neighbors "
+                f"observes, got --obs {self.obs}",
+                hint="use --obs neighbors, or --sense-radius 1",
             )
         noise_model(self.noise)
         if self.pair not in PAIR_MODES:

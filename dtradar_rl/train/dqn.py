@@ -137,6 +137,7 @@ def train(
         memory_bumps=cfg.memory_bumps,
         memory_visits=cfg.memory_visits,
         obs=cfg.obs,
+        sense_radius=cfg.sense_radius,
         normalizer=normalizer,
         reward=cfg.reward,
         max_steps=cfg.max_steps or (pair.cap if pair else None),
