@@ -322,6 +322,12 @@ def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, dev
             "the twin's observation only, not the agent's memory of the episode",
             hint='log with a memoryless agent: make train SCENE=<scene> ARGS="--preset tuned --out runs/<scene>/tuned"',
         )
+    if policy.sense_radius != 1:
+        raise ConfigError(
+            f"the checkpoint {path} senses the cells up to {policy.sense_radius} away (--sense-radius "
+            f"{policy.sense_radius}): a logged step holds the {obs!r} observation of the four neighbours only",
+            hint="log with an agent trained with --sense-radius 1 (the default of make train on a blueprint)",
+        )
     if policy.obs_preset != obs:
         raise ConfigError(
             f"the checkpoint {path} observes {policy.obs_preset!r}, the log {obs!r}",

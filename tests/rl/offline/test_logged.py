@@ -140,6 +140,18 @@ def test_a_mixture_splits_the_robots_between_its_components_and_checkpoints_ente
         log_dataset(dataclasses.replace(cfg, behaviour="epsilon-greedy", checkpoint=str(memory)), twin)
     assert "--preset tuned" in e.value.hint
 
+    wide_names = build_observations(twin, "neighbors", norm, sense_radius=2).names
+    wide = save_checkpoint(  # a wider sensing agent observes columns a logged step does not hold: refused, clearly
+        tmp_path / "wide" / "model.pt",
+        QNetwork(len(wide_names), (8,)),
+        dataclasses.replace(config_for("tuned", scene=SMALL, sense_radius=2), hidden=(8,)),
+        norm,
+        wide_names,
+        twin,
+    )
+    with pytest.raises(ConfigError, match="--sense-radius 2"):
+        log_dataset(dataclasses.replace(cfg, behaviour="epsilon-greedy", checkpoint=str(wide)), twin)
+
 
 def test_a_log_from_another_twin_or_preset_is_refused_by_the_trainer_with_a_typed_error(stores, twin, tmp_path):
     logged = log_dataset(CFG, twin)
