@@ -222,6 +222,36 @@ def run_sb3(ds, dyn, cfg, ours_cfg, threads) -> dict:
     return res
 
 
+def train_preset(cfg, preset: str, folder: str, ds, dyn, threads: int, rows: list, *, label: str, shields=(False,)):
+    """Train ``preset`` with the benchmark's budget, evaluate it on the blueprint and (each of ``shields``) the
+    dynamic twin into ``rows``; its record for the report."""
+    scene = ds.name.split("/")[0]
+    pcfg = config_for(
+        preset,
+        scene=scene,
+        total_env_steps=cfg.budget,
+        out=f"{cfg.runs}/{scene}/{folder}",
+        threads=threads,
+        checkpoint_every=0,
+    )
+    result = train(pcfg, dataset=ds)
+    policy = load_policy(result.checkpoint)
+    m_bp, _ = evaluate(policy, ds, pairs=cfg.pairs, latency=False)
+    rows.append({"case": f"ours ({label}): {ds.name} -> {ds.name}", **m_bp.to_dict()})
+    for shield in shields if dyn is not None else ():
+        m, _ = evaluate(policy, dyn, pairs=cfg.pairs, latency=False, shield=shield)
+        rows.append({"case": f"ours ({label}): {ds.name} -> {dyn.name}" + " (shielded)" * shield, **m.to_dict()})
+    print(f"{preset} DQN: {result.env_steps} env steps, {result.updates} updates in {result.wall_s:.1f} s")
+    return {
+        "config": pcfg.to_dict(),
+        "env_steps": result.env_steps,
+        "updates": result.updates,
+        "wall_s": result.wall_s,
+        "blueprint_success": m_bp.success_rate,
+        "blueprint_spl": m_bp.spl,
+    }
+
+
 def main(cfg: BenchConfig) -> dict:
     threads = cfg.threads or auto_threads()
     torch.set_num_threads(threads)
@@ -275,64 +305,26 @@ def main(cfg: BenchConfig) -> dict:
         rows.append({"case": f"ours (tuned): {ds.name} -> {dyn.name} (shielded)", **m_sh.to_dict()})
     print(f"tuned DQN: {result.env_steps} env steps, {result.updates} updates in {result.wall_s:.1f} s")
 
-    robust = None
-    if cfg.robust:
-        robust_cfg = config_for(
+    robust = (
+        train_preset(
+            cfg,
             "robust",
-            scene=scene,
-            total_env_steps=cfg.budget,
-            out=f"{cfg.runs}/{scene}/dqn_robust",
-            threads=threads,
-            checkpoint_every=0,
+            "dqn_robust",
+            ds,
+            dyn,
+            threads,
+            rows,
+            shields=(False, True),
+            label=f"robust, {config_for('robust').aug_obstacles} extra obstacles",
         )
-        r_result = train(robust_cfg, dataset=ds)
-        r_policy = load_policy(r_result.checkpoint)
-        label = f"ours (robust, {robust_cfg.aug_obstacles} extra obstacles)"
-        m_rbp, _ = evaluate(r_policy, ds, pairs=cfg.pairs, latency=False)
-        rows.append({"case": f"{label}: {ds.name} -> {ds.name}", **m_rbp.to_dict()})
-        if dyn is not None:
-            for shield in (False, True):
-                m, _ = evaluate(r_policy, dyn, pairs=cfg.pairs, latency=False, shield=shield)
-                rows.append(
-                    {"case": f"{label}: {ds.name} -> {dyn.name}" + (" (shielded)" if shield else ""), **m.to_dict()}
-                )
-        robust = {
-            "config": robust_cfg.to_dict(),
-            "env_steps": r_result.env_steps,
-            "updates": r_result.updates,
-            "wall_s": r_result.wall_s,
-            "blueprint_success": m_rbp.success_rate,
-            "blueprint_spl": m_rbp.spl,
-        }
-        print(f"robust DQN: {r_result.env_steps} env steps, {r_result.updates} updates in {r_result.wall_s:.1f} s")
-
-    default = None
-    if cfg.default:
-        d_cfg = config_for(
-            DEFAULT_PRESET,
-            scene=scene,
-            total_env_steps=cfg.budget,
-            out=f"{cfg.runs}/{scene}/dqn_default",
-            threads=threads,
-            checkpoint_every=0,
-        )
-        d_result = train(d_cfg, dataset=ds)
-        d_policy = load_policy(d_result.checkpoint)
-        label = f"ours (default, {DEFAULT_PRESET})"
-        m_dbp, _ = evaluate(d_policy, ds, pairs=cfg.pairs, latency=False)
-        rows.append({"case": f"{label}: {ds.name} -> {ds.name}", **m_dbp.to_dict()})
-        if dyn is not None:
-            m, _ = evaluate(d_policy, dyn, pairs=cfg.pairs, latency=False)
-            rows.append({"case": f"{label}: {ds.name} -> {dyn.name}", **m.to_dict()})
-        default = {
-            "config": d_cfg.to_dict(),
-            "env_steps": d_result.env_steps,
-            "updates": d_result.updates,
-            "wall_s": d_result.wall_s,
-            "blueprint_success": m_dbp.success_rate,
-            "blueprint_spl": m_dbp.spl,
-        }
-        print(f"default DQN: {d_result.env_steps} env steps, {d_result.updates} updates in {d_result.wall_s:.1f} s")
+        if cfg.robust
+        else None
+    )
+    default = (
+        train_preset(cfg, DEFAULT_PRESET, "dqn_default", ds, dyn, threads, rows, label=f"default, {DEFAULT_PRESET}")
+        if cfg.default
+        else None
+    )
 
     sb3 = run_sb3(ds, dyn, cfg, ours_cfg, threads) if cfg.sb3 else {"skipped": "--no-sb3"}
     for twin in ("blueprint", "dynamic"):
