@@ -101,20 +101,25 @@ class RaySession:
                 self.ray.shutdown()
                 self._started = False
 
-    def pool(self, name: str):
-        """The session's workers, started at the first call (one per CPU of the cluster, or ``workers``): waits
-        until the cluster can run one (:func:`~dtradar_data.core.ray_cluster.wait_for_cpus`) and one has started."""
+    def pool(self, name: str, need: int):
+        """Up to ``need`` of the session's workers (at most one per CPU of the cluster, or ``workers``), started as
+        needed and kept: waits until the cluster can run one (:func:`~dtradar_data.core.ray_cluster.wait_for_cpus`)
+        and the first has started."""
         if self.ray is None:
             self.ray = import_ray()
             self._started = start_ray(self.ray, self.address, self.workers)
         ray = self.ray
-        if not self.actors:
+        first = not self.actors
+        if first:
             wait_for_cpus(ray, 1, what="a trace worker", address=self.address)  # else the actors would wait for ever
-            cpus = int(ray.cluster_resources().get("CPU", 1))
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        want = max(1, min(need, self.workers or cpus))
+        if len(self.actors) < want:
             actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=TASK_RETRIES)(TraceWorker)
-            self.actors = [actor.remote() for _ in range(self.workers or cpus)]
+            self.actors += [actor.remote() for _ in range(want - len(self.actors))]
+        if first:
             _wait_for_a_worker(ray, self.actors, name, cpus)
-        return self.actors
+        return self.actors[:want]
 
     def scene_key(self) -> str:
         self._scenes += 1
@@ -149,7 +154,7 @@ def trace_on_ray(
 
 
 def _trace(session, spec, settings, points, ix, iy, work_dir, todo, size, per_path, bar) -> None:
-    actors = session.pool(getattr(spec, "name", "ray tracing"))[: len(todo)]
+    actors = session.pool(getattr(spec, "name", "ray tracing"), len(todo))
     ray = session.ray
     key = session.scene_key()
     scene = ray.put((spec, settings, per_path))  # once in the object store, not once per batch
