@@ -396,12 +396,13 @@ def build_one(spec, config: BuildConfig) -> Dataset:
 
 def _work_progress(work_dir: Path, spec, settings: RTSettings) -> str:
     """How far the build holding a version's lock has come, from its work folder's finished batch files."""
-    size = batch_layout(int((~occupancy(spec)).sum()), settings)
+    free = int((~occupancy(spec)).sum())
+    size = batch_layout(free, settings)
     where = batch_dir(work_dir, settings, size)
     done = len(list(where.glob("batch_*.npz"))) if where.is_dir() else 0
     if not done:
         return "it has finished no trace batch yet"
-    return f"it has finished {done} of {-(-int((~occupancy(spec)).sum()) // size)} trace batches"
+    return f"it has finished {done} of {-(-free // size)} trace batches"
 
 
 def differential_parent(spec, config: BuildConfig):
