@@ -109,15 +109,13 @@ def seed_floor_snapshots(requested: list[int] | None, count: int, full0_s: float
 
 
 def bench_scene(
-    scene: str, count: int, radius_m: float, floor_at: list[int] | None, tol_pp: float, batch_independent: bool
+    scene: str, count: int, radius_m: float, floor_at: list[int] | None, tol_pp: float, stock_solver: bool
 ) -> dict:
     host_before = machine()
     base_moving = load_moving_scene(scene)
     period = base_moving.snapshots
     mv = with_horizon(base_moving, count)
-    base = BuildConfig(
-        scene=scene, variant="moving", progress=False, rt=RTSettings(batch_independent=batch_independent)
-    )
+    base = BuildConfig(scene=scene, variant="moving", progress=False, rt=RTSettings(batch_independent=not stock_solver))
     config = scene_config(base, mv.base)
     rt = config.rt
     spec0 = mv.spec_at(0)
@@ -393,7 +391,7 @@ def markdown(res: dict) -> str:
         + f"), {res['movers']} movers, {res['grid'][0]} × {res['grid'][1]} cells, re-trace radius "
         f"{res['radius_m']:g} m, max_depth {rt.get('max_depth')}, {rt.get('samples_per_src'):g} samples, batches of "
         f"{rt.get('batch_size')}, seed {rt.get('seed')}"
-        + (", `--rt.batch-independent`" if rt.get("batch_independent") else "")
+        + ("" if rt.get("batch_independent", False) else ", `--rt.no-batch-independent`")
         + f". Machine: {res['machine']} at the start, "
         f"{res['machine_after']} at the end.",
         "",
@@ -480,20 +478,20 @@ def main() -> None:
         help="a snapshot agrees 'at the noise floor' when within this many percentage points of the lowest floor",
     )
     ap.add_argument(
-        "--batch-independent",
+        "--stock-solver",
         action="store_true",
-        help="trace with --rt.batch-independent (a cell's rows the same bytes in any batch; CPU only, slower); "
-        "results go to bench_moving_<scene>-batch-independent.*",
+        help="trace with Sionna's own PathSolver (--rt.no-batch-independent, the engine before batch-independent "
+        "tracing became the default); results go to bench_moving_<scene>-stock.*",
     )
     ap.add_argument("--out", type=Path, default=Path("results"))
     args = ap.parse_args()
     counts = snapshot_counts(args.snapshots, args.scenes)
     for scene in args.scenes:
         res = bench_scene(
-            scene, counts[scene], args.radius_m, args.seed_floor, args.floor_tolerance_pp, args.batch_independent
+            scene, counts[scene], args.radius_m, args.seed_floor, args.floor_tolerance_pp, args.stock_solver
         )
         md = markdown(res)
-        stem = f"bench_moving_{scene}" + ("-batch-independent" if args.batch_independent else "")
+        stem = f"bench_moving_{scene}" + ("-stock" if args.stock_solver else "")
         plot(res, args.out / f"{stem}.png")
         write_atomic(args.out / f"{stem}.md", md)
         write_atomic(args.out / f"{stem}.json", json.dumps(res, indent=2) + "\n")

@@ -9,7 +9,7 @@ projection for N machines multiplies the measured per-worker rate by the workers
 Results go to ``results/bench_ray.json`` and ``results/bench_ray.md``.
 
     python bench/bench_ray.py [--scenes cubicle dallas-q3 dallas] [--cubicle-batch 128] [--workers 0]
-                              [--batch-independent] [--city-batch 0]
+                              [--stock-solver] [--city-batch 0]
 """
 
 from __future__ import annotations
@@ -106,8 +106,8 @@ def settings_for(spec, args):
     settings = cfg.rt if city else replace(cfg.rt, batch_size=args.cubicle_batch)
     if city and args.city_batch:
         settings = replace(settings, batch_size=args.city_batch)
-    if args.batch_independent:
-        settings = replace(settings, batch_independent=True)
+    if args.stock_solver:
+        settings = replace(settings, batch_independent=False)
     return settings
 
 
@@ -125,9 +125,10 @@ def main() -> None:
         "--city-batch", type=int, default=0, help="batch size of the city scenes (0 = their settings' 1024)"
     )
     ap.add_argument(
-        "--batch-independent",
+        "--stock-solver",
         action="store_true",
-        help="trace with RTSettings.batch_independent: small batches then change no row, so they can balance workers",
+        help="trace with Sionna's own PathSolver (--rt.no-batch-independent): the batch partition then changes rows, "
+        "so the batches cannot be evened out",
     )
     ap.add_argument("--workers", type=int, default=0, help="Ray workers (0 = one per core)")
     ap.add_argument(
@@ -150,7 +151,8 @@ def main() -> None:
         print(
             f"{name}: {len(specs)} scene(s), {free} free cells in {batches} batches "
             f"({', '.join(str(size) for _, size in layouts)} cells each), {settings.samples_per_src:.0e} rays, "
-            f"buffer {settings.max_num_paths_per_src:.0e}" + (", batch-independent" if args.batch_independent else "")
+            f"buffer {settings.max_num_paths_per_src:.0e}"
+            + (", Sionna's own solver" if args.stock_solver else ", batch-independent")
         )
         serial, serial_s = timed(jobs, "serial", 0)
         print(f"  serial: {serial_s:.1f} s ({free / serial_s:.1f} cells/s)")
@@ -164,7 +166,7 @@ def main() -> None:
                 "free_cells": free,
                 "batch_size": settings.batch_size,
                 "cells_per_batch": [size for _, size in layouts],
-                "batch_independent": bool(args.batch_independent),
+                "batch_independent": not args.stock_solver,
                 "batches": batches,
                 "samples_per_src": settings.samples_per_src,
                 "max_num_paths_per_src": settings.max_num_paths_per_src,

@@ -64,7 +64,10 @@ def _reduce_cells(batch) -> dict[str, np.ndarray]:
     change a cell's delay spread in its last bits with the batch it was traced in."""
     import dataclasses
 
-    width = np.where(batch.valid.any(axis=1), batch.valid.shape[1] - np.argmax(batch.valid[:, ::-1], axis=1), 0)
+    if batch.valid.shape[1] == 0:  # no receiver of the call has a path (argmax of an empty row would raise)
+        width = np.zeros(batch.valid.shape[0], np.int64)
+    else:
+        width = np.where(batch.valid.any(axis=1), batch.valid.shape[1] - np.argmax(batch.valid[:, ::-1], axis=1), 0)
     out: dict[str, np.ndarray] = {}
     for w in np.unique(width):
         rows = np.flatnonzero(width == w)

@@ -60,8 +60,11 @@ def inherited_differences(
         if recorded.get(key) != scene_spec.get(key):
             out.append(_differs(f"scene {key}", recorded.get(key), scene_spec.get(key)))
     parent_rt = parent_meta.get("rt") or {}
+    engine, parent_engine = rt.get("batch_independent"), parent_rt.get("batch_independent")
+    if engine != parent_engine:  # one traced with Sionna's own solver, the other batch-independently
+        out.append(f"the solver: the parent was traced {_engine(parent_engine)}, this build traces {_engine(engine)}")
     for key in rt:
-        if parent_rt.get(key, _MISSING) != rt[key]:
+        if key != "batch_independent" and parent_rt.get(key, _MISSING) != rt[key]:
             out.append(_differs("--rt." + key.replace("_", "-"), parent_rt.get(key, _MISSING), rt[key]))
     if parent_meta.get("schema_version") != schema_version:
         out.append(_differs("schema version", parent_meta.get("schema_version"), schema_version))
@@ -72,6 +75,12 @@ def inherited_differences(
     if per_path and not parent_has_paths:
         out.append("the per-path table: the parent has none (built with --no-per-path), this build stores one")
     return out
+
+
+def _engine(recorded) -> str:
+    if recorded is None:
+        return "with Sionna's own solver (--rt.no-batch-independent)"
+    return f"batch-independently ({recorded})"
 
 
 class _Missing:

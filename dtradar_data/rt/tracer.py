@@ -78,8 +78,9 @@ _PACKET = 32  # lanes per receiver group in the image method: a multiple of ever
 _SOLVER = None  # the batch-independent PathSolver class, defined once Sionna is imported
 
 
-def _import_sionna(device: Device):
-    """Configure LLVM, pick the Mitsuba variant, then import ``sionna.rt`` (order matters)."""
+def _import_sionna(device: Device, *, cpu_only: bool = False):
+    """Configure LLVM, pick the Mitsuba variant, then import ``sionna.rt`` (order matters). ``cpu_only``: "auto"
+    means the CPU even where a GPU is found (the batch-independent solver exists for LLVM only)."""
     global _MI
     if device != "cuda":
         configure_llvm()
@@ -90,7 +91,7 @@ def _import_sionna(device: Device):
         raise RayTracerUnavailableError(
             f"Mitsuba/Dr.Jit is not importable: {e}", hint="run `make setup` (or `pip install sionna-rt==2.2.0`)"
         ) from e
-    use_cuda = device == "cuda" or (device == "auto" and dr.has_backend(dr.JitBackend.CUDA))
+    use_cuda = device == "cuda" or (device == "auto" and not cpu_only and dr.has_backend(dr.JitBackend.CUDA))
     if device == "cuda" and not dr.has_backend(dr.JitBackend.CUDA):
         raise RayTracerUnavailableError(
             "device='cuda' requested but Dr.Jit finds no CUDA GPU", hint="use device='cpu' (or 'auto')"
@@ -116,7 +117,7 @@ class RayTracer:
     def __init__(self, spec, settings: RTSettings = RTSettings(), *, scene_dir: Path | None = None):
         self.spec = spec
         self.settings = settings
-        self.mi, self.rt = _import_sionna(settings.device)
+        self.mi, self.rt = _import_sionna(settings.device, cpu_only=settings.batch_independent)
         self._tmp = None
         if scene_dir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="dtradar-scene-")
@@ -142,7 +143,7 @@ class RayTracer:
                 # Sionna's deterministic CUDA generator has its own shared hash table; not patched (no GPU here)
                 raise InvalidSettingError(
                     "--rt.batch-independent is implemented for the CPU (LLVM) backend only",
-                    hint="trace with --rt.device cpu, or without --rt.batch-independent",
+                    hint="trace with --rt.device auto or cpu, or with --rt.no-batch-independent (Sionna's own solver)",
                 )
             self._solver = _solver_class()()
         else:

@@ -12,8 +12,9 @@ from dtradar_data.rt.settings import RTSettings
 
 
 def test_sionnas_solver_keeps_the_batch_size_it_is_given():
-    assert batch_layout(1950, RTSettings(batch_size=1024)) == 1024
-    assert batch_layout(10, RTSettings(batch_size=1024)) == 1024
+    stock = RTSettings(batch_size=1024, batch_independent=False)  # the engine of the versions built before
+    assert batch_layout(1950, stock) == 1024
+    assert batch_layout(10, stock) == 1024
 
 
 @pytest.mark.parametrize(
@@ -30,7 +31,7 @@ def test_batch_independent_calls_are_as_few_as_the_batch_size_allows_and_even(ce
 
 
 def test_batch_files_of_each_layout_go_to_their_own_folder_only_when_batch_independent(tmp_path):
-    stock = RTSettings(batch_size=5)
+    stock = RTSettings(batch_size=5, batch_independent=False)
     assert batch_dir(tmp_path, stock, 5) == tmp_path
     independent = replace(stock, batch_independent=True)
     assert batch_dir(tmp_path, independent, 5) != batch_dir(tmp_path, independent, 7)

@@ -12,7 +12,9 @@ import pytest
 from dtradar_data.core import files
 from dtradar_data.core.files import waiting_lock
 from dtradar_data.core.layout import dataset_dir, work_root
+from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.pipeline import builder
+from dtradar_data.pipeline.batches import batch_dir, batch_layout
 from dtradar_data.pipeline.builder import BuildConfig, build_inputs, scene_config
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.rt.settings import RTSettings
@@ -85,8 +87,10 @@ def test_a_build_waiting_for_another_build_of_its_version_says_whom_it_waits_for
         first = stderr().splitlines()[0]
         assert f"pid {os.getpid()}" in first and version in first and "Ctrl-C is safe" in first
         assert "reuses" in first, "it says what happens once the other build is done"
-        work.mkdir(parents=True)
-        (work / "batch_00000.npz").write_bytes(b"")  # the other build has finished its first batch
+        rt = scene_config(config, spec).rt
+        where = batch_dir(work, rt, batch_layout(int((~occupancy(spec)).sum()), rt))
+        where.mkdir(parents=True)
+        (where / "batch_00000.npz").write_bytes(b"")  # the other build has finished its first batch
         wait_for(lambda: "finished 1 of 3 trace batches" in stderr(), "a progress line")
         assert thread.is_alive(), "it waits while the lock is held"
     thread.join(BOUND_S)

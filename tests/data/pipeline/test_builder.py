@@ -81,7 +81,7 @@ def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, 
         p.is_dir() for p in (root / "datasets" / "cubicle" / "blueprint").iterdir()
     )
     # the traced batches survive, so the next attempt does not trace again
-    work = list((root / "work" / "cubicle" / "blueprint").glob("*/batch_*.npz"))
+    work = list((root / "work" / "cubicle" / "blueprint").rglob("batch_*.npz"))
     assert work, "finished batches are kept for the retry"
     monkeypatch.undo()
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root))

@@ -104,3 +104,9 @@ def test_a_differential_build_differs_from_a_full_build_only_in_the_cells_it_re_
     assert 1.0 - c["agree"][retraced].mean() <= noise + 0.02
     assert c["agree"][free].mean() >= 0.95
     assert np.nanmedian(c["gain_diff_db"][retraced]) < 0.5
+    # batch-independent tracing (the default): a re-traced cell is the full build's row bit for bit, although the
+    # full build traced it among all the grid's cells and the differential one among the re-traced ones only
+    assert config.rt.batch_independent
+    for name in full.table.column_names:
+        a, b = (t.column(name).to_numpy(zero_copy_only=False)[retraced] for t in (full.table, diff.table))
+        assert a.tobytes() == b.tobytes(), f"column {name} of a re-traced cell differs from the full build"

@@ -96,7 +96,6 @@ def on_disk(root) -> dict[str, bytes]:
     ("parent_meta", "named"),
     [
         ({"rt": {"frequency_hz": 5e9}}, "--rt.frequency-hz 5e+09 in the parent, 2.4e+09 here"),
-        ({"rt": {"batch_size": 256}}, "--rt.batch-size 256 in the parent, 1024 here"),
         ({"rt": {"seed": 7}}, "--rt.seed 7 in the parent, 42 here"),
         ({"rt": {"samples_per_src": 10_000}}, "--rt.samples-per-src 10000 in the parent, 2000 here"),
         ({"rt": {"diffraction": True}}, "--rt.diffraction True in the parent, False here"),
@@ -117,6 +116,30 @@ def test_a_differential_build_refuses_a_parent_built_with_other_inputs_and_names
     assert "tiny-room/blueprint@v0" in err.value.message
     assert "drop --differential" in err.value.hint and "--variant blueprint" in err.value.hint
     assert on_disk(root) == before, "a refused build changed the data root"
+
+
+def test_a_parent_traced_with_another_solver_is_refused_and_the_solvers_are_named(root, room, config):
+    stock = replace(config, rt=replace(config.rt, batch_independent=False))
+    store_parent(room, stock, "a" * 16)  # built before batch-independent tracing was the default
+    with pytest.raises(InvalidSettingError) as err:
+        build(config)
+    assert "the parent was traced with Sionna's own solver (--rt.no-batch-independent)" in err.value.message
+    assert "this build traces batch-independently" in err.value.message
+
+
+def test_a_batch_independent_parent_is_refused_by_a_build_with_sionnas_solver(root, room, config):
+    store_parent(room, config, "a" * 16)  # batch-independent, the default
+    with pytest.raises(InvalidSettingError) as err:
+        build(replace(config, rt=replace(config.rt, batch_independent=False)))
+    assert "the parent was traced batch-independently" in err.value.message
+    assert "this build traces with Sionna's own solver" in err.value.message
+
+
+def test_a_stock_parent_traced_in_other_batches_is_refused_by_a_stock_build(root, room, config):
+    stock = replace(config, rt=replace(config.rt, batch_independent=False))
+    store_parent(room, stock, "a" * 16, rt={"batch_size": 256})
+    with pytest.raises(InvalidSettingError, match="--rt.batch-size 256 in the parent, 1024 here"):
+        build(stock)
 
 
 def test_a_parent_without_the_per_path_table_is_refused_when_the_build_stores_one(root, room, config):

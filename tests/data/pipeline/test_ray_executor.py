@@ -60,7 +60,7 @@ def test_a_worker_killed_mid_build_is_replaced_and_the_build_finishes_unchanged(
     def kill_one_worker():
         deadline = time.monotonic() + 300  # Ray workers start slowly on a busy machine
         while time.monotonic() < deadline and not killed:
-            done = list(work.glob("batch_*.npz")) if work.is_dir() else []
+            done = list(work.rglob("batch_*.npz")) if work.is_dir() else []
             pids = subprocess.run(["pgrep", "-f", "ray::TraceWorker"], capture_output=True, text=True).stdout.split()
             if done and len(done) < 4 and pids:
                 os.kill(int(pids[0]), signal.SIGKILL)

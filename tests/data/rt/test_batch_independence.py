@@ -116,9 +116,9 @@ def test_a_batch_that_fills_the_path_buffer_is_re_traced_in_halves_with_the_same
 def test_with_batch_independence_the_batch_size_leaves_the_version_and_without_it_stays():
     from dtradar_data.rt.settings import BATCH_INDEPENDENT_ENGINE, RTSettings
 
-    stock = RTSettings().hashed()
+    stock = RTSettings(batch_independent=False).hashed()
     assert "batch_independent" not in stock and stock["batch_size"] == 1024  # stored versions keep their hashes
-    a, b = RTSettings(batch_independent=True, batch_size=64), RTSettings(batch_independent=True, batch_size=1024)
+    a, b = RTSettings(batch_size=64), RTSettings(batch_independent=True, batch_size=1024)  # the default is on
     assert a.hashed() == b.hashed() and "batch_size" not in a.hashed()
     assert a.hashed()["batch_independent"] == BATCH_INDEPENDENT_ENGINE
     assert a.hashed() != {**stock, "batch_independent": BATCH_INDEPENDENT_ENGINE}  # not a stock version's hash

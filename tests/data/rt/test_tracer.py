@@ -100,18 +100,20 @@ def test_the_same_scene_and_seed_give_identical_tables(traced, iso_settings):
 
 
 def test_an_interrupted_trace_resumes_from_its_finished_batches(tmp_path, traced, iso_settings):
+    from dtradar_data.pipeline.batches import batch_dir
     from dtradar_data.pipeline.builder import trace_grid
 
     settings = replace(iso_settings, batch_size=2)  # 3 batches for 6 cells
     first, _, _, tracer = trace_grid(tiny_spec(), settings, tmp_path, progress=False)
     tracer.close()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["batch_00000.npz", "batch_00001.npz", "batch_00002.npz"]
-    (tmp_path / "batch_00001.npz").unlink()  # as if interrupted while tracing batch 1
-    stamp = (tmp_path / "batch_00000.npz").stat().st_mtime_ns
+    where = batch_dir(tmp_path, settings, 2)
+    assert sorted(p.name for p in where.iterdir()) == ["batch_00000.npz", "batch_00001.npz", "batch_00002.npz"]
+    (where / "batch_00001.npz").unlink()  # as if interrupted while tracing batch 1
+    stamp = (where / "batch_00000.npz").stat().st_mtime_ns
     again, _, _, tracer = trace_grid(tiny_spec(), settings, tmp_path, progress=False)
     tracer.close()
     assert again.equals(first)
-    assert (tmp_path / "batch_00000.npz").stat().st_mtime_ns == stamp, "finished batches are reused, not redone"
+    assert (where / "batch_00000.npz").stat().st_mtime_ns == stamp, "finished batches are reused, not redone"
 
 
 def test_receivers_outside_the_scene_are_rejected_before_tracing(iso_settings):
