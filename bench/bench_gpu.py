@@ -45,7 +45,9 @@ def _trace(scene: str, variant: str, device: str, cells: int, seed: int | None, 
         ds = load(f"{scene}/{variant}")
         known = {f for f in RTSettings.__dataclass_fields__}
         built = {k: v for k, v in (ds.meta.get("rt") or {}).items() if k in known}
-        settings = RTSettings(**{**built, "device": device})
+        # Sionna's own solver on both devices: the batch-independent one exists for the CPU only, and the comparison
+        # must trace the same way on both (a twin's meta records the engine as a string, not the flag)
+        settings = RTSettings(**{**built, "device": device, "batch_independent": False})
         if seed is not None:
             settings = replace(settings, seed=seed)
         spec = load_scene_spec(scene, variant)
