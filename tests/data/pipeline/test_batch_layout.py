@@ -58,3 +58,25 @@ def test_a_batch_independent_build_resumed_with_another_batch_size_gets_the_same
     assert fives == kept[:-1], "the other layout's files are left alone, not read as this one's"
     sizes = [len(load_batch(p)[0]["num_paths"]) for p in fives]
     assert set(sizes) == {batch_layout(free, settings)} and np.sum(sizes) < free
+
+
+def _batch(n: int, p: int, with_paths: int = 0):
+    from dtradar_data.rt.tracer import PathBatch
+
+    valid = np.zeros((n, p), bool)
+    valid[:with_paths, :p] = True
+    f = np.ones((n, p))
+    return PathBatch(
+        valid, f.astype(np.complex64), f * 1e-9, f * 1e-8, f, f, f, f, np.zeros((2, n, p), np.uint32), 2.4e9
+    )
+
+
+def test_a_batch_independent_call_in_which_no_receiver_has_a_path_reduces_to_empty_rows():
+    from dtradar_data.pipeline.batches import _reduce_cells
+    from dtradar_data.rt import features
+
+    empty = _reduce_cells(_batch(3, 0))  # Sionna returns zero path slots when no receiver of the call has one
+    assert set(empty) == set(features.reduce_cells(_batch(3, 0))) and all(len(v) == 3 for v in empty.values())
+    assert (empty["num_paths"] == 0).all()
+    some = _reduce_cells(_batch(3, 2, with_paths=1))
+    assert list(some["num_paths"]) == [2, 0, 0]
