@@ -82,8 +82,8 @@ class RTSettings:
     """Receiver: one vertical short dipole (the paper's 1x1 dipole)."""
     batch_size: int = 1024
     """Receivers per PathSolver call. Each call shoots all samples_per_src rays again, so bigger batches are
-    cheaper per cell; with Sionna's own solver results depend on the batch partition (measured), so it is part of
-    the version (not with --rt.batch-independent)."""
+    cheaper per cell; with Sionna's own solver (--rt.no-batch-independent) results depend on the batch partition
+    (measured), so it is part of the version; batch-independent tracing, the default, leaves it out."""
     batch_independent: bool = True
     """Trace every receiver independently of the others in its PathSolver call (dtradar_data.rt.tracer: a hash
     region, SIMD packets and a buffer check of its own): a cell's rows are the same bytes whatever batch it is
