@@ -51,6 +51,7 @@ from dtradar_data.store.logged import (
 )
 from dtradar_data.store.logged.staging import held_stage
 from dtradar_rl.envs.registration import twin_env_spec, twin_version
+from dtradar_rl.offline.minari_refs import reference_returns
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.twins import load_dataset
 
@@ -153,9 +154,9 @@ NAMESPACE_FILE = "namespace_metadata.json"
 #: The record of a complete Minari copy, written beside its ``data/`` folder (Minari ignores it) as the copy's last
 #: file before it is renamed into place: what it holds, where from, and the sha256 of every file of ``data/``.
 RECORD_FILE = "dtradar.json"
-#: 2: the copy records the env spec (``recover_environment``) and the env's observation space; a copy of format 1
-#: (none) is rewritten once.
-RECORD_FORMAT = 2
+#: 2: the copy records the env spec (``recover_environment``) and the env's observation space; 3: and Minari's
+#: ``ref_min_score`` / ``ref_max_score`` (:mod:`dtradar_rl.offline.minari_refs`); an older copy is rewritten once.
+RECORD_FORMAT = 3
 #: Hidden (Minari lists no hidden folder) staging folders in the Minari path, held while written (see
 #: :mod:`dtradar_data.store.logged.staging`).
 STAGE_PREFIX = ".dtradar-stage-"
@@ -242,7 +243,7 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
     if rec.get("format") != RECORD_FORMAT:
         return "incomplete", (
             f"{folder} was written by another dtradar (record format {rec.get('format')}, this one writes "
-            f"{RECORD_FORMAT}: the copy records an env spec since format 2)"
+            f"{RECORD_FORMAT}: an env spec since format 2, reference scores since 3)"
         )
     if rec.get("episodes") != want["episodes"] or rec.get("steps") != want["steps"]:
         return (
@@ -401,7 +402,13 @@ def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset, envs: Mina
     d = a["obs"].shape[1]
     s = logged.meta.get("stats") or {}
     if envs.spec is not None:
-        env_args = {"env": envs.env, "eval_env": envs.eval_spec}
+        refs = reference_returns(envs.eval_spec)
+        env_args = {
+            "env": envs.env,
+            "eval_env": envs.eval_spec,
+            "ref_min_score": refs["ref_min_score"],
+            "ref_max_score": refs["ref_max_score"],
+        }
         how = (
             f"recover_environment(): {_env_text(envs.spec)}; recover_environment(eval_env=True): "
             f"{_env_text(envs.eval_spec)} (import path {envs.spec.entry_point}, needs dtradar installed)"
@@ -485,7 +492,8 @@ def export_minari(
             )
         with held_stage(root, STAGE_PREFIX, lockless=lambda _: True) as stage:  # .dtradar-stage-*: only ours
             staged = _write_copy(minari, stage, mid, logged, envs)
-            rec = {**_wanted(logged), "minari_id": mid, **envs.record(), "files": _files(staged)}
+            refs = reference_returns(envs.eval_spec)["references"] if envs.spec is not None else None
+            rec = {**_wanted(logged), "minari_id": mid, **envs.record(), "ref_scores": refs, "files": _files(staged)}
             (staged / RECORD_FILE).write_text(json.dumps(rec, indent=2, sort_keys=True) + "\n")
             _ensure_namespace(stage, root, mid)
             folder.parent.mkdir(parents=True, exist_ok=True)

@@ -71,7 +71,7 @@ def test_the_recovered_env_is_the_logging_twin_at_its_version_with_the_logged_se
         obs, reward, *_ = env.step(action)
         assert ds.observation_space.contains(obs) and np.isfinite(reward)
     rec = json.loads((logged.minari_path / formats.RECORD_FILE).read_text())
-    assert rec["format"] == formats.RECORD_FORMAT == 2 and rec["env_spec"]["kwargs"] == kw
+    assert rec["format"] == formats.RECORD_FORMAT == 3 and rec["env_spec"]["kwargs"] == kw
     assert "recover_environment()" in ds.storage.metadata["description"]
 
 
