@@ -28,6 +28,8 @@ generator that :meth:`TablePolicy.env_for` restarts, so an evaluation repeats.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,10 +38,12 @@ from scipy.spatial import cKDTree
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, InvalidSettingError, unknown_name
+from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.tabular.fingerprints import fingerprints
 from dtradar_rl.task.mdp import background
 from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
+from dtradar_rl.task.twins import load_dataset
 
 #: The observation preset of a table policy: the robot's position and radio features, and its target's position.
 OBS_PRESET = "goal"
@@ -52,6 +56,8 @@ LOCALISATIONS: tuple[str, ...] = ("fingerprint", "oracle")
 TABLE_BYTES_CAP = 2 << 30
 #: Seed of a probability table's draws (restarted by ``env_for``).
 DRAW_SEED = 0
+#: ``table.json``'s format tag (:meth:`TablePolicy.save`).
+TABLE_FORMAT = "dtradar-table-policy/1"
 
 
 class TableTooLargeError(InvalidSettingError):
@@ -218,6 +224,51 @@ class TablePolicy:
         other.name = self.name if localise == "fingerprint" else f"{self.name} ({localise})"
         other._gen = None
         return other
+
+    # -- files ------------------------------------------------------------------------------------------------------
+    def save(self, folder: str | Path) -> Path:
+        """``actions.npy`` (moves as int8, or probabilities as float32), ``targets.npy`` (the columns' cells, when not
+        every cell) and ``table.json`` (the twin, the normaliser, the name) in ``folder``; returns ``table.json``."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        table = self.table.numpy().astype(np.float32 if self.stochastic else np.int8)
+        with open_atomic(folder / "actions.npy", "wb") as f:
+            np.save(f, table)
+        every = self.targets.size == self.localiser.num_cells and (self.targets == np.arange(self.targets.size)).all()
+        if not every:
+            with open_atomic(folder / "targets.npy", "wb") as f:
+                np.save(f, self.targets)
+        record = {
+            "format": TABLE_FORMAT,
+            "name": self.name,
+            "dataset": self.meta["dataset"],
+            "normalizer": self.normalizer.to_dict(),
+            "stochastic": self.stochastic,
+            "every_target": bool(every),
+        }
+        write_atomic(folder / "table.json", json.dumps(record, indent=2) + "\n")
+        return folder / "table.json"
+
+    @classmethod
+    def load(cls, folder: str | Path, blueprint: Dataset | None = None) -> TablePolicy:
+        """The table :meth:`save` wrote in ``folder``, over ``blueprint`` (default: the twin it records, loaded)."""
+        folder = Path(folder)
+        try:
+            record = json.loads((folder / "table.json").read_text())
+            if record.get("format") != TABLE_FORMAT:
+                raise ValueError(f"format {record.get('format')!r}")
+            table = np.load(folder / "actions.npy")
+            targets = None if record["every_target"] else np.load(folder / "targets.npy")
+        except (OSError, ValueError, KeyError) as e:
+            raise InvalidSettingError(
+                f"{folder} holds no table policy ({type(e).__name__}: {e})",
+                hint="pass the folder a tabular learner wrote (table.json, actions.npy)",
+            ) from e
+        ds = record["dataset"]
+        if blueprint is None:
+            blueprint = load_dataset(ds["name"] + (f"@{ds['version']}" if ds.get("version") else ""))
+        table = table.astype(np.float64) if record["stochastic"] else table.astype(np.int64)
+        return cls(blueprint, table, Normalizer.from_dict(record["normalizer"]), targets, record["name"])
 
     # -- the Policy interface used by dtradar_rl.evaluation.evaluate ----------------------------------------------
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
