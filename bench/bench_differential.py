@@ -30,12 +30,9 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import write_atomic
 from dtradar_data.core.machine import describe, machine
 from dtradar_data.pipeline import differential
-from dtradar_data.pipeline.builder import (
-    BuildConfig,
-    differential_parent,
-    scene_config,
-    trace_grid,
-)
+from dtradar_data.pipeline.config import BuildConfig, scene_config
+from dtradar_data.pipeline.parent import differential_parent
+from dtradar_data.pipeline.tracing import trace_grid
 from dtradar_data.rt.compare import compare
 from dtradar_data.rt.compare import summarize as stats
 from dtradar_data.rt.tracer import RayTracer

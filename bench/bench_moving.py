@@ -3,7 +3,7 @@
 For each scene: load its moving twin (:func:`dtradar_data.scenes.load_moving_scene`), compile the kernels first on a
 few cells (the first JIT compile, reported apart), then build the twin's ``T`` snapshots with the library's own code
 path, the one ``make dataset VARIANT=moving`` runs (:func:`dtradar_data.pipeline.moving.trace_snapshots` with the
-builder's :func:`~dtradar_data.pipeline.builder.trace_grid` for snapshot 0, then
+build's :func:`~dtradar_data.pipeline.tracing.trace_grid` for snapshot 0, then
 :func:`~dtradar_data.pipeline.moving.moving_tables`; into a temporary work folder), and trace every snapshot ``k >= 1``
 in full as well (``MovingScene.spec_at(k)``, a static scene, by ``trace_grid``); snapshot 0 of the build is itself a
 full trace and serves as its own reference. Reported per snapshot and in total: cells re-traced, differential and
@@ -45,7 +45,8 @@ from dtradar_data.core.files import write_atomic
 from dtradar_data.core.machine import describe, machine
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.pipeline import differential, moving
-from dtradar_data.pipeline.builder import BuildConfig, scene_config, trace_grid
+from dtradar_data.pipeline.config import BuildConfig, scene_config
+from dtradar_data.pipeline.tracing import trace_grid
 from dtradar_data.rt.compare import compare
 from dtradar_data.rt.compare import summarize as stats
 from dtradar_data.rt.settings import RTSettings
@@ -133,7 +134,7 @@ def bench_scene(
     compile_s = time.perf_counter() - t0
     log(f"{scene}: first compile {compile_s:.1f} s")
 
-    # the moving twin, as `make dataset VARIANT=moving` builds it (builder.build_moving_one's calls)
+    # the moving twin, as `make dataset VARIANT=moving` builds it (dtradar_data.pipeline.moving_build's calls)
     with tempfile.TemporaryDirectory(prefix="dtradar-bench-moving-") as tmp:
 
         def full_trace(spec, batch_dir: Path):

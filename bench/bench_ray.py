@@ -26,8 +26,9 @@ from pathlib import Path
 from dtradar_data.core.machine import describe, machine
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.pipeline.batches import batch_layout
-from dtradar_data.pipeline.builder import BuildConfig, scene_config, trace_grid
+from dtradar_data.pipeline.config import BuildConfig, scene_config
 from dtradar_data.pipeline.executors import RaySession
+from dtradar_data.pipeline.tracing import trace_grid
 from dtradar_data.scenes import build_targets, load_scene_spec
 from dtradar_data.store.versions import library_versions
 

@@ -25,7 +25,7 @@ from dtradar_data.core.errors import DtradarError, InvalidSettingError
 from dtradar_data.core.files import human_size
 from dtradar_data.core.layout import data_root
 from dtradar_data.pipeline import builder
-from dtradar_data.pipeline.builder import BuildConfig
+from dtradar_data.pipeline.config import BuildConfig
 from dtradar_data.publish import cards, hub, logged_hub
 from dtradar_data.rt import llvm
 from dtradar_data.rt.tracer import smoke_test

@@ -19,8 +19,9 @@ from dtradar_data.core.errors import (
     InvalidSettingError,
 )
 from dtradar_data.core.files import open_atomic, write_atomic
-from dtradar_data.pipeline import builder as pipeline
-from dtradar_data.pipeline.builder import BuildConfig, build_inputs
+from dtradar_data.pipeline import builder, static_build, tracing
+from dtradar_data.pipeline.config import BuildConfig
+from dtradar_data.pipeline.inputs import build_inputs
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.publish import cards, hub
 from dtradar_data.rt.settings import RTSettings
@@ -45,8 +46,8 @@ def no_tracing(monkeypatch):
     def traced(*args, **kwargs):
         raise AssertionError("the ray tracer was called for an input that should have been refused first")
 
-    monkeypatch.setattr(pipeline, "trace_grid", traced)
-    monkeypatch.setattr(pipeline, "RayTracer", traced)
+    monkeypatch.setattr(tracing, "trace_grid", traced)
+    monkeypatch.setattr(static_build, "RayTracer", traced)
 
 
 def one_error_line(err: str) -> str:
@@ -114,7 +115,7 @@ def test_a_frequency_where_a_scene_material_is_undefined_is_refused_before_traci
 
 def test_the_python_build_api_checks_the_scene_before_tracing(root, no_tracing):
     with pytest.raises(InvalidSettingError, match="wet_ground"):
-        pipeline.build(BuildConfig(scene="cubicle", variant="dynamic", rt=RTSettings(frequency_hz=12e9)))
+        builder.build(BuildConfig(scene="cubicle", variant="dynamic", rt=RTSettings(frequency_hz=12e9)))
 
 
 def test_a_frequency_every_material_supports_passes_the_scene_check():

@@ -1,7 +1,7 @@
 """One trace batch: receivers in, per-cell features (and per-path rows) out; saved to and read from the work folder.
 
 The unit of resumable work: ``batch_<b>.npz`` files in a build's work folder are finished batches. Every executor
-(serial in :mod:`dtradar_data.pipeline.builder`, Ray in :mod:`dtradar_data.pipeline.executors`) traces with
+(serial in :mod:`dtradar_data.pipeline.tracing`, Ray in :mod:`dtradar_data.pipeline.executors`) traces with
 :func:`trace_batch` and stores with :func:`save_batch`, so their results are the same bytes.
 """
 

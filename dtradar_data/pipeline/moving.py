@@ -1,6 +1,6 @@
 """Moving twins: every snapshot of a :class:`~dtradar_data.scenes.movers.MovingScene` traced into one table.
 
-``build --variant moving`` (:func:`dtradar_data.pipeline.builder.build`) traces snapshot 0 in full, like a blueprint,
+``build --variant moving`` (:mod:`dtradar_data.pipeline.moving_build`) traces snapshot 0 in full, like a blueprint,
 and each snapshot ``k >= 1`` **differentially from snapshot k-1**: the changed objects are the movers that moved
 between the two (:meth:`MovingScene.changed_between`: each mover's old and new box), the cells re-traced are those the
 differential rule selects around them (:func:`dtradar_data.pipeline.differential.retrace_mask`: occupancy changed,
@@ -46,8 +46,8 @@ GIF_FILE = P.MOVING_GIF_FILE
 #: At most this many frames in the animation (snapshots evenly picked): a 500-snapshot city twin stays a small file.
 GIF_MAX_FRAMES = 120
 
-#: ``full_trace(spec, work_dir) -> (cells, paths, blocked, tracer)``: how snapshot 0 is traced (the builder's
-#: :func:`~dtradar_data.pipeline.builder.trace_grid`, resumable by batch in ``work_dir``).
+#: ``full_trace(spec, work_dir) -> (cells, paths, blocked, tracer)``: how snapshot 0 is traced (a static
+#: build's :func:`~dtradar_data.pipeline.tracing.trace_grid`, resumable by batch in ``work_dir``).
 FullTrace = Callable[[Any, Path], tuple]
 
 

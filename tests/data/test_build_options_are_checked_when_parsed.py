@@ -10,7 +10,8 @@ import pytest
 from dtradar_data import cli
 from dtradar_data.core.errors import InvalidSettingError, SceneFileError
 from dtradar_data.core.grid import MAX_CELLS, Grid
-from dtradar_data.pipeline import builder
+from dtradar_data.pipeline import static_build, tracing
+from dtradar_data.pipeline.config import BuildConfig
 from dtradar_data.scenes import load_scene_spec, xml_scene
 from dtradar_data.scenes.city import reader as city_reader
 
@@ -22,8 +23,8 @@ def nothing_expensive(monkeypatch):
     def expensive(*args, **kwargs):
         raise AssertionError("an expensive step ran for an option that should have been refused first")
 
-    monkeypatch.setattr(builder, "trace_grid", expensive)
-    monkeypatch.setattr(builder, "RayTracer", expensive)
+    monkeypatch.setattr(tracing, "trace_grid", expensive)
+    monkeypatch.setattr(static_build, "RayTracer", expensive)
     monkeypatch.setattr(xml_scene, "mesh_scene", expensive)
     monkeypatch.setattr(city_reader, "city_footprints", expensive)
 
@@ -124,5 +125,5 @@ def test_a_scene_files_grid_too_large_for_memory_is_refused_when_read_naming_the
 )
 def test_a_build_config_made_in_python_checks_the_same_values_as_the_command_line(kw, flag):
     with pytest.raises(InvalidSettingError) as e:
-        builder.BuildConfig(scene="cubicle", **kw)
+        BuildConfig(scene="cubicle", **kw)
     assert flag in str(e.value) and "how to fix" in str(e.value)

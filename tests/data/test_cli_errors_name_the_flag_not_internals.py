@@ -9,7 +9,7 @@ import pytest
 
 from dtradar_data import cli
 from dtradar_data.core.errors import InvalidSettingError
-from dtradar_data.pipeline import builder
+from dtradar_data.pipeline import static_build, tracing
 from dtradar_data.rt.settings import RTSettings
 
 INTERNALS = ("__tyro", "dummy", "BuildConfig", "RTSettings", "Error parsing", "Traceback", "unexpected")
@@ -20,8 +20,8 @@ def no_tracing(monkeypatch):
     def traced(*args, **kwargs):
         raise AssertionError("the ray tracer was called for a setting that should have been refused first")
 
-    monkeypatch.setattr(builder, "trace_grid", traced)
-    monkeypatch.setattr(builder, "RayTracer", traced)
+    monkeypatch.setattr(tracing, "trace_grid", traced)
+    monkeypatch.setattr(static_build, "RayTracer", traced)
 
 
 CHECKED = [  # refused by a config's own check (RTSettings, BuildConfig) while tyro builds it

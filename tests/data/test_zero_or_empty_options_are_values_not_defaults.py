@@ -6,7 +6,7 @@ import pytest
 
 from dtradar_data import cli
 from dtradar_data.core.errors import InvalidSettingError
-from dtradar_data.pipeline import builder
+from dtradar_data.pipeline import static_build, tracing
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.scenes.city import reader as city_reader
 from dtradar_data.scenes.city.reader import city_file, city_spec, quadrant_grid, read_city_file
@@ -17,8 +17,8 @@ def nothing_expensive(monkeypatch):
     def expensive(*args, **kwargs):
         raise AssertionError("an expensive step ran for an option that should have been refused first")
 
-    monkeypatch.setattr(builder, "trace_grid", expensive)
-    monkeypatch.setattr(builder, "RayTracer", expensive)
+    monkeypatch.setattr(tracing, "trace_grid", expensive)
+    monkeypatch.setattr(static_build, "RayTracer", expensive)
     monkeypatch.setattr(city_reader, "city_footprints", expensive)
 
 

@@ -41,7 +41,7 @@ def test_batch_files_of_each_layout_go_to_their_own_folder_only_when_batch_indep
 @pytest.mark.sionna
 def test_a_batch_independent_build_resumed_with_another_batch_size_gets_the_same_table(tmp_path):
     from dtradar_data.geometry.occupancy import occupancy
-    from dtradar_data.pipeline.builder import trace_grid
+    from dtradar_data.pipeline.tracing import trace_grid
     from dtradar_data.scenes import load_scene_spec
 
     spec = load_scene_spec("cubicle", "blueprint")

@@ -13,9 +13,10 @@ from dtradar_data.core import files
 from dtradar_data.core.files import waiting_lock
 from dtradar_data.core.layout import dataset_dir, work_root
 from dtradar_data.geometry.occupancy import occupancy
-from dtradar_data.pipeline import builder
+from dtradar_data.pipeline import static_build, storing
 from dtradar_data.pipeline.batches import batch_dir, batch_layout
-from dtradar_data.pipeline.builder import BuildConfig, build_inputs, scene_config
+from dtradar_data.pipeline.config import BuildConfig, scene_config
+from dtradar_data.pipeline.inputs import build_inputs
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.scenes import load_scene_spec
@@ -76,13 +77,13 @@ def test_a_build_waiting_for_another_build_of_its_version_says_whom_it_waits_for
     root, spec, config, capsys, monkeypatch
 ):
     monkeypatch.setattr(files, "LOCK_NOTICE_EVERY_S", 0.2)
-    monkeypatch.setattr(builder, "_trace_and_store", lambda *args: "traced once the lock was free")
+    monkeypatch.setattr(storing, "write_new_version", lambda *args: "traced once the lock was free")
     version = versions.version_id(build_inputs(spec, scene_config(config, spec)))
     work = work_root() / spec.scene / spec.variant / version
     lock = work.parent / f"{version}.lock"
     stderr = Stderr(capsys)
     with waiting_lock(lock, f"building {spec.name} version {version}"):  # "another build", holding the version
-        thread, box = in_thread(lambda: builder.build_one(spec, config))
+        thread, box = in_thread(lambda: static_build.build_one(spec, config))
         wait_for(lambda: "waiting for" in stderr(), "the waiting message")
         first = stderr().splitlines()[0]
         assert f"pid {os.getpid()}" in first and version in first and "Ctrl-C is safe" in first
@@ -100,8 +101,8 @@ def test_a_build_waiting_for_another_build_of_its_version_says_whom_it_waits_for
 
 
 def test_a_build_that_gets_its_lock_at_once_prints_no_waiting_line(root, spec, config, capsys, monkeypatch):
-    monkeypatch.setattr(builder, "_trace_and_store", lambda *args: "traced")
-    assert builder.build_one(spec, config) == "traced"
+    monkeypatch.setattr(storing, "write_new_version", lambda *args: "traced")
+    assert static_build.build_one(spec, config) == "traced"
     assert "waiting" not in capsys.readouterr().err
 
 

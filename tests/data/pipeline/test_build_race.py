@@ -18,8 +18,8 @@ BUILDER = textwrap.dedent("""
     from dataclasses import replace
     from pathlib import Path
 
-    from dtradar_data.pipeline import builder
-    from dtradar_data.pipeline.builder import BuildConfig
+    from dtradar_data.pipeline import static_build, tracing
+    from dtradar_data.pipeline.config import BuildConfig
     from dtradar_data.rt.settings import RTSettings
     from dtradar_data.scenes import load_scene_spec
 
@@ -39,7 +39,7 @@ BUILDER = textwrap.dedent("""
     # 8 cells a batch: 3 batch files, so "mid-trace" is a moment with a batch written and more to come
     config = BuildConfig(scene="cubicle", rt=RTSettings(max_depth=1, samples_per_src=2_000, batch_size=8,
                                                         device="cpu"), coverage_map=False, progress=False)
-    real_trace_grid, real_save = builder.trace_grid, builder.save_batch
+    real_trace_grid, real_save = tracing.trace_grid, tracing.save_batch
 
 
     def counting_trace_grid(*args, **kwargs):
@@ -56,13 +56,13 @@ BUILDER = textwrap.dedent("""
             time.sleep(0.5)
 
 
-    builder.trace_grid = counting_trace_grid
+    tracing.trace_grid = counting_trace_grid
     if role == "first":
-        builder.save_batch = save_then_let_the_second_in
+        tracing.save_batch = save_then_let_the_second_in
     else:
         wait_for("first-batch-written")
         (signals / "second-building").touch()
-    ds = builder.build_one(spec, config)
+    ds = static_build.build_one(spec, config)
     print(f"{role} done: {ds.version}")
 """)
 

@@ -13,7 +13,7 @@ pytestmark = pytest.mark.sionna
 
 @pytest.fixture
 def config():
-    from dtradar_data.pipeline.builder import BuildConfig
+    from dtradar_data.pipeline.config import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     return BuildConfig(
@@ -35,7 +35,7 @@ def small_cubicle():
 
 def test_a_built_dataset_loads_by_name_with_every_column_and_a_coverage_map(root, config, small_cubicle):
     import dtradar_data
-    from dtradar_data.pipeline.builder import build_one
+    from dtradar_data.pipeline.static_build import build_one
 
     ds = build_one(small_cubicle, config)
     loaded = dtradar_data.load("cubicle/blueprint")
@@ -56,7 +56,7 @@ def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_n
     root, config, small_cubicle, capsys
 ):
     import dtradar_data
-    from dtradar_data.pipeline.builder import build_one
+    from dtradar_data.pipeline.static_build import build_one
 
     first = build_one(small_cubicle, config)
     again = build_one(small_cubicle, config)
@@ -69,14 +69,14 @@ def test_building_the_same_thing_twice_reuses_the_version_and_a_change_makes_a_n
 
 
 def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, monkeypatch):
-    from dtradar_data.pipeline import builder
+    from dtradar_data.pipeline import static_build
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(builder, "render_coverage_png", boom)
+    monkeypatch.setattr(static_build, "render_coverage_png", boom)
     with pytest.raises(RuntimeError, match="disk full"):
-        builder.build_one(small_cubicle, config)
+        static_build.build_one(small_cubicle, config)
     assert not (root / "datasets" / "cubicle" / "blueprint").exists() or not any(
         p.is_dir() for p in (root / "datasets" / "cubicle" / "blueprint").iterdir()
     )
@@ -85,7 +85,7 @@ def test_a_failed_build_leaves_the_store_untouched(root, config, small_cubicle, 
     assert work, "finished batches are kept for the retry"
     monkeypatch.undo()
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root))
-    ds = builder.build_one(small_cubicle, config)
+    ds = static_build.build_one(small_cubicle, config)
     from dtradar_data.geometry.occupancy import occupancy
 
     assert ds.table.num_rows == 24
@@ -110,22 +110,22 @@ def test_two_builds_of_one_version_at_once_both_finish_with_one_version_traced_o
 ):
     import threading
 
-    from dtradar_data.pipeline import builder
+    from dtradar_data.pipeline import static_build, tracing
 
     traced = []
-    real_trace = builder.trace_grid
+    real_trace = tracing.trace_grid
 
     def counting_trace(*args, **kwargs):
         traced.append(threading.get_ident())
         return real_trace(*args, **kwargs)
 
-    monkeypatch.setattr(builder, "trace_grid", counting_trace)
+    monkeypatch.setattr(tracing, "trace_grid", counting_trace)
     cfg = replace(config, coverage_map=False)
     results, errors = [], []
 
     def run():
         try:
-            results.append(builder.build_one(small_cubicle, cfg))
+            results.append(static_build.build_one(small_cubicle, cfg))
         except BaseException as e:  # noqa: BLE001 - the assertion below reports it
             errors.append(e)
 

@@ -7,7 +7,8 @@ pytestmark = pytest.mark.sionna
 
 def test_a_dallas_quadrant_builds_and_loads_by_name_with_its_city_card_and_overview(root):
     import dtradar_data
-    from dtradar_data.pipeline.builder import BuildConfig, build
+    from dtradar_data.pipeline.builder import build
+    from dtradar_data.pipeline.config import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     cfg = BuildConfig(

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from dtradar_data.pipeline.builder import BuildConfig, build_inputs, scene_config
+from dtradar_data.pipeline.config import BuildConfig, scene_config
+from dtradar_data.pipeline.inputs import build_inputs
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.store.versions import version_id
 

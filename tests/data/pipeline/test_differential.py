@@ -23,7 +23,7 @@ def small():
 
 @pytest.fixture
 def config():
-    from dtradar_data.pipeline.builder import BuildConfig
+    from dtradar_data.pipeline.config import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     return BuildConfig(
@@ -36,7 +36,7 @@ def config():
 
 
 def test_the_differential_build_of_an_unchanged_twin_equals_its_parent(root, small, config):
-    from dtradar_data.pipeline.builder import build_one
+    from dtradar_data.pipeline.static_build import build_one
 
     parent = build_one(small, config)
     same = build_one(replace(small, variant="dynamic"), config)
@@ -48,7 +48,7 @@ def test_the_differential_build_of_an_unchanged_twin_equals_its_parent(root, sma
 
 def test_an_added_object_re_traces_only_the_cells_it_can_affect_and_keeps_the_rest(root, small, config):
     import dtradar_data
-    from dtradar_data.pipeline.builder import build_one
+    from dtradar_data.pipeline.static_build import build_one
 
     wide = replace(small, grid=replace(small.grid, nx=20, ny=10))  # 10 m x 5 m: room for cells the chair cannot affect
     parent = build_one(wide, config)
@@ -79,7 +79,7 @@ def test_a_differential_build_differs_from_a_full_build_only_in_the_cells_it_re_
     the rule re-traced. Where the differential build kept the parent's rows, the full build agrees with them as well
     as a second full trace with another ray-sampling seed agrees with the first; where it re-traced, likewise; and
     overall within the agreement the README reports for the indoor twins (98.6 % on the cubicle)."""
-    from dtradar_data.pipeline.builder import build_one
+    from dtradar_data.pipeline.static_build import build_one
     from dtradar_data.rt.compare import compare
 
     wide = replace(small, grid=replace(small.grid, nx=20, ny=10))  # x 0-10 m; the transmitter stands at x = 10.5 m

@@ -5,8 +5,9 @@ import pytest
 
 from dtradar_data.cli import main
 from dtradar_data.core.errors import InvalidSettingError
-from dtradar_data.pipeline import builder
-from dtradar_data.pipeline.builder import BuildConfig, build
+from dtradar_data.pipeline import static_build, tracing
+from dtradar_data.pipeline.builder import build
+from dtradar_data.pipeline.config import BuildConfig
 
 
 @pytest.fixture(autouse=True)
@@ -14,8 +15,8 @@ def no_tracing(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("the build traced although it should have been refused first")
 
-    monkeypatch.setattr(builder, "RayTracer", refuse)
-    monkeypatch.setattr(builder, "trace_grid", refuse)
+    monkeypatch.setattr(static_build, "RayTracer", refuse)
+    monkeypatch.setattr(tracing, "trace_grid", refuse)
 
 
 @pytest.mark.parametrize(

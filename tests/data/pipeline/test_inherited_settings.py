@@ -12,8 +12,10 @@ import pytest
 from dtradar_data.core.errors import DatasetNotFoundError, InvalidSettingError
 from dtradar_data.core.schema import SCHEMA_VERSION
 from dtradar_data.geometry.occupancy import occupancy
-from dtradar_data.pipeline import builder
-from dtradar_data.pipeline.builder import BuildConfig, build, differential_parent_version, scene_config
+from dtradar_data.pipeline import static_build, tracing
+from dtradar_data.pipeline.builder import build
+from dtradar_data.pipeline.config import BuildConfig, scene_config
+from dtradar_data.pipeline.parent import differential_parent_version
 from dtradar_data.pipeline.synthetic import synthetic_table
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.scenes import load_scene_spec
@@ -60,8 +62,8 @@ def no_tracing(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("the build traced although it should have been refused first")
 
-    monkeypatch.setattr(builder, "RayTracer", refuse)
-    monkeypatch.setattr(builder, "trace_grid", refuse)
+    monkeypatch.setattr(static_build, "RayTracer", refuse)
+    monkeypatch.setattr(tracing, "trace_grid", refuse)
 
 
 def store_parent(room, config, version: str, **changes) -> None:
@@ -180,7 +182,7 @@ def test_a_pose_twin_checks_its_parent_pose_twin_blueprint_the_same_way(root, ro
     """An antenna-pose-error twin's differential parent is the pose twin's blueprint (same seeded pose); another
     pose seed moves the transmitter, which its rows depend on."""
     pose = replace(config, tx_pose_error=(0.3, 5.0))
-    blueprint, twin = builder.build_specs(replace(pose, variant="all"))
+    blueprint, twin = static_build.build_specs(replace(pose, variant="all"))
     cfg = scene_config(pose, blueprint)
     cells = synthetic_table(blueprint.grid.nx, blueprint.grid.ny, occupancy(blueprint), cell_m=blueprint.grid.cell_m)
     meta = {

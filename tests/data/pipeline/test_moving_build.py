@@ -68,7 +68,7 @@ waypoints = [[0.75, 0.75], [2.25, 0.75]]
 
 
 def _config(path, **rt):
-    from dtradar_data.pipeline.builder import BuildConfig
+    from dtradar_data.pipeline.config import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     settings = {"max_depth": 1, "samples_per_src": 2_000, "device": "cpu", **rt}
@@ -110,8 +110,8 @@ def test_a_differential_snapshot_equals_a_full_trace_where_it_re_traced_and_the_
     in_built_root,
 ):
     from dtradar_data.geometry.occupancy import occupancy
-    from dtradar_data.pipeline.builder import trace_grid
     from dtradar_data.pipeline.differential import retrace_mask
+    from dtradar_data.pipeline.tracing import trace_grid
     from dtradar_data.rt.features import CELL_RADIO_KEYS
     from dtradar_data.scenes import load_moving_scene
 
@@ -213,7 +213,8 @@ def test_the_rl_side_reads_the_built_moving_twin(in_built_root):
 @pytest.mark.sionna
 def test_the_moving_twin_loads_by_name_lists_verifies_and_is_reused(in_built_root, capsys):
     from dtradar_data import cli
-    from dtradar_data.pipeline.builder import build, moving_build_inputs
+    from dtradar_data.pipeline.builder import build
+    from dtradar_data.pipeline.inputs import moving_build_inputs
     from dtradar_data.scenes import load_moving_scene
     from dtradar_data.store import listing
     from dtradar_data.store.versions import version_id
@@ -310,7 +311,7 @@ def test_an_interrupted_build_restarts_at_the_first_missing_snapshot(root, corri
 )
 def test_the_options_a_moving_build_cannot_use_are_refused_naming_them(options, flag):
     from dtradar_data.core.errors import InvalidSettingError
-    from dtradar_data.pipeline.builder import BuildConfig
+    from dtradar_data.pipeline.config import BuildConfig
 
     with pytest.raises(InvalidSettingError) as err:
         BuildConfig(scene="cubicle", variant="moving", **options)

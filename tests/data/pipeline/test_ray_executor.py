@@ -11,8 +11,10 @@ from dataclasses import replace
 import pytest
 
 from dtradar_data.core.layout import work_root
-from dtradar_data.pipeline import builder
-from dtradar_data.pipeline.builder import BuildConfig, build_inputs, build_one, scene_config
+from dtradar_data.pipeline import tracing
+from dtradar_data.pipeline.config import BuildConfig, scene_config
+from dtradar_data.pipeline.inputs import build_inputs
+from dtradar_data.pipeline.static_build import build_one
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.store.versions import version_id
@@ -72,7 +74,7 @@ def test_a_worker_killed_mid_build_is_replaced_and_the_build_finishes_unchanged(
     on_ray = build_one(small_cubicle, cfg)
     killer.join()
     assert killed, "no worker was running mid-build to kill"
-    serial = builder.trace_grid(small_cubicle, spec_cfg.rt, None, progress=False)[0]
+    serial = tracing.trace_grid(small_cubicle, spec_cfg.rt, None, progress=False)[0]
     assert on_ray.table.equals(serial)
 
 
@@ -100,10 +102,10 @@ def test_a_ray_session_keeps_its_workers_warm_from_one_scene_to_the_next(small_c
     meeting = load_scene_spec("meeting", "blueprint")
     meeting = replace(meeting, grid=replace(meeting.grid, nx=5, ny=4))
     with RaySession(workers=2) as session:
-        first = builder.trace_grid(small_cubicle, settings, tmp_path / "a", progress=False, executor="ray")[0]
+        first = tracing.trace_grid(small_cubicle, settings, tmp_path / "a", progress=False, executor="ray")[0]
         pids = sorted(ray.get([a.pid.remote() for a in session.actors]))
-        second = builder.trace_grid(meeting, settings, tmp_path / "b", progress=False, executor="ray")[0]
+        second = tracing.trace_grid(meeting, settings, tmp_path / "b", progress=False, executor="ray")[0]
         assert sorted(ray.get([a.pid.remote() for a in session.actors])) == pids, "the same workers, not new ones"
     assert ray.is_initialized(), "a Ray the caller started stays up"
-    assert first.equals(builder.trace_grid(small_cubicle, settings, None, progress=False)[0])
-    assert second.equals(builder.trace_grid(meeting, settings, None, progress=False)[0])
+    assert first.equals(tracing.trace_grid(small_cubicle, settings, None, progress=False)[0])
+    assert second.equals(tracing.trace_grid(meeting, settings, None, progress=False)[0])

@@ -2,8 +2,8 @@
 
 import pytest
 
-from dtradar_data.pipeline import builder, resources
-from dtradar_data.pipeline.builder import BuildConfig
+from dtradar_data.pipeline import builder, resources, tracing
+from dtradar_data.pipeline.config import BuildConfig
 from dtradar_data.pipeline.resources import InsufficientResourcesError, estimate_memory
 from dtradar_data.rt.settings import RTSettings
 
@@ -13,7 +13,7 @@ def no_tracing(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("traced although the build could not fit")
 
-    monkeypatch.setattr(builder, "trace_grid", refuse)
+    monkeypatch.setattr(tracing, "trace_grid", refuse)
 
 
 def test_too_little_memory_fails_before_tracing_naming_the_path_buffer(root, monkeypatch, no_tracing):

@@ -7,7 +7,8 @@ pytestmark = pytest.mark.sionna
 
 def test_a_bundled_sionna_scene_builds_a_small_grid_and_loads_by_its_dataset_name(root):
     import dtradar_data
-    from dtradar_data.pipeline.builder import BuildConfig, build
+    from dtradar_data.pipeline.builder import build
+    from dtradar_data.pipeline.config import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     cfg = BuildConfig(

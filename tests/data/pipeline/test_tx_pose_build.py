@@ -26,7 +26,7 @@ height_m = 0.8
 
 @pytest.fixture
 def config(tmp_path, tiny_room):
-    from dtradar_data.pipeline.builder import BuildConfig
+    from dtradar_data.pipeline.config import BuildConfig
     from dtradar_data.rt.settings import RTSettings
 
     path = tmp_path / "pose-room.toml"
@@ -89,7 +89,8 @@ def test_the_tracer_orients_the_array_exactly_as_the_pose_twin_says(config):
 
 
 def test_a_city_quadrants_pose_twin_builds_both_variants_with_one_pose_and_the_outdoor_settings():
-    from dtradar_data.pipeline.builder import BuildConfig, build_specs, scene_config
+    from dtradar_data.pipeline.config import BuildConfig, scene_config
+    from dtradar_data.pipeline.static_build import build_specs
     from dtradar_data.scenes import load_scene_spec
 
     config = BuildConfig(scene="dallas-q3", tx_pose_error=(0.5, 5.0), tx_pose_seed=3)
@@ -107,7 +108,7 @@ def test_a_city_quadrants_pose_twin_builds_both_variants_with_one_pose_and_the_o
 @pytest.mark.parametrize("bad", [(-0.5, 5.0), (0.5, 90.0), (float("nan"), 5.0)])
 def test_a_bad_tx_pose_error_fails_when_the_config_is_made(bad):
     from dtradar_data.core.errors import InvalidSettingError
-    from dtradar_data.pipeline.builder import BuildConfig
+    from dtradar_data.pipeline.config import BuildConfig
 
     with pytest.raises(InvalidSettingError, match="--tx-pose-error"):
         BuildConfig(scene="cubicle", tx_pose_error=bad)

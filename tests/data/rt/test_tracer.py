@@ -55,7 +55,7 @@ def iso_settings():
 
 @pytest.fixture(scope="module")
 def traced(iso_settings):
-    from dtradar_data.pipeline.builder import trace_grid
+    from dtradar_data.pipeline.tracing import trace_grid
 
     cells, paths, blocked, tracer = trace_grid(tiny_spec(), iso_settings, progress=False)
     tracer.close()
@@ -92,7 +92,7 @@ def test_the_floor_reflection_is_found_and_the_los_path_is_the_strongest(traced)
 
 
 def test_the_same_scene_and_seed_give_identical_tables(traced, iso_settings):
-    from dtradar_data.pipeline.builder import trace_grid
+    from dtradar_data.pipeline.tracing import trace_grid
 
     cells, paths, _, tracer = trace_grid(tiny_spec(), iso_settings, progress=False)
     tracer.close()
@@ -101,7 +101,7 @@ def test_the_same_scene_and_seed_give_identical_tables(traced, iso_settings):
 
 def test_an_interrupted_trace_resumes_from_its_finished_batches(tmp_path, traced, iso_settings):
     from dtradar_data.pipeline.batches import batch_dir
-    from dtradar_data.pipeline.builder import trace_grid
+    from dtradar_data.pipeline.tracing import trace_grid
 
     settings = replace(iso_settings, batch_size=2)  # 3 batches for 6 cells
     first, _, _, tracer = trace_grid(tiny_spec(), settings, tmp_path, progress=False)
@@ -131,7 +131,7 @@ def test_receivers_outside_the_scene_are_rejected_before_tracing(iso_settings):
 
 def test_per_cell_features_follow_the_contract_on_the_paper_arrays():
     from dtradar_data.core.schema import CELL_SCHEMA
-    from dtradar_data.pipeline.builder import trace_grid
+    from dtradar_data.pipeline.tracing import trace_grid
     from dtradar_data.rt.settings import RTSettings
 
     settings = RTSettings(max_depth=2, samples_per_src=5_000, device="cpu")  # -> vertical dipole

@@ -8,7 +8,7 @@ import pytest
 
 from dtradar_data import cli
 from dtradar_data.core.errors import SceneFileError
-from dtradar_data.pipeline import builder
+from dtradar_data.pipeline import static_build, tracing
 from dtradar_data.scenes import load_scene_spec, scene_file, xml_scene
 from dtradar_data.scenes.city.reader import city_file, read_city_file
 from dtradar_data.scenes.names import reserved_because
@@ -23,8 +23,8 @@ def nothing_read(monkeypatch):
     def expensive(*args, **kwargs):
         raise AssertionError("an expensive step ran for a scene whose name should have been refused first")
 
-    monkeypatch.setattr(builder, "trace_grid", expensive)
-    monkeypatch.setattr(builder, "RayTracer", expensive)
+    monkeypatch.setattr(tracing, "trace_grid", expensive)
+    monkeypatch.setattr(static_build, "RayTracer", expensive)
     monkeypatch.setattr(xml_scene, "mesh_scene", expensive)
 
 
