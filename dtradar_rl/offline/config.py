@@ -11,6 +11,7 @@ from pathlib import Path
 
 from dtradar_data.core.errors import unknown_name
 from dtradar_rl.offline.behaviours import BehaviourConfig
+from dtradar_rl.offline.relabel import DEFAULT_DISCOUNT, RelabelConfig
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.runs import run_dir
 
@@ -79,8 +80,26 @@ class OfflineConfig(BehaviourConfig):
     logged: str = ""
     """train on this stored logged dataset (e.g. cubicle/blueprint/mixture@v0, see `dtradar_rl log`); default: log
     (or reuse) <scene>/<variant>/<behaviour> with --behaviour, --transitions and --seed"""
+    relabel: str = "none"
+    """goal relabelling of the logged steps (dtradar_rl.offline.relabel): none (the logged targets); future (goals
+    from the future of the same episode: with --algorithm bc this is GCBC); own-future; ogbench (OGBench's value goals:
+    next 0.2, future 0.5, random 0.3); random; or probabilities like own=0.5,future=0.3,random=0.2 (sources own,
+    future, random, next; they sum to 1). Rewards and terminals are recomputed exactly for each goal"""
+    relabel_discount: float = DEFAULT_DISCOUNT
+    """relabelling: future goals are k >= 1 steps ahead, k geometric with parameter 1 - discount (mean 1 / (1 -
+    discount) steps), cut at the episode's end"""
+    relabel_resample: str = "batch"
+    """relabelling: batch (fresh goals for every minibatch, as OGBench) or run (one goal per logged step, drawn once
+    with --seed)"""
     out: str = ""
     """output directory (default runs/<scene>/offline/<algorithm>)"""
+
+    def relabel_config(self) -> RelabelConfig:
+        """The goal relabelling of this run (seeded with ``seed``): :class:`~dtradar_rl.offline.relabel.RelabelConfig`
+        of ``relabel``, ``relabel_discount`` and ``relabel_resample``."""
+        return RelabelConfig.parse(
+            self.relabel, discount=self.relabel_discount, seed=self.seed, resample=self.relabel_resample
+        )
 
     @property
     def out_dir(self) -> Path:
@@ -94,6 +113,7 @@ class OfflineConfig(BehaviourConfig):
         if not self.lr > 0:
             raise ConfigError(f"--lr must be > 0, got {self.lr}", hint="e.g. --lr 1e-3")
         self.check_at_least(0, "bc_beta", "cql_alpha")
+        self.relabel_config()  # a mix that does not parse, or probabilities that are not a distribution
 
     def validate(self) -> OfflineConfig:
         super().validate()

@@ -19,6 +19,8 @@ Three stages, each usable on its own:
    the weights are those of d3rlpy's defaults for the same seed. d3rlpy's defaults
    are tuned for Atari (learning rate 6.25e-5, target sync every 8000 updates, γ = 0.99); here γ, learning rate,
    target interval and hidden sizes come from :class:`OfflineConfig`, with defaults measured on the cubicle twin.
+   With ``--relabel`` the minibatches are the logged steps replayed towards relabelled goals, rewards and terminals
+   recomputed from the twin (:mod:`dtradar_rl.offline.relabel`; ``--algorithm bc --relabel future`` is GCBC).
 3. **Evaluation**: :class:`~dtradar_rl.offline.policy.OfflinePolicy` wraps the trained algorithm as a
 :class:`dtradar_rl.agents.policy.Policy`, so
    :func:`dtradar_rl.evaluation.evaluate.evaluate` runs it unchanged (greedy action = ``algo.predict``). The obstacle
@@ -56,6 +58,7 @@ from dtradar_rl.offline.config import ALGORITHMS, OFFLINE_FORMAT, OfflineConfig,
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, check_compatible, log_dataset
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
+from dtradar_rl.offline.relabel import relabelled_sampler, relabeller
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runs import no_empty_folder_on_failure
@@ -294,8 +297,16 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         )
     stats["transitions"] = int(logged_data.transition_count)
 
+    relabel = cfg.relabel_config()
+    train_data = logged_data
+    if not relabel.is_identity:  # goals relabelled in every minibatch (or once): dtradar_rl.offline.relabel
+        train_data = relabelled_sampler(logged_data, relabeller(store_log, ds), relabel)
+        say(f"relabelling goals: {relabel.describe()}, discount {relabel.discount:g}, drawn per {relabel.resample}")
+
     d3rlpy.seed(cfg.seed)
     algo = make_algorithm(cfg)
+    if algo.need_returns_to_go and train_data is not logged_data:  # pragma: no cover - none of ALGORITHMS does
+        raise ConfigError(f"{cfg.algorithm} reads returns-to-go, which relabelled steps do not have")
     epochs = _epochs(cfg.n_steps)
 
     def progress(row: dict[str, float]) -> None:
@@ -305,8 +316,10 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         )
 
     t_fit = time.perf_counter()
-    losses = fit(algo, logged_data, cfg.n_steps, epochs=epochs, on_epoch=progress)
+    losses = fit(algo, train_data, cfg.n_steps, epochs=epochs, on_epoch=progress)
     train_s = time.perf_counter() - t_fit
+    if train_data is not logged_data:
+        stats["relabel"] = train_data.summary()
 
     model = out / "model.d3"
     tmp_model = out / ".model.d3.tmp"
@@ -321,6 +334,7 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         "dataset": {"name": ds.name, "version": ds.version},
         "logged": source,
         "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s, **threads},
+        "relabel": stats.get("relabel") or {**relabel.to_dict(), "mix": relabel.describe()},
     }
     write_atomic(out / "config.json", json.dumps(meta, indent=2) + "\n")
     _write_losses(losses, out / "losses.csv")
