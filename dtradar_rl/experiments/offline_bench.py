@@ -61,12 +61,15 @@ from dtradar_data.store.logged import episode_stats
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
 from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized, reference_scores
 from dtradar_rl.experiments.offline_report import markdown, ope_summary, plot, plot_fqe, summarize
+from dtradar_rl.experiments.offline_tabular import tabular_rows
 from dtradar_rl.offline.behaviours import BEHAVIOURS, FAMILIES, behaviour_policy
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.formats import as_logged
 from dtradar_rl.offline.logged import LogConfig, log_dataset, resolve_spec
 from dtradar_rl.offline.ope import FQE_GAMMA, episode_starts, fqe_estimate, true_value
 from dtradar_rl.offline.trainer import train_offline
+from dtradar_rl.tabular.batch import LEARNERS
+from dtradar_rl.tabular.batch import NAMES as TABULAR_NAMES
 from dtradar_rl.task.config import Config, ConfigError
 from dtradar_rl.task.runs import dqn_checkpoint
 from dtradar_rl.task.runtime import machine
@@ -138,6 +141,9 @@ class OfflineBenchConfig(Config):
     fqe_gamma: float = FQE_GAMMA
     """discount of the value FQE estimates and the rollouts measure (the agents train with 0.5, under which all
     reasonable agents are worth about the same; see dtradar_rl.offline.ope)"""
+    tabular: bool = True
+    """also run the tabular batch learners (CE, VI-LCB, Π_b-SPIBB) and each dataset's ceiling (--no-tabular: skip;
+    seconds per dataset, see dtradar_rl.tabular.batch)"""
     out: str = ""
     """output folder (default results/offline_bench/<scene>)"""
     verbose: bool = True
@@ -459,6 +465,34 @@ def log_datasets(
     return datasets, ids
 
 
+def tabular_section(cfg: OfflineBenchConfig, ids: dict[str, str], twins: dict[str, Any], refs, say) -> dict[str, Any]:
+    """Every dataset's ceiling and tabular batch learners (:mod:`dtradar_rl.experiments.offline_tabular`)."""
+    by_variant = {name.split("/")[1]: ds for name, ds in twins.items()}
+    if "blueprint" not in by_variant:
+        by_variant = {"blueprint": load_dataset(f"{cfg.scene}/blueprint"), **by_variant}
+    out = {}
+    for beh, logged_id in ids.items():
+        out[beh] = tabular_rows(as_logged(logged_id), by_variant, refs_for(by_variant, refs, cfg), pairs=cfg.pairs)
+        row = out[beh]
+        say(
+            f"tabular on {beh}: ceiling {row['ceiling']['blueprint']['normalized']:.1f}, "
+            + ", ".join(
+                f"{TABULAR_NAMES[n]} " + "/".join(f"{row[n][v]['normalized']:.1f}" for v in cfg.variants if v in row[n])
+                for n in LEARNERS
+            )
+            + f" ({row['seconds']:.1f} s)"
+        )
+    return out
+
+
+def refs_for(twins: dict[str, Any], refs: dict[str, Any], cfg: OfflineBenchConfig) -> dict[str, Any]:
+    """SPL references of every twin in ``twins`` (the blueprint's measured here when it is not evaluated)."""
+    return {
+        v: refs[v] if v in refs else reference_scores(ds, pairs=cfg.pairs, seed=EVAL_SEED, device=cfg.device)
+        for v, ds in twins.items()
+    }
+
+
 def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     """Run the benchmark of ``cfg`` and write ``bench.{json,md,png}``; returns the JSON object."""
     cfg = cfg.validate()
@@ -475,7 +509,10 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     }
     ckpt, online = _online(cfg, twins, refs, say)
     datasets, ids = log_datasets(cfg, ckpt, twins, blueprint, refs)
-    head = {"references": refs, "online_dqn": online, "datasets": datasets, "setup_s": time.perf_counter() - t_start}
+    head = {"references": refs, "online_dqn": online, "datasets": datasets}
+    if cfg.tabular:
+        head["tabular"] = tabular_section(cfg, ids, twins, refs, say)
+    head["setup_s"] = time.perf_counter() - t_start
     jobs = [
         BenchJob(
             behaviour=beh,

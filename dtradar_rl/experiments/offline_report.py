@@ -108,24 +108,56 @@ def _num(x: float | None, fmt: str = "{:.1f}") -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else fmt.format(x)
 
 
+#: The tabular columns of the score table, in order (dtradar_rl.tabular.batch): the data ceiling, then the learners.
+TABULAR_COLUMNS: dict[str, str] = {"ceiling": "data ceiling", "ce": "CE", "lcb": "VI-LCB", "spibb": "Π_b-SPIBB"}
+
+
+def _tabular_score(result: dict[str, Any], beh: str, column: str, variant: str, key: str = "normalized"):
+    row = ((result.get("tabular") or {}).get(beh) or {}).get(column) or {}
+    return (row.get(variant) or {}).get(key)
+
+
 def score_table(result: dict[str, Any], variant: str) -> list[str]:
-    """The quotable table of one twin: a row per dataset, the behaviour itself and every algorithm's normalised
-    score (mean ± std over seeds), the best algorithm of each row in bold."""
+    """The quotable table of one twin: a row per dataset, the behaviour itself, the data's ceiling and the tabular
+    batch learners (when the benchmark ran them), then every d3rlpy algorithm's normalised score (mean ± std over
+    seeds); the best learner of each row (tabular or deep, not the ceiling) in bold."""
     algos = list(result["algorithms"])
+    tab_cols = [c for c in TABULAR_COLUMNS if result.get("tabular")]
     best = best_per_dataset(result, variant)
     lines = [
-        "| dataset | behaviour itself | " + " | ".join(result["algorithms"][a] for a in algos) + " |",
-        "|" + "---|" * (2 + len(algos)),
+        "| dataset | behaviour itself | "
+        + "".join(f"{TABULAR_COLUMNS[c]} | " for c in tab_cols)
+        + " | ".join(result["algorithms"][a] for a in algos)
+        + " |",
+        "|" + "---|" * (2 + len(tab_cols) + len(algos)),
     ]
     for beh, d in result["datasets"].items():
         own = ((d.get("eval") or {}).get(variant) or {}).get("normalized")
-        cells = []
+        deep = []
         for a in algos:
             e = next((e for e in result["summary"] if e["behaviour"] == beh and e["algorithm"] == a), None)
             m = ((e or {}).get(variant) or {}).get("normalized")
-            text = _pm(m, "{:.1f}")
-            cells.append(f"**{text}**" if e is not None and best.get(beh) is e else text)
+            deep.append((_pm(m, "{:.1f}"), None if m is None else m["mean"], e is not None and best.get(beh) is e))
+        tab = [(c, _tabular_score(result, beh, c, variant)) for c in tab_cols]
+        top = max([x for _, x in tab[1:] if x is not None] + [x for _, x, _ in deep if x is not None], default=None)
+        best_deep = max([x for _, x, _ in deep if x is not None], default=None)
+        cells = [f"**{_num(x)}**" if c != "ceiling" and x is not None and x == top else _num(x) for c, x in tab] + [
+            f"**{t}**" if flag and (top is None or best_deep >= top) else t for t, _, flag in deep
+        ]
         lines.append(f"| {beh} | {_num(own)} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def return_table(result: dict[str, Any], variant: str) -> list[str]:
+    """The return-based normalised score (exact) of the ceiling and the tabular learners on one twin."""
+    tab_cols = list(TABULAR_COLUMNS)
+    lines = [
+        "| dataset | " + " | ".join(TABULAR_COLUMNS[c] for c in tab_cols) + " | seconds |",
+        "|" + "---|" * (2 + len(tab_cols)),
+    ]
+    for beh, row in (result.get("tabular") or {}).items():
+        cells = [_num(_tabular_score(result, beh, c, variant, "return_normalized")) for c in tab_cols]
+        lines.append(f"| {beh} | " + " | ".join(cells) + f" | {row.get('seconds', 0):.1f} |")
     return lines
 
 
@@ -153,6 +185,25 @@ def markdown(result: dict[str, Any]) -> str:
     ]
     for v in variants:
         lines += ["", f"**{cfg['scene']} → {v}** (normalised score)", "", *score_table(result, v)]
+    if result.get("tabular"):
+        lines += [
+            "",
+            "Tabular columns (dtradar_rl.tabular.batch): the data ceiling is the best SPL of any policy using only "
+            "logged (cell, action) pairs, on the blueprint with the true cell; CE, VI-LCB and Π_b-SPIBB are tables "
+            "learnt from the logged moves for every evaluation target (the reward function known, so every logged "
+            "move teaches every target), acting by fingerprint localisation like a robot.",
+        ]
+        for v in variants:
+            ref = next(iter(result["tabular"].values()))["return_references"].get(v) or {}
+            lines += [
+                "",
+                f"**{cfg['scene']} → {v}** (return-based normalised score, exact: 100 · (J − J_random) / (J* − "
+                f"J_random), J the mean discounted return (γ = {ref.get('gamma')}, reward {ref.get('reward')}) over "
+                f"the evaluation pairs; J_random {ref.get('random', float('nan')):.3f}, J* "
+                f"{ref.get('optimal', float('nan')):.3f})",
+                "",
+                *return_table(result, v),
+            ]
     online = result.get("online_dqn") or {}
     if online:
         scores = ", ".join(

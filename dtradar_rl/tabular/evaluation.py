@@ -19,7 +19,7 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidSettingError
-from dtradar_rl.tabular.solver import MAX_SWEEPS, TOL, TabularMDP, check_gamma, check_size, chunk_size
+from dtradar_rl.tabular.solver import TabularMDP, check_gamma, check_size, chunk_size, expectation_sweeps
 
 #: Observations per forward pass of :func:`greedy_table`.
 GREEDY_BATCH = 65_536
@@ -66,17 +66,7 @@ def policy_values(
         r, reached = tab.rewards(reward, t_states[i : i + k])
         p = policy[i : i + k]
         w = np.eye(4)[p] if deterministic else np.asarray(p, np.float64)  # [k, N, 4]
-        # the policy's expected reward and its successor distribution; a deterministic policy has one successor
-        r_pi = (w * r).sum(-1)
-        cont = gamma * ~reached * w  # [k, N, 4]
-        v = np.zeros_like(r_pi)
-        rows = np.arange(r_pi.shape[0])[:, None, None]
-        for _ in range(MAX_SWEEPS):
-            new = r_pi + (cont * v[rows, tab.next[None]]).sum(-1)
-            change = float(np.abs(new - v).max()) / max(1.0, float(np.abs(new).max()))
-            v = new
-            if change <= TOL:
-                break
+        v, _, _ = expectation_sweeps(r, reached, tab.next, gamma, w)
         out[i : i + k] = v
     return out
 

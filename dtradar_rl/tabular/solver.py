@@ -162,12 +162,14 @@ def bellman_sweeps(
     allowed: np.ndarray | None = None,
     v0: np.ndarray | None = None,
     floor: float | None = None,
+    masked_value: float = -np.inf,
     tol: float = TOL,
 ) -> tuple[np.ndarray, int, float]:
     """Value iteration on one chunk: ``(V float64[K, N], sweeps, last relative change)``.
 
-    ``allowed`` (``bool[N, 4]`` or ``[K, N, 4]``) removes moves (a state without any gets ``floor``: what a robot
-    that can do nothing is worth); ``v0`` starts the sweeps elsewhere than 0."""
+    ``allowed`` (``bool[N, 4]`` or ``[K, N, 4]``) removes moves: they are worth ``masked_value`` (default -inf: never
+    taken; a state without any allowed move gets ``floor``, what a robot that can do nothing is worth); ``v0`` starts
+    the sweeps elsewhere than 0."""
     # action-major copies: one contiguous gather ``V[:, next[:, a]]`` per move is ~3x faster than one fancy
     # index over ``[K, N, 4]`` (measured on Dallas Q3's 1 950 states)
     r_a = np.ascontiguousarray(np.moveaxis(r, -1, 0))
@@ -178,7 +180,7 @@ def bellman_sweeps(
     if allowed is not None:
         allowed = np.broadcast_to(allowed, r.shape)
         mask_a = np.ascontiguousarray(np.moveaxis(~allowed, -1, 0))
-        stuck = ~allowed.any(-1)
+        stuck = ~allowed.any(-1) if masked_value == -np.inf else None
     v = np.zeros(r.shape[:2]) if v0 is None else np.array(v0, np.float64)
     new = np.empty_like(v)
     qa = np.empty_like(v)
@@ -189,7 +191,7 @@ def bellman_sweeps(
             qa *= cont_a[a]
             qa += r_a[a]
             if mask_a is not None:
-                qa[mask_a[a]] = -np.inf
+                qa[mask_a[a]] = masked_value
             if a == 0:
                 new[:] = qa
             else:
@@ -202,6 +204,41 @@ def bellman_sweeps(
         if change <= tol:
             return v, sweep, change
     return v, MAX_SWEEPS, change
+
+
+def expectation_sweeps(
+    r: np.ndarray,
+    reached: np.ndarray,
+    nxt: np.ndarray,
+    gamma: float,
+    weights: np.ndarray,
+    *,
+    v0: np.ndarray | None = None,
+    max_sweeps: int = MAX_SWEEPS,
+    tol: float = TOL,
+) -> tuple[np.ndarray, int, float]:
+    """Policy evaluation on one chunk: ``V = Σ_a w_a · (r_a + γ · [not reached] · V[next_a])`` swept until the
+    relative change is at most ``tol`` (or ``max_sweeps``); ``weights`` ``[K, N, 4]`` are the move probabilities
+    (zero where a move must not count: its term is then 0). Action-major like :func:`bellman_sweeps`."""
+    w_a = np.ascontiguousarray(np.moveaxis(np.broadcast_to(weights, r.shape), -1, 0))
+    r_pi = (w_a * np.moveaxis(r, -1, 0)).sum(0)
+    cont_a = w_a * np.moveaxis(gamma * ~reached, -1, 0)
+    nxt_a = [np.ascontiguousarray(nxt[:, a]) for a in range(nxt.shape[1])]
+    live = [a for a in range(len(nxt_a)) if cont_a[a].any()]
+    v = np.zeros(r.shape[:2]) if v0 is None else np.array(v0, np.float64)
+    qa = np.empty_like(v)
+    change = np.inf
+    for sweep in range(1, max_sweeps + 1):
+        new = r_pi.copy()
+        for a in live:
+            np.take(v, nxt_a[a], axis=1, out=qa)
+            qa *= cont_a[a]
+            new += qa
+        change = float(np.abs(new - v).max()) / max(1.0, float(np.abs(new).max()))
+        v = new
+        if change <= tol:
+            return v, sweep, change
+    return v, max_sweeps, change
 
 
 @dataclass
@@ -359,6 +396,7 @@ __all__ = [
     "TabularMDP",
     "TooLargeError",
     "bellman_sweeps",
+    "expectation_sweeps",
     "cache_dir",
     "check_size",
     "load",

@@ -53,6 +53,11 @@ def test_a_tiny_benchmark_runs_end_to_end_in_seconds(root, tmp_path):
     assert "DiscreteBC" in md and "NFQ" in md and " ± " in md and "behaviour itself" in md
     assert (tmp_path / "bench" / "bench.png").stat().st_size > 1000
     assert result["datasets"]["random"]["name"] == "synthetic-8x6/blueprint/random"
+    # the tabular rows: the data's ceiling on the blueprint, the three learners on both twins, exact return scores
+    tab = saved["tabular"]["random"]
+    assert 0 <= tab["ceiling"]["blueprint"]["spl"] <= 1 and "return_normalized" in tab["ceiling"]["blueprint"]
+    assert all(isinstance(tab[n][v]["normalized"], float) for n in ("ce", "lcb", "spibb") for v in cfg.variants)
+    assert "data ceiling" in md and "| CE |" in md and "Π_b-SPIBB" in md and "return-based" in md
     # --no-fqe: no off-policy evaluation anywhere
     assert "ope" not in saved and not any("fqe" in r for r in saved["runs"]) and "FQE" not in md
     assert not (tmp_path / "bench" / "bench_fqe.png").exists()

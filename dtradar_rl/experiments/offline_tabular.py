@@ -1,0 +1,113 @@
+"""The offline benchmark's tabular rows: each logged dataset's ceiling and the tabular batch learners on it.
+
+For one logged dataset (:mod:`dtradar_rl.tabular.batch`): the empirical model of its moves, the **data ceiling** on
+the twin it was logged on (the best SPL and return of any policy that uses only logged (cell, action) pairs, with the
+true cell), and every learner of :data:`~dtradar_rl.tabular.batch.LEARNERS` as a table over the blueprint's cells and
+the evaluation pairs' targets. A learner's table acts as a robot would, through
+:class:`~dtradar_rl.tabular.table_policy.TablePolicy`: it localises by the nearest blueprint fingerprint and looks up
+its move, rolled out like the deep agents on the same seeded pairs of every evaluated twin (so its SPL-normalised
+score sits beside theirs), and its return-based normalised score is exact (the table composed with the fingerprint
+localisation of that twin is again a table, evaluated by :func:`~dtradar_rl.tabular.evaluation.policy_values`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from dtradar_data.core.dataset import Dataset
+from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout, sample_eval_pairs
+from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized
+from dtradar_rl.evaluation.returns import pair_values, return_references, return_score
+from dtradar_rl.tabular.batch import LEARNERS, BatchConfig, ceiling, empirical_model, learn
+from dtradar_rl.tabular.evaluation import policy_values
+from dtradar_rl.tabular.fingerprints import localisation
+from dtradar_rl.tabular.solver import TabularMDP
+from dtradar_rl.tabular.table_policy import TablePolicy
+
+
+def grid_table(tab: TabularMDP, table: np.ndarray) -> np.ndarray:
+    """A learner's ``[K, N(, 4)]`` table (states in ``tab.cells`` order) as TablePolicy's ``[H*W, K(, 4)]`` (a
+    blocked cell's row is never read: no robot is believed to stand on one)."""
+    out = np.zeros((tab.mdp.num_cells, *table.shape[:1], *table.shape[2:]), table.dtype)
+    if table.ndim == 3:
+        out[...] = 0.25
+    out[tab.cells] = np.swapaxes(table, 0, 1)
+    return out
+
+
+def localised_table(tab_bp: TabularMDP, tab: TabularMDP, loc: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """``table`` (over blueprint states) as the table over ``tab``'s states that a robot localising with ``loc``
+    (true grid cell -> believed blueprint cell) follows."""
+    return table[:, tab_bp.state_of[loc[tab.cells]]]
+
+
+def _exact_return(blueprint: Dataset, tab_bp, twin: Dataset, table, targets, pairs, reward, gamma, refs) -> float:
+    """The return-normalised score of ``table`` on ``twin``'s ``pairs``, localising by fingerprint, exactly."""
+    tab = TabularMDP.from_dataset(twin)
+    loc = localisation(blueprint, twin)
+    rows = np.searchsorted(targets, np.unique(pairs[:, 1]))
+    seen = localised_table(tab_bp, tab, loc, table[rows])
+    values = policy_values(tab, seen, targets[rows], reward, gamma)
+    return return_score(pair_values(tab, values, targets[rows], pairs).mean(), refs)
+
+
+def tabular_rows(
+    logged,
+    twins: dict[str, Dataset],
+    refs: dict[str, dict[str, float]],
+    *,
+    pairs: int = 500,
+    cfg: BatchConfig | None = None,
+    device: str = "cpu",
+) -> dict[str, Any]:
+    """``{"coverage", "model_s", "ceiling", <learner>: {"learn_s", <variant>: scores}}`` for one logged dataset;
+    ``twins`` maps variant -> twin (the blueprint first: the data's own), ``refs`` variant -> SPL references."""
+    cfg = (cfg or BatchConfig()).validate()
+    blueprint = twins["blueprint"]
+    tab = TabularMDP.from_dataset(blueprint)
+    t0 = time.perf_counter()
+    model = empirical_model(logged, tab)
+    out: dict[str, Any] = {"coverage": model.coverage(), "model_s": time.perf_counter() - t0, "reward": model.reward}
+    eval_pairs = {v: sample_eval_pairs(ds, pairs, DEFAULT_SEED) for v, ds in twins.items()}
+    ret_refs = {v: return_references(ds, reward=model.reward, gamma=cfg.gamma, pairs=pairs) for v, ds in twins.items()}
+    out["return_references"] = ret_refs
+
+    c = ceiling(model, eval_pairs["blueprint"], cfg)
+    rows = np.searchsorted(c["targets"], eval_pairs["blueprint"][:, 1])
+    j = c["values"][rows, tab.states(eval_pairs["blueprint"][:, 0])].mean()
+    out["ceiling"] = {
+        "seconds": c["seconds"],
+        "blueprint": {
+            "normalized": normalized(c["spl"], refs["blueprint"]),
+            "return_normalized": return_score(j, ret_refs["blueprint"]),
+            "success_rate": c["success_rate"],
+            "spl": c["spl"],
+        },
+    }
+    targets = np.unique(np.concatenate([p[:, 1] for p in eval_pairs.values()]))
+    for name in LEARNERS:
+        t1 = time.perf_counter()
+        table = learn(name, model, targets, cfg)
+        row: dict[str, Any] = {"learn_s": time.perf_counter() - t1}
+        policy = TablePolicy(blueprint, grid_table(tab, table), targets=targets, name=f"tabular {name}")
+        for v, ds in twins.items():
+            m = metrics_from_rollouts(rollout(policy, ds, eval_pairs[v], device=device)).to_dict()
+            row[v] = {
+                "normalized": normalized(m["spl"], refs[v]),
+                "return_normalized": _exact_return(
+                    blueprint, tab, ds, table, targets, eval_pairs[v], model.reward, cfg.gamma, ret_refs[v]
+                ),
+                "success_rate": float(m["success_rate"]),
+                "spl": float(m["spl"]),
+                "collisions": float(m["collisions"]),
+            }
+        row["seconds"] = time.perf_counter() - t1
+        out[name] = row
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+__all__ = ["grid_table", "localised_table", "tabular_rows"]
