@@ -7,7 +7,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -92,6 +92,11 @@ eval:
 # reused), e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
 offline:
 	$(PY) -m dtradar_rl offline --scene $(SCENE) $(ARGS)
+
+# The exact solution of $(SCENE)'s twins: V*/Q* for every (cell, target) under the geodesic and paper rewards (cached
+# in the data root), the greedy policy's success and SPL on the 500 evaluation pairs -> results/solve/$(SCENE)/
+solve:
+	$(PY) -m dtradar_rl solve --scene $(SCENE) $(ARGS)
 
 BEHAVIOUR ?= noisy-shortest
 # A logged offline-RL dataset <scene>/blueprint/<behaviour> in the store (+ Minari copy), e.g.

@@ -26,6 +26,7 @@ from dtradar_rl.evaluation.jobs import CrossConfig, EvalConfig, run_cross, run_e
 from dtradar_rl.experiments.adapt import AdaptConfig, adapt
 from dtradar_rl.experiments.offline_bench import OfflineBenchConfig
 from dtradar_rl.experiments.paper import PaperConfig, run_paper
+from dtradar_rl.experiments.solve import SolveConfig
 from dtradar_rl.experiments.sweep import SweepConfig, sweep
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.logged import LogConfig
@@ -122,6 +123,13 @@ def _parse_and_run(argv: list[str]) -> int:
 
         run_bench(cfg.validate())
 
+    def solve_cmd(cfg: Annotated[SolveConfig, tyro.conf.arg(name="")] = SolveConfig()) -> None:
+        """Solve a twin's navigation MDP exactly: V*/Q* for every (cell, target) under each reward (cached in the data
+        root), and the greedy policy's success and SPL on the 500 seeded evaluation pairs; JSON, Markdown, a picture."""
+        from dtradar_rl.experiments.solve import solve_scene
+
+        solve_scene(cfg.validate())
+
     def sweep_cmd(cfg: Annotated[SweepConfig, tyro.conf.arg(name="")] = SweepConfig()) -> None:
         """Train and evaluate several scenes x seeds (on Ray workers by default); one table with mean and spread."""
         sweep(cfg.validate())
@@ -142,6 +150,7 @@ def _parse_and_run(argv: list[str]) -> int:
         "adapt": adapt_cmd,
         "log": log_cmd,
         "offline-bench": offline_bench_cmd,
+        "solve": solve_cmd,
         "sweep": sweep_cmd,
         "paper": paper_cmd,
     }
