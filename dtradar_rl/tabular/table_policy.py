@@ -117,6 +117,11 @@ class Localiser:
             return self._positions.query(o[:, POSITION_COLUMNS].astype(np.float64))[1].astype(np.int64)
         return self.cells[self._fingerprints.query(o[:, RADIO_COLUMNS].astype(np.float64))[1]]
 
+    def hears(self, obs: torch.Tensor | np.ndarray) -> np.ndarray:
+        """``bool[n]``: the robot senses radio features on its cell (a free cell no path reaches reads all 0, the
+        normalised value of a missing feature; its nearest fingerprint says nothing about where it is)."""
+        return (_numpy(obs)[:, RADIO_COLUMNS] != 0).any(1)
+
     def targets(self, obs: torch.Tensor | np.ndarray) -> np.ndarray:
         """``int64[n]``: the target cell of each robot (its ``x, y`` are the observation's last two columns)."""
         return self._positions.query(_numpy(obs)[:, -2:].astype(np.float64))[1].astype(np.int64)
