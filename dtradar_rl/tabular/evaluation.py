@@ -81,14 +81,16 @@ def follow(
     tab: TabularMDP, actions: np.ndarray, rows: np.ndarray, starts: np.ndarray, targets: np.ndarray, max_steps: int
 ) -> dict[str, np.ndarray]:
     """Follow a deterministic table from every start: ``success``, ``steps``, ``travelled`` (moves that changed
-    cell) and ``shortest`` (breadth-first) per episode. ``actions`` is ``int[K, N]``; episode ``i`` uses row
-    ``rows[i]``, starts and targets are grid cells."""
+    cell), ``collisions`` and ``shortest`` (breadth-first) per episode: what a rollout in the env gives for a
+    deterministic policy on a static twin without measurement noise. ``actions`` is ``int[K, N]``; episode ``i``
+    uses row ``rows[i]``, starts and targets are grid cells."""
     s = tab.states(starts).copy()
     t = tab.states(targets)
     n = s.size
     done = s == t
     steps = np.zeros(n, np.int64)
     travelled = np.zeros(n, np.int64)
+    collisions = np.zeros(n, np.int64)
     for _ in range(max_steps):
         live = ~done
         if not live.any():
@@ -96,13 +98,14 @@ def follow(
         a = actions[rows[live], s[live]]
         nxt = tab.next[s[live], a]
         travelled[live] += nxt != s[live]
+        collisions[live] += tab.collides[s[live], a]
         steps[live] += 1
         s[live] = nxt
         done[live] = nxt == t[live]
     d = tab.mdp.bfs_distances_many(np.unique(targets))
     order = np.searchsorted(np.unique(targets), targets)
     shortest = d[order, starts]
-    return {"success": done, "steps": steps, "travelled": travelled, "shortest": shortest}
+    return {"success": done, "steps": steps, "travelled": travelled, "shortest": shortest, "collisions": collisions}
 
 
 def path_metrics(paths: dict[str, np.ndarray]) -> dict[str, float]:
@@ -111,7 +114,10 @@ def path_metrics(paths: dict[str, np.ndarray]) -> dict[str, float]:
     lo = paths["shortest"].astype(np.float64)
     p = paths["travelled"].astype(np.float64)
     ratio = np.where(np.maximum(p, lo) > 0, lo / np.maximum(np.maximum(p, lo), 1e-12), 1.0)
-    return {"success_rate": float(s.mean()), "spl": float((s * ratio).mean()), "steps": float(paths["steps"].mean())}
+    out = {"success_rate": float(s.mean()), "spl": float((s * ratio).mean()), "steps": float(paths["steps"].mean())}
+    if "collisions" in paths:
+        out["collisions"] = float(paths["collisions"].mean())
+    return out
 
 
 def greedy_table(policy, ds: Dataset, tab: TabularMDP, targets: np.ndarray, device: str = "cpu") -> np.ndarray:

@@ -56,3 +56,23 @@ def test_the_return_score_is_0_for_uniform_moves_and_100_for_the_optimum(twin):
     refs = return_references(twin, pairs=80, seed=2)
     assert return_score(refs["random"], refs) == 0 and return_score(refs["optimal"], refs) == 100
     assert refs["optimal"] > refs["random"]
+
+
+def test_following_a_localised_table_gives_the_episodes_of_its_rollout_on_another_twin():
+    from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout
+    from dtradar_rl.experiments.offline_tabular import localised_table
+    from dtradar_rl.tabular.evaluation import follow, path_metrics
+    from dtradar_rl.tabular.fingerprints import localisation
+
+    blueprint, dynamic = load_dataset(TWIN), load_dataset("synthetic-12x8/dynamic")
+    tab_bp, tab = TabularMDP.from_dataset(blueprint), TabularMDP.from_dataset(dynamic)
+    pairs = sample_eval_pairs(dynamic, 80, 4)
+    targets = np.unique(pairs[:, 1])
+    table = solve(tab_bp, "geodesic", 0.9, targets).greedy()  # the blueprint's optimum, blind to the new obstacles
+    policy = TablePolicy(blueprint, as_grid(tab_bp, table), targets=targets)
+    seen = localised_table(tab_bp, tab, localisation(blueprint, dynamic), table)
+    followed = path_metrics(follow(tab, seen, np.searchsorted(targets, pairs[:, 1]), pairs[:, 0], pairs[:, 1], 400))
+    rolled = metrics_from_rollouts(rollout(policy, dynamic, pairs, max_steps=400)).to_dict()
+    for key in ("success_rate", "spl", "collisions"):
+        assert followed[key] == pytest.approx(rolled[key], abs=1e-12), key
+    assert followed["success_rate"] < 1.0  # the test means something: the dynamic twin's obstacles stop some
