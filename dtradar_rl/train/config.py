@@ -1,7 +1,10 @@
-"""The online DQN's settings and its four presets (``tuned``, ``robust``, ``memory``, ``paper``).
+"""The online DQN's settings and its six presets (``memory-escape-noise``, the default; ``memory-escape``, ``tuned``,
+``robust``, ``memory``, ``paper``).
 
-:class:`DQNConfig` extends :class:`~dtradar_rl.task.config.TwinConfig`; :func:`config_for` gives a preset with
-overrides. What each preset reaches on each twin is measured in the docs (Navigation), not here.
+:class:`DQNConfig` extends :class:`~dtradar_rl.task.config.TwinConfig`; its field defaults are the default preset's
+settings (:data:`DEFAULT_PRESET`), so ``DQNConfig() == config_for()``, and each entry of :data:`PRESETS` lists how its
+preset differs from them. :func:`config_for` gives a preset with overrides. What each preset reaches on each twin is
+measured in the docs (Navigation), not here.
 """
 
 from __future__ import annotations
@@ -23,33 +26,33 @@ PAIR_MODES = ("random", "paper")
 
 @dataclass(frozen=True)
 class DQNConfig(TwinConfig):
-    """Deep Q-learning on the navigation MDP of one dataset (defaults: the ``tuned`` preset)."""
+    """Deep Q-learning on the navigation MDP of one dataset (defaults: the default preset, ``memory-escape-noise``)."""
 
-    preset: str = "tuned"
+    preset: str = "memory-escape-noise"
     """the preset these settings started from (see the command's description); recorded in config.json"""
-    aug_obstacles: int = 0
+    aug_obstacles: int = 10
     """obstacle augmentation: extra random obstacles per robot, redrawn at every episode reset, that collide and
     read as blocked neighbours (0 = off; see dtradar_rl.envs.batched)"""
     aug_obstacle_size: int = 2
     """largest side of an extra obstacle in cells (each is a 1..size x 1..size rectangle; 2 = 1 m at 0.5 m cells)"""
     aug_potential: str = "replan"
     """geodesic shaping with extra obstacles: replan (BFS per robot on its augmented grid) or blueprint"""
-    memory_radius: int = 0
+    memory_radius: int = 5
     """memory agent: append a (2R+1)^2 window of the cells sensed as occupied and visited so far this episode
     (0 = off; needs --obs neighbors; see dtradar_rl.envs.memory)"""
     memory_bumps: bool = False
     """memory agent: also keep a map of the cells a move into failed (a bumper's feedback), so a free street cell
     that no ray reached, which reads as "no radio" like an obstacle, can be told from a wall by trying it"""
-    memory_visits: bool = False
+    memory_visits: bool = True
     """memory agent: also observe how many times the robot has stood on its cell this episode (visits_here)"""
     sense_radius: int = 1
     """cells the robot senses around it: 1 = its four neighbours; R > 1 also observes whether each cell at Manhattan
     distance 2..R has radio features, now and one snapshot before, so a mover is seen coming (needs --obs neighbors;
     see dtradar_rl.task.observations)"""
-    escape_after: int = 0
+    escape_after: int = 2
     """loop escape when acting (needs --memory-visits): a robot standing on a cell for the (k+1)-th time this episode
     takes a random move, so a greedy policy cannot repeat a cycle until the step limit (0 = off)"""
-    noise: str = "none"
+    noise: str = "realistic"
     """measurement-noise augmentation: train on radio features as a receiver would measure them (none, realistic,
     2x; see dtradar_rl.task.noise), drawn anew at every step"""
     total_env_steps: int = 600_000
@@ -102,6 +105,12 @@ class DQNConfig(TwinConfig):
     """include the replay buffer in last.pt, so a resumed run is exact"""
     resume: bool = False
     """continue from <out>/last.pt up to the (possibly raised) budget (exploration follows the new budget)"""
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> DQNConfig:
+        """The config saved by :meth:`to_dict`. A field missing from ``d`` (a config saved before the field existed)
+        takes the default it had then (:data:`SAVED_DEFAULTS`), not today's: an old checkpoint keeps its meaning."""
+        return super().from_dict({**SAVED_DEFAULTS, **d})
 
     @property
     def out_dir(self) -> Path:
@@ -192,32 +201,33 @@ class DQNConfig(TwinConfig):
         return self
 
 
+#: What ``tuned`` turns off of the default agent: the extra obstacles, the memory and its visit counts, the loop escape
+#: and the measurement noise. ``robust``, ``memory`` and ``paper`` start from it, as they were built on ``tuned``.
+_TUNED: dict[str, Any] = {
+    "aug_obstacles": 0,
+    "memory_radius": 0,
+    "memory_visits": False,
+    "escape_after": 0,
+    "noise": "none",
+}
+
+#: Each preset's settings where they differ from :class:`DQNConfig`'s defaults (the default preset's).
 PRESETS: dict[str, dict[str, Any]] = {
-    "tuned": {},
-    "robust": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan"},
-    "memory": {"aug_obstacles": 10, "aug_obstacle_size": 2, "aug_potential": "replan", "memory_radius": 5},
-    # The memory agent that counts its visits and leaves a cell it keeps coming back to.
-    "memory-escape": {
-        "aug_obstacles": 10,
-        "aug_obstacle_size": 2,
-        "aug_potential": "replan",
-        "memory_radius": 5,
-        "memory_visits": True,
-        "escape_after": 2,
-    },
+    # Goal-conditioned over random pairs, no memory, exact features: the default before the memory agents.
+    "tuned": {**_TUNED},
+    # tuned + 10 random extra obstacles per robot and episode (aug_obstacle_size 2, aug_potential replan).
+    "robust": {**_TUNED, "aug_obstacles": 10},
+    # robust + a window of what the robot has sensed and visited (memory_radius 5), no visit count or escape.
+    "memory": {**_TUNED, "aug_obstacles": 10, "memory_radius": 5},
+    # The memory agent that counts its visits and leaves a cell it keeps coming back to, on exact features.
+    "memory-escape": {"noise": "none"},
     # The default (DEFAULT_PRESET): memory-escape trained on noisy measurements (dtradar_rl.task.noise), so the
     # features it learns to rely on are the ones a receiver measures well enough (docs: Navigation).
-    "memory-escape-noise": {
-        "aug_obstacles": 10,
-        "aug_obstacle_size": 2,
-        "aug_potential": "replan",
-        "memory_radius": 5,
-        "memory_visits": True,
-        "escape_after": 2,
-        "noise": "realistic",
-    },
-    # The episodes decide the paper's budget; total_env_steps is only a backstop far above what they use.
+    "memory-escape-noise": {},
+    # The paper's agent, on tuned's base. The episodes decide the paper's budget; total_env_steps is only a backstop
+    # far above what they use.
     "paper": dict(
+        _TUNED,
         obs="paper",
         reward="paper",
         pair="paper",
@@ -238,6 +248,11 @@ PRESETS: dict[str, dict[str, Any]] = {
         eps_end=0.1,
     ),
 }
+
+#: The defaults a config saved without a field got for it: until the field defaults became the default preset's,
+#: they were the ``tuned`` preset's (every later feature off). :meth:`DQNConfig.from_dict` fills missing fields
+#: from here, so a checkpoint or ``config.json`` written before a field existed keeps what it meant.
+SAVED_DEFAULTS: dict[str, Any] = {**_TUNED, "preset": "tuned"}
 
 
 #: What ``make train`` trains without ``--preset``: the best agent measured on every twin (docs: Navigation).
