@@ -1,4 +1,6 @@
-# The Makefile only calls the two CLIs (dtradar-data, dtradar-rl); every option lives in their --help.
+# The job targets call the two CLIs (python -m dtradar_data, python -m dtradar_rl); the bench targets run the scripts
+# in bench/ (python bench/<name>.py); setup, test, lint, format and docs run pip, pytest, ruff and mkdocs. Every
+# option of a CLI or a script is on its --help and passes through ARGS="...".
 PY      ?= .venv/bin/python
 SCENE   ?= cubicle
 VARIANT ?= all

@@ -1,6 +1,6 @@
 """Where datasets live on disk. Every path the store touches is built here, so the layout has one definition.
 
-Layout (DESIGN.md §2, interfaces file)::
+Layout (docs: Datasets, where datasets live)::
 
     <root>/datasets/<scene>/<variant>/<version>/{cells.parquet, paths.parquet?, coverage.png?, meta.json, README.md}
     <root>/datasets/<scene>/<variant>/refs.json      {"tags": {"v0": "<version>", ...}, "latest": "<version>"}

@@ -1,4 +1,4 @@
-"""The per-cell table: the contract between ``dtradar_data`` and ``dtradar_rl`` (DESIGN.md §3).
+"""The per-cell table: the contract between ``dtradar_data`` and ``dtradar_rl`` (docs: Datasets, the per-cell table).
 
 One row per grid cell, blocked cells included, in row-major order (``iy`` outer, ``ix`` inner), so a column
 reshapes to ``[H, W] = [ny, nx]``. Column names carry their unit. Radio columns are null where a cell has no

@@ -1,4 +1,4 @@
-"""From traced paths to the per-cell features of the contract (DESIGN.md §3), in plain numpy.
+"""From traced paths to the per-cell features of the table (:mod:`dtradar_data.core.schema`), in plain numpy.
 
 The antenna-port reduction (written into every dataset card):
 

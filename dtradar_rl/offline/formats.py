@@ -15,10 +15,11 @@ Formats
   the logging env and ``recover_environment(eval_env=True)`` the evaluation env (the dynamic twin of a blueprint
   log), and its observation space is that env's.
 - **d3rlpy** (:func:`to_mdp_dataset`): built from our table, not with ``d3rlpy.datasets.get_minari`` (which
-  misaligns observations after the first episode in 2.8.1, DESIGN.md §4). d3rlpy drops the last step of an episode
-  that ends in a timeout (it has no next observation there), so each truncated episode gets one extra row, its final
-  ``next_obs`` with a dummy action, flagged as the timeout: every logged transition is then a d3rlpy transition with
-  the right next observation. ``timeouts = truncated and not terminated`` (2.8.1 asserts on a step with both).
+  misaligns observations after the first episode in 2.8.1; docs: Logged datasets). d3rlpy drops the last step of an
+  episode that ends in a timeout (it has no next observation there), so each truncated episode gets one extra row,
+  its final ``next_obs`` with a dummy action, flagged as the timeout: every logged transition is then a d3rlpy
+  transition with the right next observation. ``timeouts = truncated and not terminated`` (2.8.1 asserts on a step
+  with both).
 """
 
 from __future__ import annotations

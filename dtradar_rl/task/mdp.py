@@ -371,7 +371,11 @@ def moving_masks(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     n = h * w
     table = ds.table
     if "mover" not in table.column_names:
-        raise SchemaMismatchError(f"{ds.name}: a moving twin needs a bool 'mover' column", hint="see DESIGN.md")
+        raise SchemaMismatchError(
+            f"{ds.name}: a moving twin needs a bool 'mover' column (the blocked cells a mover covers at snapshot t)",
+            hint="rebuild it with make dataset SCENE=<scene> VARIANT=moving (its format: docs/navigation.md, "
+            "Navigation among movers)",
+        )
     col = lambda name: table.column(name).to_numpy(zero_copy_only=False)  # noqa: E731
     t, ix, iy = col("t"), col("ix"), col("iy")
     iy_ref, ix_ref = np.divmod(np.arange(n), w)

@@ -17,7 +17,8 @@ from dtradar_data.scenes.indoor.reader import parse_room as parse_scene
 from dtradar_data.scenes.materials import ITU_MATERIALS, material_valid_at
 from dtradar_data.scenes.model import Box
 
-# DT-RaDaR Sec. V-A / DESIGN.md section 1, plus the room structure we generate (4 walls, floor, ceiling).
+# DT-RaDaR Sec. V-A (the object counts are in docs/scenes.md), plus the room structure we generate (4 walls, floor,
+# ceiling).
 STRUCTURE = {"wall": 4, "floor": 1, "ceiling": 1}
 PAPER_COUNTS = {
     ("cubicle", "blueprint"): {"chair": 11, "cubicle": 7, "table": 1},
