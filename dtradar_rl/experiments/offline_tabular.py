@@ -21,13 +21,14 @@ import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout, sample_eval_pairs
-from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized
+from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized, reference_scores
 from dtradar_rl.evaluation.returns import pair_values, return_references, return_score
-from dtradar_rl.tabular.batch import LEARNERS, BatchConfig, ceiling, empirical_model, learn
+from dtradar_rl.tabular.batch import LEARNERS, NAMES, BatchConfig, ceiling, empirical_model, learn
 from dtradar_rl.tabular.evaluation import follow, path_metrics, policy_values
 from dtradar_rl.tabular.fingerprints import localisation
 from dtradar_rl.tabular.solver import TabularMDP
 from dtradar_rl.tabular.table_policy import TablePolicy
+from dtradar_rl.task.twins import load_dataset
 
 
 def grid_table(tab: TabularMDP, table: np.ndarray) -> np.ndarray:
@@ -118,4 +119,34 @@ def tabular_rows(
     return out
 
 
-__all__ = ["grid_table", "localised_table", "tabular_rows"]
+def tabular_section(
+    scene: str,
+    logged: dict[str, Any],
+    twins: dict[str, Dataset],
+    refs: dict[str, dict[str, float]],
+    *,
+    pairs: int = 500,
+    say=lambda *a, **k: None,
+) -> dict[str, Any]:
+    """:func:`tabular_rows` of every logged dataset (``{behaviour: LoggedDataset}``) of ``scene``; ``twins`` maps
+    ``<scene>/<variant>`` to the evaluated twins, ``refs`` variant to their SPL references (the blueprint's are
+    measured here when it is not evaluated)."""
+    by_variant = {name.split("/")[1]: ds for name, ds in twins.items()}
+    if "blueprint" not in by_variant:
+        by_variant = {"blueprint": load_dataset(f"{scene}/blueprint"), **by_variant}
+    refs = {v: refs[v] if v in refs else reference_scores(ds, pairs=pairs) for v, ds in by_variant.items()}
+    out = {}
+    for beh, data in logged.items():
+        row = out[beh] = tabular_rows(data, by_variant, refs, pairs=pairs)
+        say(
+            f"tabular on {beh}: ceiling {row['ceiling']['blueprint']['normalized']:.1f}, "
+            + ", ".join(
+                f"{NAMES[n]} " + "/".join(f"{row[n][v]['normalized']:.1f}" for v in by_variant if v in row[n])
+                for n in LEARNERS
+            )
+            + f" ({row['seconds']:.1f} s)"
+        )
+    return out
+
+
+__all__ = ["grid_table", "localised_table", "tabular_rows", "tabular_section"]

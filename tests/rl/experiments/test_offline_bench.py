@@ -8,7 +8,7 @@ import pytest
 
 from dtradar_rl.cli import main
 from dtradar_rl.evaluation.normalized import normalized, reference_scores
-from dtradar_rl.experiments import offline_bench
+from dtradar_rl.experiments import offline_jobs
 from dtradar_rl.experiments.offline_bench import (
     BenchJob,
     OfflineBenchConfig,
@@ -190,8 +190,8 @@ def test_the_benchmark_command_refuses_an_unknown_algorithm(root, capsys):
 
 def test_trainings_run_side_by_side_only_when_the_cores_measurably_work_in_parallel(monkeypatch):
     assert parallel_gain(1, seconds=0.05) > 0
-    monkeypatch.setattr(offline_bench.os, "cpu_count", lambda: 2)
-    monkeypatch.setattr(offline_bench, "parallel_gain", lambda k: 1.1)  # the cores busy with other jobs
+    monkeypatch.setattr(offline_jobs.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(offline_jobs, "parallel_gain", lambda k: 1.1)  # the cores busy with other jobs
     assert auto_workers(90) == (1, 1.1)
-    monkeypatch.setattr(offline_bench, "parallel_gain", lambda k: 1.6)
+    monkeypatch.setattr(offline_jobs, "parallel_gain", lambda k: 1.6)
     assert auto_workers(90) == (2, 1.6) and auto_workers(1) == (1, None)
