@@ -9,7 +9,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -125,6 +125,11 @@ adapt:
 # e.g. make paper SCENES="cubicle meeting"; every option: python -m dtradar_rl paper --help
 paper:
 	$(PY) -m dtradar_rl paper $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
+
+# Tabular Q-learning and Dyna-Q beside the DQN at equal env steps: learning curves, fingerprint ambiguity, localisation
+# cost -> results/bench_tabular.*
+bench-tabular:
+	$(PY) bench/bench_tabular.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
 # Both main benchmarks: ray tracing and navigation.
 bench: bench-rt bench-rl

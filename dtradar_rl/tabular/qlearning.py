@@ -13,7 +13,7 @@ measurement noise or memory (a table has no room for them).
 The table is ``Q[believed cell, target cell, action]`` (float32, every cell of the grid in both axes, so a
 :class:`~dtradar_rl.tabular.table_policy.TablePolicy` reads it with no renumbering); one that would take more than
 ``max_table_gib`` is refused before anything is allocated (:class:`~dtradar_rl.tabular.table_policy.
-TableTooLargeError`). The robot acts from what it senses: its believed cell is the nearest blueprint fingerprint of
+TooLargeError`). The robot acts from what it senses: its believed cell is the nearest blueprint fingerprint of
 the radio features in its observation and its target the cell of the observation's target ``x, y``
 (:class:`~dtradar_rl.tabular.table_policy.Localiser`). The lookup runs on the observation, not on a precomputed map
 ``true cell -> believed cell``: it is the one :class:`TablePolicy` acts with (so training and evaluation localise the
@@ -175,7 +175,7 @@ def learning_rate(cfg: QLearningConfig, env_steps: int) -> float:
 
 # -- the pieces of a step ------------------------------------------------------------------------------------------
 def new_table(cfg: QLearningConfig, cells: int) -> torch.Tensor:
-    """``float32[cells, cells, 4]`` zeros, or :class:`TableTooLargeError` before allocating it."""
+    """``float32[cells, cells, 4]`` zeros, or :class:`TooLargeError` before allocating it."""
     check_table_size(cells, cells, cfg.max_table_bytes, name=f"the Q table of {cfg.dataset_name}")
     return torch.zeros((cells, cells, 4), dtype=torch.float32)
 

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import DtradarError, InvalidSettingError
+from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.core.files import open_atomic
 from dtradar_data.core.layout import data_root
 from dtradar_data.store.logged import table_digest
@@ -51,8 +51,9 @@ GAMMA = 0.9
 FORMAT = "dtradar-tabular-solution/1"
 
 
-class TooLargeError(DtradarError, ValueError):
-    """A tabular problem whose tables would not fit in memory."""
+class TooLargeError(InvalidSettingError):
+    """A tabular problem (a solution, an evaluation, a learner's table) whose arrays would not fit the memory cap,
+    refused before anything is allocated; the message names the size."""
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,7 @@ from dtradar_data.core.errors import DtradarError, InvalidSettingError, unknown_
 from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.tabular.fingerprints import fingerprints
+from dtradar_rl.tabular.solver import TooLargeError
 from dtradar_rl.task.mdp import background
 from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
 from dtradar_rl.task.twins import load_dataset
@@ -60,10 +61,6 @@ DRAW_SEED = 0
 TABLE_FORMAT = "dtradar-table-policy/1"
 
 
-class TableTooLargeError(InvalidSettingError):
-    """A ``[cells, targets, 4]`` table that would not fit the memory cap (refused before it is allocated)."""
-
-
 class UncoveredTargetError(DtradarError, ValueError):
     """A target cell the table has no column for."""
 
@@ -74,10 +71,10 @@ def table_bytes(cells: int, targets: int, itemsize: int = 4) -> int:
 
 
 def check_table_size(cells: int, targets: int, cap_bytes: int, name: str = "the table", itemsize: int = 4) -> int:
-    """The bytes of a ``[cells, targets, 4]`` table, or :class:`TableTooLargeError` naming its size and the cap."""
+    """The bytes of a ``[cells, targets, 4]`` table, or :class:`TooLargeError` naming its size and the cap."""
     size = table_bytes(cells, targets, itemsize)
     if size > cap_bytes:
-        raise TableTooLargeError(
+        raise TooLargeError(
             f"{name} would hold {cells:,} cells x {targets:,} targets x 4 actions = {size / 2**30:.2f} GiB, over the "
             f"cap of {cap_bytes / 2**30:.2f} GiB",
             hint="raise --max-table-gib if the machine has the memory, or learn on a smaller twin",
@@ -324,7 +321,7 @@ __all__ = [
     "TABLE_BYTES_CAP",
     "Localiser",
     "TablePolicy",
-    "TableTooLargeError",
+    "TooLargeError",
     "UncoveredTargetError",
     "check_table_size",
     "greedy_actions",

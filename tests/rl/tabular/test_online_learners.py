@@ -9,7 +9,7 @@ import torch
 from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout, sample_eval_pairs
 from dtradar_rl.tabular import dyna, qlearning
-from dtradar_rl.tabular.table_policy import TablePolicy, TableTooLargeError, check_table_size, greedy_actions
+from dtradar_rl.tabular.table_policy import TablePolicy, TooLargeError, check_table_size, greedy_actions
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.twins import load_dataset
 
@@ -76,9 +76,9 @@ def test_dyna_with_hindsight_learns_every_target_from_the_moves_it_has_tried(tin
 def test_a_table_too_large_for_the_memory_cap_is_refused_before_it_is_allocated(tiny):
     ds, _ = tiny
     cfg = qlearning.QLearningConfig(scene=TINY, max_table_gib=1e-4, save=False, verbose=False)
-    with pytest.raises(TableTooLargeError, match=r"96 cells x 96 targets x 4 actions = 0\.00 GiB, over the cap"):
+    with pytest.raises(TooLargeError, match=r"96 cells x 96 targets x 4 actions = 0\.00 GiB, over the cap"):
         qlearning.learn(cfg, ds)
-    with pytest.raises(TableTooLargeError, match=r"30,000 cells x 30,000 targets x 4 actions = 13\.41 GiB"):
+    with pytest.raises(TooLargeError, match=r"30,000 cells x 30,000 targets x 4 actions = 13\.41 GiB"):
         check_table_size(30_000, 30_000, 2 << 30)
 
 
