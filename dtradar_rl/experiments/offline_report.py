@@ -300,7 +300,8 @@ def _load(m: dict[str, Any]) -> str:
 
 def plot(result: dict[str, Any], path: Path) -> Path:
     """Normalised-score bars per dataset and algorithm, one panel per twin, error bars = std over seeds; the
-    behaviour itself as a cross, the expert's 100 dotted, the online agent dashed."""
+    behaviour itself as a cross, the best tabular learner as a star and the data's ceiling as a bar across the
+    group (when the benchmark ran them), the expert's 100 dotted, the online agent dashed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -330,6 +331,15 @@ def plot(result: dict[str, Any], path: Path) -> Path:
             )
         own = [((result["datasets"][b].get("eval") or {}).get(v) or {}).get("normalized", np.nan) for b in behs]
         ax.scatter(x, own, marker="x", color="k", zorder=3, label="behaviour itself")
+        if result.get("tabular"):  # the best tabular learner as a star, the data's ceiling as a bar across the group
+            best = [
+                max((_tabular_score(result, b, c, v) for c in TABULAR_COLUMNS if c != "ceiling"), default=np.nan)
+                for b in behs
+            ]
+            ax.scatter(x, best, marker="*", s=80, color="gold", edgecolor="k", zorder=4, label="best tabular")
+            ceil = [_tabular_score(result, b, "ceiling", v) for b in behs]
+            ceil = [np.nan if c is None else c for c in ceil]
+            ax.hlines(ceil, x - 0.42, x + 0.42, colors="k", lw=1.5, zorder=3, label="data ceiling")
         ax.axhline(100, color="0.5", ls=":", lw=1, label="expert (100)")
         online = (result.get("online_dqn") or {}).get(v) or {}
         if "normalized" in online:
