@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import sample_eval_pairs
 from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED
@@ -39,8 +40,9 @@ class SolveConfig(Config):
 
     scene: str = "cubicle"
     """scene whose twins are solved (synthetic-<nx>x<ny> for a stand-in without a ray tracer)"""
-    variants: tuple[str, ...] = ("blueprint", "dynamic")
-    """static twins to solve (a moving twin is refused: its MDP is in space-time)"""
+    variants: tuple[str, ...] = ()
+    """static twins to solve (default: the blueprint and, where it is built, the dynamic twin; a moving twin is
+    refused: its MDP is in space-time)"""
     rewards: tuple[str, ...] = ("geodesic", "paper")
     """rewards to solve under (paper, scaled, euclidean, geodesic)"""
     gamma: float = GAMMA
@@ -62,8 +64,8 @@ class SolveConfig(Config):
         for r in self.rewards:
             check_reward(r)
         check_gamma(self.gamma)
-        if not self.variants or not self.rewards:
-            raise ConfigError("--variants and --rewards must each list at least one value")
+        if not self.rewards:
+            raise ConfigError("--rewards must list at least one value")
         if self.pairs < 1:
             raise ConfigError("--pairs must be >= 1")
         return self
@@ -107,6 +109,19 @@ def value_picture(sol: Solution, tab: TabularMDP, pair: np.ndarray, path: Path) 
     )
 
 
+def twins(cfg: SolveConfig, say) -> dict[str, Any]:
+    """The twins to solve, all loaded before any work: ``--variants``, or the blueprint and the dynamic twin where it
+    is built (a city quadrant without vehicles has none)."""
+    if cfg.variants:
+        return {v: load_dataset(f"{cfg.scene}/{v}") for v in cfg.variants}
+    out = {"blueprint": load_dataset(f"{cfg.scene}/blueprint")}
+    try:
+        out["dynamic"] = load_dataset(f"{cfg.scene}/dynamic")
+    except DatasetNotFoundError as e:
+        say(f"{cfg.scene}/dynamic is not solved: {e.message}")
+    return out
+
+
 def solve_scene(cfg: SolveConfig) -> dict[str, Any]:
     """Run ``cfg``; returns (and writes) the result."""
     cfg = cfg.validate()
@@ -114,8 +129,7 @@ def solve_scene(cfg: SolveConfig) -> dict[str, Any]:
     out = cfg.out_dir
     t_start = time.perf_counter()
     rows: list[dict[str, Any]] = []
-    for variant in cfg.variants:
-        ds = load_dataset(f"{cfg.scene}/{variant}")
+    for variant, ds in twins(cfg, say).items():
         tab = TabularMDP.from_dataset(ds)
         pairs = sample_eval_pairs(ds, cfg.pairs, DEFAULT_SEED)
         for reward in cfg.rewards:

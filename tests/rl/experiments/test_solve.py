@@ -28,3 +28,24 @@ def test_solve_writes_the_solution_and_the_greedy_policy_walks_shortest_paths(ro
 def test_solve_refuses_a_bad_discount_with_exit_status_2(root, capsys):
     assert main(["solve", "--scene", "synthetic-12x8", "--gamma", "1.5"]) == 2
     assert "discount" in capsys.readouterr().err
+
+
+def test_a_scene_without_a_dynamic_twin_solves_its_blueprint_and_says_so(root, tmp_path, capsys, monkeypatch):
+    from dtradar_data.core.errors import DatasetNotFoundError
+    from dtradar_rl.experiments import solve
+
+    real = solve.load_dataset
+
+    def no_dynamic(name):
+        if name.endswith("/dynamic"):
+            raise DatasetNotFoundError(f"{name} has not been built", hint="make dataset")
+        return real(name)
+
+    monkeypatch.setattr(solve, "load_dataset", no_dynamic)
+    out = tmp_path / "solve"
+    assert (
+        main(["solve", "--scene", "synthetic-12x8", "--rewards", "geodesic", "--pairs", "20", "--out", str(out)]) == 0
+    )
+    rows = json.loads((out / "solve.json").read_text())["rows"]
+    assert [r["dataset"] for r in rows] == ["synthetic-12x8/blueprint"]
+    assert "synthetic-12x8/dynamic is not solved" in capsys.readouterr().out
