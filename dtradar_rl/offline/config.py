@@ -81,10 +81,11 @@ class OfflineConfig(BehaviourConfig):
     """train on this stored logged dataset (e.g. cubicle/blueprint/mixture@v0, see `dtradar_rl log`); default: log
     (or reuse) <scene>/<variant>/<behaviour> with --behaviour, --transitions and --seed"""
     relabel: str = "none"
-    """goal relabelling of the logged steps (dtradar_rl.offline.relabel): none (the logged targets); future (goals
-    from the future of the same episode: with --algorithm bc this is GCBC); own-future; ogbench (OGBench's value goals:
-    next 0.2, future 0.5, random 0.3); random; or probabilities like own=0.5,future=0.3,random=0.2 (sources own,
-    future, random, next; they sum to 1). Rewards and terminals are recomputed exactly for each goal"""
+    """goal relabelling of the logged steps (dtradar_rl.offline.relabel; rewards and terminals recomputed exactly for
+    each goal): none (the logged targets); auto (the algorithm's best measured mix: own-next for bc and cql, ogbench
+    for bcq, dqn, ddqn, nfq); future (goals from the future of the same episode: with --algorithm bc this is GCBC);
+    own-future; own-next (own 0.5, next 0.5); ogbench (OGBench's value goals: next 0.2, future 0.5, random 0.3);
+    random; or probabilities like own=0.5,future=0.3,random=0.2 (sources own, future, random, next; summing to 1)"""
     relabel_discount: float = DEFAULT_DISCOUNT
     """relabelling: future goals are k >= 1 steps ahead, k geometric with parameter 1 - discount (mean 1 / (1 -
     discount) steps), cut at the episode's end"""
@@ -98,7 +99,11 @@ class OfflineConfig(BehaviourConfig):
         """The goal relabelling of this run (seeded with ``seed``): :class:`~dtradar_rl.offline.relabel.RelabelConfig`
         of ``relabel``, ``relabel_discount`` and ``relabel_resample``."""
         return RelabelConfig.parse(
-            self.relabel, discount=self.relabel_discount, seed=self.seed, resample=self.relabel_resample
+            self.relabel,
+            self.algorithm,
+            discount=self.relabel_discount,
+            seed=self.seed,
+            resample=self.relabel_resample,
         )
 
     @property
@@ -113,7 +118,8 @@ class OfflineConfig(BehaviourConfig):
         if not self.lr > 0:
             raise ConfigError(f"--lr must be > 0, got {self.lr}", hint="e.g. --lr 1e-3")
         self.check_at_least(0, "bc_beta", "cql_alpha")
-        self.relabel_config()  # a mix that does not parse, or probabilities that are not a distribution
+        if self.algorithm in ALGORITHMS or self.relabel.strip() != "auto":  # (validate names a wrong algorithm)
+            self.relabel_config()  # a mix that does not parse, or probabilities that are not a distribution
 
     def validate(self) -> OfflineConfig:
         super().validate()

@@ -78,6 +78,8 @@ SOURCES: tuple[str, ...] = ("own", "future", "random", "next")
 OWN, FUTURE, RANDOM, NEXT = range(4)
 #: The count of drawn goals that were the robot's current cell and became the logged target.
 FALLBACK = 4
+#: The columns of :attr:`Relabeller._rows`.
+ROW_CELL, ROW_ACTION, ROW_TARGET, ROW_NEXT, ROW_LAST, ROW_NEXT_ACTION, ROW_COLLIDES = range(7)
 #: How often goals are drawn (:attr:`RelabelConfig.resample`).
 RESAMPLE: tuple[str, ...] = ("batch", "run")
 
@@ -92,8 +94,28 @@ MIXES: dict[str, dict[str, float]] = {
     "ogbench": {"next": 0.2, "future": 0.5, "random": 0.3},
     # every goal the twin allows, drawn uniformly from the robot's component
     "random": {"random": 1.0},
+    # half the logged targets, half the step's own next cell: the best measured for the imitation learners
+    "own-next": {"own": 0.5, "next": 0.5},
 }
-MIX_FORM = "a named mix (" + ", ".join(MIXES) + ") or probabilities like future=0.5,random=0.3,next=0.2"
+#: ``--relabel auto``: the mix each algorithm trained best with on the expert and medium logs of the cubicle and Dallas
+#: Q3 (seed 0, 4 000 updates, ``bench/bench_relabel.py``): the imitation learners (bc, and cql, whose conservative term
+#: pulls towards the logged moves) on their targets and the next cell, the Q-learners on OGBench's value goals.
+AUTO_MIXES: dict[str, str] = {
+    "bc": "own-next",
+    "cql": "own-next",
+    "bcq": "ogbench",
+    "dqn": "ogbench",
+    "ddqn": "ogbench",
+    "nfq": "ogbench",
+}
+AUTO = "auto"
+MIX_FORM = (
+    "a named mix ("
+    + ", ".join(MIXES)
+    + "), auto (the algorithm's best: "
+    + ", ".join(f"{a} {m}" for a, m in AUTO_MIXES.items())
+    + ") or probabilities like future=0.5,random=0.3,next=0.2"
+)
 #: Tolerance of "the probabilities sum to 1".
 SUM_TOLERANCE = 1e-6
 #: The default geometric parameter of ``future`` goals: mean offset 1 / (1 - 0.9) = 10 steps.
@@ -159,10 +181,17 @@ class RelabelConfig(Config):
             raise unknown_name("relabel resampling", self.resample, RESAMPLE)
 
     @classmethod
-    def parse(cls, mix: str, **kw: Any) -> RelabelConfig:
-        """The config of ``mix``: a name of :data:`MIXES` or ``source=p,...`` (sources not named are 0); ``kw`` sets
-        ``discount``, ``seed`` and ``resample``."""
+    def parse(cls, mix: str, algorithm: str | None = None, **kw: Any) -> RelabelConfig:
+        """The config of ``mix``: a name of :data:`MIXES`, ``auto`` (:data:`AUTO_MIXES` of ``algorithm``) or
+        ``source=p,...`` (sources not named are 0); ``kw`` sets ``discount``, ``seed`` and ``resample``."""
         text = str(mix).strip()
+        if text == AUTO:
+            if algorithm not in AUTO_MIXES:
+                raise ConfigError(
+                    f"--relabel auto picks the mix of the algorithm, got algorithm {algorithm!r}",
+                    hint="one of " + ", ".join(AUTO_MIXES) + " (or name the mix)",
+                )
+            text = AUTO_MIXES[algorithm]
         if text in MIXES:
             probs = MIXES[text]
         elif "=" in text:
@@ -258,12 +287,22 @@ class Relabeller:
         self.rank = np.zeros(mdp.num_cells, np.int64)
         self.rank[self.members] = np.arange(self.members.size) - self.comp_first[comp]
         iy, ix = np.divmod(np.arange(mdp.num_cells), mdp.nx)
-        self.ix, self.iy = ix.astype(np.float32), iy.astype(np.float32)
+        #: ``float32[cells, 2]``: each cell's ``(ix, iy)``, as the batched env holds them
+        self.xy = np.stack([ix, iy], 1).astype(np.float32)
+        #: ``int64[cells, 3]``: a cell's component's first member, the component's size - 1, the cell's rank in it
+        self._cell_comp = np.zeros((mdp.num_cells, 3), np.int64)
+        free = mdp.component >= 0
+        c = mdp.component[free]
+        self._cell_comp[free] = np.stack([self.comp_first[c], self.comp_size[c] - 1, self.rank[free]], 1)
+        #: ``int64[steps, 7]``: each logged row's columns (:data:`ROW_CELL` ...), one cache line per row
+        self._rows = np.stack(
+            [self.cell, self.action, self.target, self.next, self.last, self.next_action, self.collides], 1
+        ).astype(np.int64)
         self.potential = potential_kind(self.reward_name)
-        if self.potential == "geodesic":  # one row per cell that can be a goal (every pair cell)
+        if self.potential == "geodesic":  # one row per cell that can be a goal (every pair cell), flattened
             self.goal_row = np.full(mdp.num_cells, -1, np.int64)
             self.goal_row[cells] = np.arange(cells.size)
-            self.dist = mdp.bfs_distances_many(cells).astype(np.int32)
+            self.dist = mdp.bfs_distances_many(cells).astype(np.int32).ravel()
         self._check(a)
         self.build_s = time.perf_counter() - t0
 
@@ -294,86 +333,98 @@ class Relabeller:
     def goals(self, idx: np.ndarray, cfg: RelabelConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """``(goal cells, sources)`` for logged rows ``idx`` by ``cfg``'s mix; a source is an index of
         :data:`SOURCES`, or :data:`FALLBACK` where the drawn goal was the current cell and became the logged target."""
-        idx = np.asarray(idx, np.int64)
+        goal, source, _ = self._goals(np.asarray(idx, np.int64), cfg, rng)
+        return goal, source
+
+    def _goals(self, idx: np.ndarray, cfg: RelabelConfig, rng: np.random.Generator):
+        rows = self._rows[idx]  # one gather of everything a row needs (random gathers cost cache misses)
+        cell, target = rows[:, ROW_CELL], rows[:, ROW_TARGET]
+        goal = target.copy()
         m = idx.size
-        goal = self.target[idx].copy()
         if cfg.is_identity:
-            return goal, np.zeros(m, np.int64)
+            return goal, np.zeros(m, np.int64), rows
         cum = np.cumsum(cfg.probabilities)
         cum /= cum[-1]
         source = np.minimum(np.searchsorted(cum, rng.random(m), side="right"), len(SOURCES) - 1)
-        cell = self.cell[idx]
         f = np.flatnonzero(source == FUTURE)
         if f.size:
             k = rng.geometric(1.0 - cfg.discount, f.size)
-            j = np.minimum(idx[f] + (k - 1), self.last[idx[f]])
-            goal[f] = self.next[j]
+            goal[f] = self.next[np.minimum(idx[f] + (k - 1), rows[f, ROW_LAST])]
         r = np.flatnonzero(source == RANDOM)
         if r.size:
-            c = self.mdp.component[cell[r]]
-            j = np.floor(rng.random(r.size) * (self.comp_size[c] - 1)).astype(np.int64)
-            goal[r] = self.members[self.comp_first[c] + j + (j >= self.rank[cell[r]])]
+            first, span, rank = self._cell_comp[cell[r]].T
+            j = np.floor(rng.random(r.size) * span).astype(np.int64)
+            goal[r] = self.members[first + j + (j >= rank)]
         nx_ = np.flatnonzero(source == NEXT)
-        goal[nx_] = self.next[idx[nx_]]
+        goal[nx_] = rows[nx_, ROW_NEXT]
         same = goal == cell
-        goal[same] = self.target[idx[same]]
+        goal[same] = target[same]
         source[same] = FALLBACK
-        return goal, source
+        return goal, source, rows
 
     # -- transitions -------------------------------------------------------------------------------------------
     def rewards(self, idx: np.ndarray, goal: np.ndarray) -> np.ndarray:
         """``float32``: the logged reward function of rows ``idx``' moves towards ``goal``, computed like the batched
-        env that logs (:meth:`dtradar_rl.envs.batched.BatchedNavEnv._reward`: the same torch float32 operations in
-        the same order; torch's float32 square root is not numpy's, so numpy would miss the ``euclidean`` reward by
-        an ulp or two)."""
-        t = torch.from_numpy
-        cell, nxt, goal_t = t(self.cell[idx]), t(self.next[idx]), t(np.asarray(goal, np.int64))
-        ix, iy = t(self.ix), t(self.iy)
-        dx, dy = ix[goal_t] - ix[nxt], iy[goal_t] - iy[nxt]
+        env that logs (:meth:`dtradar_rl.envs.batched.BatchedNavEnv._reward`)."""
+        return self._rewards(self._rows[np.asarray(idx, np.int64)], np.asarray(goal, np.int64))
+
+    def _rewards(self, rows: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        # The batched env's float32 operations in its order. numpy's float32 +, -, *, / round like torch's; the square
+        # root does not (torch's is not correctly rounded), so the euclidean potential takes torch's.
+        cell, nxt = rows[:, ROW_CELL], rows[:, ROW_NEXT]
+        g, n = self.xy[goal], self.xy[nxt]
+        dx, dy = g[:, 0] - n[:, 0], g[:, 1] - n[:, 1]
         if self.potential == "geodesic":
-            row = t(self.goal_row)[goal_t]
-            dist = t(self.dist)
-            pb, pa = dist[row, cell].float(), dist[row, nxt].float()
+            at = self.goal_row[goal] * self.mdp.num_cells
+            pb, pa = self.dist[at + cell].astype(np.float32), self.dist[at + nxt].astype(np.float32)
         elif self.potential == "euclidean":
-            bx, by = ix[goal_t] - ix[cell], iy[goal_t] - iy[cell]
-            pb, pa = torch.sqrt(bx * bx + by * by), torch.sqrt(dx * dx + dy * dy)
+            c = self.xy[cell]
+            bx, by = g[:, 0] - c[:, 0], g[:, 1] - c[:, 1]
+            pb = torch.sqrt(torch.from_numpy(bx * bx + by * by)).numpy()
+            pa = torch.sqrt(torch.from_numpy(dx * dx + dy * dy)).numpy()
         else:
-            pb = pa = torch.zeros(())
+            pb = pa = np.zeros((), np.float32)
         out = reward_fn(
             self.reward_name,
             d2_after=dx * dx + dy * dy,
             pot_before=pb,
             pot_after=pa,
-            collision=t(self.collides[idx]).float(),
-            reached=(nxt == goal_t).float(),
+            collision=rows[:, ROW_COLLIDES].astype(np.float32),
+            reached=(nxt == goal).astype(np.float32),
             diag2=self.mdp.diag2,
         )
-        return out.float().numpy()
+        return np.asarray(out, np.float32)
 
     def transitions(self, idx: np.ndarray, goal: np.ndarray, *, zero_terminal: bool = True) -> dict[str, np.ndarray]:
         """Rows ``idx`` replayed towards ``goal``: d3rlpy's minibatch arrays (``observations``, ``actions``,
         ``rewards``, ``next_observations``, ``next_actions``, ``terminals``; float32, the scalars as ``[m, 1]``).
         ``zero_terminal``: a terminal step's next observation and action are zero (d3rlpy's transition picker)."""
-        idx = np.asarray(idx, np.int64)
-        goal = np.asarray(goal, np.int64)
-        nxt = self.next[idx]
+        return self._transitions(self._rows[np.asarray(idx, np.int64)], np.asarray(goal, np.int64), zero_terminal)
+
+    def _transitions(self, rows: np.ndarray, goal: np.ndarray, zero_terminal: bool = True) -> dict[str, np.ndarray]:
+        nxt = rows[:, ROW_NEXT]
         tp = self.target_part[goal]
-        obs = np.concatenate([self.cell_part[self.cell[idx]], tp], 1)
+        obs = np.concatenate([self.cell_part[rows[:, ROW_CELL]], tp], 1)
         next_obs = np.concatenate([self.cell_part[nxt], tp], 1)
         term = nxt == goal
-        next_action = self.next_action[idx].astype(np.float32)
+        next_action = rows[:, ROW_NEXT_ACTION].astype(np.float32)
         if zero_terminal:
             next_obs[term] = 0.0
             next_action[term] = 0.0
         col = lambda v: np.asarray(v, np.float32).reshape(-1, 1)  # noqa: E731
         return {
             "observations": obs,
-            "actions": col(self.action[idx]),
-            "rewards": col(self.rewards(idx, goal)),
+            "actions": col(rows[:, ROW_ACTION]),
+            "rewards": col(self._rewards(rows, goal)),
             "next_observations": next_obs,
             "next_actions": col(next_action),
             "terminals": col(term),
         }
+
+    def batch(self, idx: np.ndarray, cfg: RelabelConfig, rng: np.random.Generator):
+        """``(d3rlpy's minibatch arrays, sources)`` of rows ``idx`` towards goals drawn by ``cfg``."""
+        goal, source, rows = self._goals(np.asarray(idx, np.int64), cfg, rng)
+        return self._transitions(rows, goal), source
 
 
 #: The relabellers of the most recently opened logged versions in this process (see :func:`relabeller`).
@@ -494,8 +545,7 @@ def _sampler_class():
                 src = self._fixed_source[i]
             else:
                 t0 = time.perf_counter()
-                goal, src = self.relabeller.goals(i, self.config, self.rng)
-                batch = self.relabeller.transitions(i, goal)
+                batch, src = self.relabeller.batch(i, self.config, self.rng)
                 self.draw_s += time.perf_counter() - t0
             self.counts += np.bincount(src, minlength=FALLBACK + 1)
             return D.TransitionMiniBatch(**batch, intervals=np.ones((batch_size, 1), np.float32), transitions=[])
@@ -527,6 +577,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "FALLBACK",
+    "AUTO_MIXES",
     "MIXES",
     "SOURCES",
     "RelabelConfig",

@@ -17,6 +17,7 @@ from dtradar_rl.offline.formats import to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.policy import load_offline_policy
 from dtradar_rl.offline.relabel import (
+    AUTO_MIXES,
     FALLBACK,
     FUTURE,
     MIXES,
@@ -186,6 +187,12 @@ def test_a_relabel_mix_on_the_command_line_is_parsed_and_a_bad_one_is_one_error_
     cfg = OfflineConfig(relabel="own=0.5, random=0.5", relabel_discount=0.5, seed=4).relabel_config()
     assert (cfg.own, cfg.random, cfg.discount, cfg.seed) == (0.5, 0.5, 0.5, 4)
     assert all(RelabelConfig.parse(m) for m in MIXES)
+    for algorithm, mix in AUTO_MIXES.items():  # auto: the algorithm's own mix
+        auto = OfflineConfig(algorithm=algorithm, relabel="auto").relabel_config()
+        assert auto == RelabelConfig.parse(mix) and not auto.is_identity
+    assert set(AUTO_MIXES) == set(ALGORITHMS)
+    with pytest.raises(UnknownNameError, match="did you mean 'cql'"):
+        OfflineConfig(algorithm="cq", relabel="auto").validate()
     with pytest.raises(ConfigError, match="sum to 1"):
         OfflineConfig(relabel="future=0.5")
     with pytest.raises(UnknownNameError, match="did you mean 'future'"):
