@@ -2,6 +2,7 @@
 
     python bench/bench_relabel.py --scenes cubicle dallas-q3 --families expert medium
     python bench/bench_relabel.py --scenes cubicle --families expert --algorithms bc --mixes none future --workers 1
+    python bench/bench_relabel.py --families mixed --mixes none auto         # auto: the algorithm's own mix
 
 For every scene, dataset family (``<scene>/blueprint/<family>``, already logged: ``make logged SCENE=<scene>
 BEHAVIOUR=all``), algorithm and relabelling mix (``--relabel`` of ``make offline``: ``none`` is the logged targets),
@@ -104,7 +105,7 @@ def main(argv: list[str]) -> int:
     p.add_argument("--scenes", nargs="+", default=["cubicle", "dallas-q3"])
     p.add_argument("--families", nargs="+", default=["expert", "medium"])
     p.add_argument("--algorithms", nargs="+", default=["bc", "cql", "bcq", "dqn"])
-    p.add_argument("--mixes", nargs="+", default=["none", "future", "own-future", "ogbench"])
+    p.add_argument("--mixes", nargs="+", default=["none", "future", "own-future", "ogbench", "own-next"])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-steps", type=int, default=4000)
     p.add_argument("--discount", type=float, default=0.9)
