@@ -109,7 +109,14 @@ def _num(x: float | None, fmt: str = "{:.1f}") -> str:
 
 
 #: The tabular columns of the score table, in order (dtradar_rl.tabular.batch): the data ceiling, then the learners.
-TABULAR_COLUMNS: dict[str, str] = {"ceiling": "data ceiling", "ce": "CE", "lcb": "VI-LCB", "spibb": "Π_b-SPIBB"}
+TABULAR_COLUMNS: dict[str, str] = {
+    "ceiling": "data ceiling",
+    "ce": "CE",
+    "lcb": "VI-LCB",
+    "spibb": "Π_b-SPIBB",
+    "ce-senses": "CE + senses",
+    "lcb-senses": "VI-LCB + senses",
+}
 
 
 def _tabular_score(result: dict[str, Any], beh: str, column: str, variant: str, key: str = "normalized"):

@@ -10,6 +10,11 @@ score sits beside theirs), and its return-based normalised score is exact (the t
 localisation of that twin is again a table, evaluated by :func:`~dtradar_rl.tabular.evaluation.policy_values`).
 A deterministic table's episodes are followed move by move instead of rolled out in the env (the same episodes, tested;
 a tenth of the time), a stochastic one's (Π_b-SPIBB) are rolled out.
+
+Beside them, CE and VI-LCB **with senses** (``ce-senses``, ``lcb-senses``; :mod:`dtradar_rl.tabular.sensing`): the
+same tables followed by a robot that carries its belief along its own moves, forbids the moves it senses or bumps
+into as blocked and re-plans on the same empirical model; their return-based score is the mean discounted return of
+those episodes (exact: the episodes are deterministic).
 """
 
 from __future__ import annotations
@@ -25,7 +30,8 @@ from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized, reference
 from dtradar_rl.evaluation.returns import pair_values, return_references, return_score
 from dtradar_rl.tabular.batch import LEARNERS, NAMES, BatchConfig, ceiling, empirical_model, learn
 from dtradar_rl.tabular.evaluation import follow, path_metrics, policy_values
-from dtradar_rl.tabular.fingerprints import localisation
+from dtradar_rl.tabular.fingerprints import Tracker, localisation
+from dtradar_rl.tabular.sensing import SENSING, SUFFIX, WINDOW, follow_sensing, radio_flags
 from dtradar_rl.tabular.solver import TabularMDP
 from dtradar_rl.tabular.table_policy import TablePolicy
 from dtradar_rl.task.twins import load_dataset
@@ -45,6 +51,38 @@ def localised_table(tab_bp: TabularMDP, tab: TabularMDP, loc: np.ndarray, table:
     """``table`` (over blueprint states) as the table over ``tab``'s states that a robot localising with ``loc``
     (true grid cell -> believed blueprint cell) follows."""
     return table[:, tab_bp.state_of[loc[tab.cells]]]
+
+
+#: Every tabular learner column of a dataset's row, in order: the tables, then the tables with senses.
+COLUMNS: tuple[str, ...] = (*LEARNERS, *(n + SUFFIX for n in SENSING))
+COLUMN_NAMES = {**NAMES, **{n + SUFFIX: f"{NAMES[n]} + senses" for n in SENSING}}
+
+
+def _with_senses(blueprint, tab_bp, twin, name, model, table, targets, pairs, cfg, refs):
+    """Scores of learner ``name``'s table followed by a sensing, re-planning robot (module docstring) on ``twin``."""
+    tab = TabularMDP.from_dataset(twin)
+    paths = follow_sensing(
+        name,
+        model,
+        table,
+        np.searchsorted(targets, pairs[:, 1]),
+        tab,
+        localisation(blueprint, twin),
+        radio_flags(twin),
+        radio_flags(blueprint),
+        pairs[:, 0],
+        pairs[:, 1],
+        cfg=cfg,
+        tracker=Tracker(blueprint, twin, WINDOW),
+    )
+    m = path_metrics(paths)
+    return {
+        "return_normalized": return_score(float(paths["returns"].mean()), refs),
+        "success_rate": float(m["success_rate"]),
+        "spl": float(m["spl"]),
+        "collisions": float(m["collisions"]),
+        "replans": float(paths["replans"].mean()),
+    }
 
 
 def _on_twin(blueprint: Dataset, tab_bp: TabularMDP, twin: Dataset, table, targets, pairs, model, gamma, refs, policy):
@@ -105,9 +143,10 @@ def tabular_rows(
         },
     }
     targets = np.unique(np.concatenate([p[:, 1] for p in eval_pairs.values()]))
+    tables = {}
     for name in LEARNERS:
         t1 = time.perf_counter()
-        table = learn(name, model, targets, cfg)
+        table = tables[name] = learn(name, model, targets, cfg)
         row: dict[str, Any] = {"learn_s": time.perf_counter() - t1}
         policy = TablePolicy(blueprint, grid_table(tab, table), targets=targets, name=f"tabular {name}")
         for v, ds in twins.items():
@@ -115,6 +154,16 @@ def tabular_rows(
             row[v] = {"normalized": normalized(scores["spl"], refs[v]), **scores}
         row["seconds"] = time.perf_counter() - t1
         out[name] = row
+    for name in SENSING:
+        t1 = time.perf_counter()
+        row = {"learn_s": out[name]["learn_s"]}
+        for v, ds in twins.items():
+            scores = _with_senses(
+                blueprint, tab, ds, name, model, tables[name], targets, eval_pairs[v], cfg, ret_refs[v]
+            )
+            row[v] = {"normalized": normalized(scores["spl"], refs[v]), **scores}
+        row["seconds"] = time.perf_counter() - t1
+        out[name + SUFFIX] = row
     out["seconds"] = time.perf_counter() - t0
     return out
 
@@ -141,12 +190,12 @@ def tabular_section(
         say(
             f"tabular on {beh}: ceiling {row['ceiling']['blueprint']['normalized']:.1f}, "
             + ", ".join(
-                f"{NAMES[n]} " + "/".join(f"{row[n][v]['normalized']:.1f}" for v in by_variant if v in row[n])
-                for n in LEARNERS
+                f"{COLUMN_NAMES[n]} " + "/".join(f"{row[n][v]['normalized']:.1f}" for v in by_variant if v in row[n])
+                for n in COLUMNS
             )
             + f" ({row['seconds']:.1f} s)"
         )
     return out
 
 
-__all__ = ["grid_table", "localised_table", "tabular_rows", "tabular_section"]
+__all__ = ["COLUMNS", "COLUMN_NAMES", "grid_table", "localised_table", "tabular_rows", "tabular_section"]

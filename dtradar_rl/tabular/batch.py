@@ -147,36 +147,48 @@ def _chunks(targets: np.ndarray, n: int):
         yield i, targets[i : i + k]
 
 
-def certainty_equivalence(model: EmpiricalModel, targets: np.ndarray, cfg: BatchConfig) -> np.ndarray:
-    """``int64[K, N]`` greedy moves of value iteration on the empirical MDP (unseen moves keep the value 0)."""
+def certainty_equivalence(
+    model: EmpiricalModel, targets: np.ndarray, cfg: BatchConfig, forbidden: np.ndarray | None = None
+) -> np.ndarray:
+    """``int64[K, N]`` greedy moves of value iteration on the empirical MDP (unseen moves keep the value 0);
+    ``forbidden`` (``bool[K, N, 4]``, rows in targets order) removes moves known to be blocked."""
     tab, out = model.tab, np.empty((targets.size, model.tab.n), np.int64)
     for i, t in _chunks(targets, tab.n):
+        f = None if forbidden is None else forbidden[i : i + t.size]
         r, reached = tab.rewards(model.reward, tab.states(t))
-        v, _, _ = bellman_sweeps(r, reached, tab.next, cfg.gamma, allowed=model.seen, masked_value=0.0)
+        v, _, _ = bellman_sweeps(r, reached, tab.next, cfg.gamma, allowed=model.seen, masked_value=0.0, forbidden=f)
         q = r + cfg.gamma * ~reached * v[np.arange(t.size)[:, None, None], tab.next[None]]
-        out[i : i + t.size] = np.where(model.seen[None], q, 0.0).argmax(-1)
+        q = np.where(model.seen[None], q, 0.0)
+        out[i : i + t.size] = (q if f is None else np.where(f, -np.inf, q)).argmax(-1)
     return out
 
 
-def _restricted(model: EmpiricalModel, t: np.ndarray, gamma: float, penalty: np.ndarray | None):
-    """Values and greedy moves over logged moves only (``penalty`` subtracted from their rewards); a state with no
-    logged move is worth standing still forever with the reward's lowest step."""
+def _restricted(
+    model: EmpiricalModel, t: np.ndarray, gamma: float, penalty: np.ndarray | None, forbidden: np.ndarray | None = None
+):
+    """Values and greedy moves over logged moves only (``penalty`` subtracted from their rewards, ``forbidden``
+    moves removed); a state with no logged move is worth standing still forever with the reward's lowest step."""
     tab = model.tab
     r, reached = tab.rewards(model.reward, tab.states(t))
     if penalty is not None:
         r = r - penalty[None]
+    allowed = model.seen[None] if forbidden is None else model.seen[None] & ~forbidden
     floor = float(r.min()) / (1 - gamma)
-    v, _, _ = bellman_sweeps(r, reached, tab.next, gamma, allowed=model.seen, floor=floor)
+    v, _, _ = bellman_sweeps(r, reached, tab.next, gamma, allowed=allowed, floor=floor)
     q = r + gamma * ~reached * v[np.arange(t.size)[:, None, None], tab.next[None]]
-    return v, np.where(model.seen[None], q, -np.inf).argmax(-1)
+    return v, np.where(np.broadcast_to(allowed, q.shape), q, -np.inf).argmax(-1)
 
 
-def lower_confidence_bound(model: EmpiricalModel, targets: np.ndarray, cfg: BatchConfig) -> np.ndarray:
-    """``int64[K, N]`` greedy moves of VI-LCB: logged moves only, each penalised by ``β / sqrt(n(s, a))``."""
+def lower_confidence_bound(
+    model: EmpiricalModel, targets: np.ndarray, cfg: BatchConfig, forbidden: np.ndarray | None = None
+) -> np.ndarray:
+    """``int64[K, N]`` greedy moves of VI-LCB: logged moves only, each penalised by ``β / sqrt(n(s, a))``
+    (``forbidden`` as in :func:`certainty_equivalence`)."""
     penalty = cfg.lcb_beta / np.sqrt(np.maximum(model.counts, 1))
     out = np.empty((targets.size, model.tab.n), np.int64)
     for i, t in _chunks(targets, model.tab.n):
-        out[i : i + t.size] = _restricted(model, t, cfg.gamma, penalty)[1]
+        f = None if forbidden is None else forbidden[i : i + t.size]
+        out[i : i + t.size] = _restricted(model, t, cfg.gamma, penalty, f)[1]
     return out
 
 
@@ -211,13 +223,37 @@ def spibb(model: EmpiricalModel, targets: np.ndarray, cfg: BatchConfig) -> np.nd
     return out
 
 
-def learn(name: str, model: EmpiricalModel, targets: np.ndarray, cfg: BatchConfig | None = None) -> np.ndarray:
-    """The table of learner ``name`` (:data:`LEARNERS`) for ``targets`` (grid cells), rows in targets order."""
+def learn(
+    name: str,
+    model: EmpiricalModel,
+    targets: np.ndarray,
+    cfg: BatchConfig | None = None,
+    forbidden: np.ndarray | None = None,
+) -> np.ndarray:
+    """The table of learner ``name`` (:data:`LEARNERS`) for ``targets`` (grid cells), rows in targets order;
+    ``forbidden`` (``bool[K, N, 4]``) removes moves known to be blocked, row by row (CE and VI-LCB: what a robot that
+    senses re-plans with, :mod:`dtradar_rl.tabular.sensing`)."""
     cfg = (cfg or BatchConfig()).validate()
     fns = {"ce": certainty_equivalence, "lcb": lower_confidence_bound, "spibb": spibb}
     if name not in fns:
         raise unknown_name("tabular batch learner", name, LEARNERS)
-    return fns[name](model, np.asarray(targets, np.int64), cfg)
+    targets = np.asarray(targets, np.int64)
+    if forbidden is None:
+        return fns[name](model, targets, cfg)
+    if name == "spibb":
+        raise InvalidSettingError(
+            "Π_b-SPIBB re-planned with forbidden moves is not built (its bootstrapped moves keep the behaviour's "
+            "probabilities, which a blocked move would have to give up)",
+            hint="re-plan with ce or lcb",
+        )
+    forbidden = np.asarray(forbidden, bool)
+    if forbidden.shape != (targets.size, model.tab.n, 4):
+        raise InvalidSettingError(
+            f"forbidden must be bool[{targets.size}, {model.tab.n}, 4] (targets x states x moves), "
+            f"got {forbidden.shape}",
+            hint="index it [target row, state, move] in TabularMDP.cells order",
+        )
+    return fns[name](model, targets, cfg, forbidden)
 
 
 # -- the ceiling ------------------------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_rl.task.mdp import GridMDP, background
+from dtradar_rl.task.mdp import ACTION_DELTAS, GridMDP, background
 from dtradar_rl.task.observations import RADIO_FEATURES, Normalizer
 
 #: The normalised columns a fingerprint holds (the radio features, no position).
@@ -94,4 +94,57 @@ def ambiguity(blueprint: Dataset, ds: Dataset | None = None, normalizer: Normali
     )
 
 
-__all__ = ["FINGERPRINT_COLUMNS", "Ambiguity", "ambiguity", "fingerprints", "localisation"]
+class Tracker:
+    """Where a moving robot believes it is: fingerprints searched near where its own moves say it went.
+
+    On a twin whose objects changed, the radio features near a new object are not the blueprint's, and the nearest
+    fingerprint over the whole blueprint can be far away (:func:`ambiguity` counts them). A robot also knows which
+    move it made and whether it bumped (the move did not change its cell), so it can carry its belief along: the
+    **predicted** cell is the believed cell moved by that move (or kept, after a bump), and the new belief is the
+    nearest fingerprint among the blueprint cells with radio within ``window`` moves (Manhattan) of the prediction.
+    ``window=0`` is dead reckoning from the first fingerprint; ``window >= 1`` lets the fingerprints correct a wrong
+    start. Where nothing with radio lies in the window, or the robot's cell senses nothing, the prediction is kept;
+    where the prediction is not a free blueprint cell (a belief already wrong), the global fingerprint is used.
+    The first belief of an episode is the global nearest fingerprint (:func:`localisation`)."""
+
+    def __init__(self, blueprint: Dataset, ds: Dataset, window: int = 1, normalizer: Normalizer | None = None):
+        if not (isinstance(window, (int, np.integer)) and window >= 0):
+            raise ValueError(f"window must be an int >= 0, got {window!r}")
+        normalizer = normalizer or Normalizer.fit(blueprint)
+        self.window = int(window)
+        self.ref, self.ref_radio = fingerprints(blueprint, normalizer)
+        self.seen, self.seen_radio = fingerprints(ds, normalizer)
+        self.glob = localisation(blueprint, ds, normalizer)
+        self.mdp = GridMDP.from_dataset(background(blueprint))
+        self.free = np.asarray(self.mdp.free, bool)
+        w = self.window
+        self.offsets = np.array(
+            [(dx, dy) for dx in range(-w, w + 1) for dy in range(-w, w + 1) if abs(dx) + abs(dy) <= w], np.int64
+        )
+
+    def start(self, cells: np.ndarray) -> np.ndarray:
+        """The first belief (a blueprint grid cell) of robots on the twin's grid ``cells``."""
+        return self.glob[np.asarray(cells, np.int64)]
+
+    def step(self, believed: np.ndarray, moves: np.ndarray, moved: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        """The belief after each robot made ``moves`` from ``believed``; ``moved`` says which changed cell, ``cells``
+        are the twin cells the robots are on now (only their sensed features are read)."""
+        nx, ny = self.mdp.nx, self.mdp.ny
+        iy, ix = np.divmod(np.asarray(believed, np.int64), nx)
+        d = np.where(np.asarray(moved, bool)[:, None], ACTION_DELTAS[np.asarray(moves, np.int64)], 0)
+        px, py = ix + d[:, 0], iy + d[:, 1]
+        inside = (px >= 0) & (px < nx) & (py >= 0) & (py < ny)
+        pred = np.where(inside, py * nx + px, 0)
+        ok = inside & self.free[pred]
+        cx, cy = px[:, None] + self.offsets[None, :, 0], py[:, None] + self.offsets[None, :, 1]
+        cand = np.where((cx >= 0) & (cx < nx) & (cy >= 0) & (cy < ny), cy * nx + cx, -1)
+        valid = (cand >= 0) & self.ref_radio[cand.clip(0)]
+        cells = np.asarray(cells, np.int64)
+        dist = ((self.ref[cand.clip(0)] - self.seen[cells][:, None]) ** 2).sum(-1)
+        best = cand[np.arange(cand.shape[0]), np.where(valid, dist, np.inf).argmin(1)]
+        use_fp = valid.any(1) & self.seen_radio[cells]
+        out = np.where(use_fp, best, pred)
+        return np.where(ok, out, self.glob[cells])
+
+
+__all__ = ["FINGERPRINT_COLUMNS", "Ambiguity", "Tracker", "ambiguity", "fingerprints", "localisation"]

@@ -164,13 +164,15 @@ def bellman_sweeps(
     v0: np.ndarray | None = None,
     floor: float | None = None,
     masked_value: float = -np.inf,
+    forbidden: np.ndarray | None = None,
     tol: float = TOL,
 ) -> tuple[np.ndarray, int, float]:
     """Value iteration on one chunk: ``(V float64[K, N], sweeps, last relative change)``.
 
     ``allowed`` (``bool[N, 4]`` or ``[K, N, 4]``) removes moves: they are worth ``masked_value`` (default -inf: never
-    taken; a state without any allowed move gets ``floor``, what a robot that can do nothing is worth); ``v0`` starts
-    the sweeps elsewhere than 0."""
+    taken; a state without any allowed move gets ``floor``, what a robot that can do nothing is worth); ``forbidden``
+    (same shapes) removes moves whatever ``masked_value`` is (never taken: a move known to be blocked, where
+    ``allowed`` keeps an unlogged move at ``masked_value``); ``v0`` starts the sweeps elsewhere than 0."""
     # action-major copies: one contiguous gather ``V[:, next[:, a]]`` per move is ~3x faster than one fancy
     # index over ``[K, N, 4]`` (measured on Dallas Q3's 1 950 states)
     r_a = np.ascontiguousarray(np.moveaxis(r, -1, 0))
@@ -182,6 +184,12 @@ def bellman_sweeps(
         allowed = np.broadcast_to(allowed, r.shape)
         mask_a = np.ascontiguousarray(np.moveaxis(~allowed, -1, 0))
         stuck = ~allowed.any(-1) if masked_value == -np.inf else None
+    forbid_a = None
+    if forbidden is not None:
+        forbidden = np.broadcast_to(forbidden, r.shape)
+        forbid_a = np.ascontiguousarray(np.moveaxis(forbidden, -1, 0))
+        gone = forbidden if allowed is None or masked_value != -np.inf else forbidden | ~allowed
+        stuck = gone.all(-1) if stuck is None else stuck | gone.all(-1)
     v = np.zeros(r.shape[:2]) if v0 is None else np.array(v0, np.float64)
     new = np.empty_like(v)
     qa = np.empty_like(v)
@@ -193,6 +201,8 @@ def bellman_sweeps(
             qa += r_a[a]
             if mask_a is not None:
                 qa[mask_a[a]] = masked_value
+            if forbid_a is not None:
+                qa[forbid_a[a]] = -np.inf
             if a == 0:
                 new[:] = qa
             else:

@@ -1,0 +1,167 @@
+"""Tables with senses: a batch-RL table that avoids what the robot senses and re-plans around it.
+
+A table learnt from logged data (:mod:`dtradar_rl.tabular.batch`) knows the blueprint's walls only. On a dynamic
+twin a new object stops it: a deterministic table that bumps into one keeps bumping (the same believed cell, the
+same move) until the step limit, which is most of the tables' loss there. A robot senses more than its own radio
+features: the has-radio flag of each neighbour (the ``neighbors`` observation: 0 = blocked, off the grid or no path)
+and whether its last move changed its cell. :func:`follow_sensing` acts as such a robot, one episode per pair:
+
+1. **localise**: the believed blueprint cell ``b``: the nearest fingerprint at the start, then carried along the
+   robot's own moves (it knows which move it made and whether it bumped), :class:`~dtradar_rl.tabular.fingerprints.
+   Tracker` with :data:`WINDOW`; without a tracker, the nearest fingerprint at every step (as
+   :class:`~dtradar_rl.tabular.table_policy.TablePolicy` does), which near a new object misleads;
+2. **sense**: a neighbour the blueprint says has radio but that senses none is believed blocked, so the move
+   ``(b, a)`` towards it is forbidden for the rest of the episode; a move that bumped likewise. A neighbour without
+   radio on the blueprint too (a free cell no path reaches) is not read as blocked, nor the target;
+3. **re-plan**: when the forbidden set grew, the learner is solved again for the episode's target on the *same*
+   empirical model with those moves removed (:func:`~dtradar_rl.tabular.batch.learn` with ``forbidden=``), and the
+   robot follows the new table. No new data: the model still knows only the logged moves.
+
+Forbidden moves are kept in believed coordinates, ``(b, a)``, not as cells of the twin: a mislocalised robot forbids
+what it believes it saw. The learners re-planned are CE and VI-LCB (Π_b-SPIBB's bootstrapped moves keep the
+behaviour's probabilities, which a blocked move would have to give up: not built). Episodes run in lockstep and the
+robots that need a new plan at a step are solved together, one call per step. The reward along the way is the
+twin's, so an episode's discounted return is exact (cut at the step limit like a rollout).
+
+    paths = follow_sensing("ce", model, table, rows, twin_tab, localisation(blueprint, twin),
+                           radio_flags(twin), radio_flags(blueprint), starts, targets,
+                           tracker=Tracker(blueprint, twin, WINDOW))
+    path_metrics(paths)          # success, SPL, collisions: what the robot does on the twin
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dtradar_data.core.dataset import Dataset
+from dtradar_rl.tabular.batch import BatchConfig, EmpiricalModel, learn
+from dtradar_rl.tabular.fingerprints import Tracker
+from dtradar_rl.tabular.solver import TabularMDP
+from dtradar_rl.task.mdp import ACTION_DELTAS, GridMDP
+from dtradar_rl.task.observations import Normalizer, build_observations
+
+#: The learners a sensing robot re-plans with (module docstring).
+SENSING: tuple[str, ...] = ("ce", "lcb")
+#: Their columns in the offline benchmark: ``<learner>-senses``.
+SUFFIX = "-senses"
+#: The :class:`~dtradar_rl.tabular.fingerprints.Tracker` window a sensing robot localises with. Measured on Dallas
+#: Q3's dynamic twin from expert data (CE / VI-LCB + senses, normalised): 0 (dead reckoning from the first
+#: fingerprint) 96.2 / 94.2, 1: 83.0 / 83.2, 2: 81.7 / 78.5, every step's global fingerprint: 72.3 / 72.6; on the
+#: blueprint all within 0.1 of each other. Near a new object the fingerprints mislead more than they correct.
+WINDOW = 0
+
+
+def radio_flags(ds: Dataset, normalizer: Normalizer | None = None) -> np.ndarray:
+    """``bool[H*W]`` the has-radio flag of every cell of ``ds`` (free and with radio features): what a robot senses
+    of a neighbour, the same flag the ``neighbors`` observation carries."""
+    table = build_observations(ds, "goal", normalizer or Normalizer.fit(ds))
+    return np.asarray(table.has_radio, bool)
+
+
+def neighbour_cells(mdp: GridMDP) -> np.ndarray:
+    """``int64[H*W, 4]`` the grid cell next to every cell in action order, -1 off the grid (walls included)."""
+    n = mdp.num_cells
+    x, y = mdp.xy(np.arange(n))
+    out = np.full((n, 4), -1, np.int64)
+    for a, (dx, dy) in enumerate(ACTION_DELTAS):
+        jx, jy = x + dx, y + dy
+        inside = (jx >= 0) & (jx < mdp.nx) & (jy >= 0) & (jy < mdp.ny)
+        out[inside, a] = (jy * mdp.nx + jx)[inside]
+    return out
+
+
+def follow_sensing(
+    name: str,
+    model: EmpiricalModel,
+    table: np.ndarray,
+    rows: np.ndarray,
+    twin: TabularMDP,
+    loc: np.ndarray,
+    sensed: np.ndarray,
+    expected: np.ndarray,
+    starts: np.ndarray,
+    targets: np.ndarray,
+    *,
+    cfg: BatchConfig | None = None,
+    max_steps: int | None = None,
+    tracker: Tracker | None = None,
+) -> dict[str, np.ndarray]:
+    """Follow learner ``name``'s table as a sensing, re-planning robot on ``twin`` (module docstring).
+
+    ``table`` is the learner's ``int64[K, N]`` plan over the blueprint's states (``model.tab``), episode ``i`` starts
+    from row ``rows[i]``; ``loc`` maps the twin's grid cells to believed blueprint cells
+    (:func:`~dtradar_rl.tabular.fingerprints.localisation`); ``sensed`` / ``expected`` are the twin's and the
+    blueprint's :func:`radio_flags`; ``starts`` and ``targets`` are grid cells of the twin. Returns what
+    :func:`~dtradar_rl.tabular.evaluation.follow` returns, plus ``returns`` (each episode's discounted return on
+    the twin) and ``replans`` (the episode's re-plans). With a ``tracker`` the robot carries its belief along its own
+    moves (:class:`~dtradar_rl.tabular.fingerprints.Tracker`) instead of reading ``loc`` afresh at every step."""
+    cfg = (cfg or BatchConfig()).validate()
+    bp = model.tab
+    max_steps = int(max_steps or twin.mdp.max_steps)
+    starts, targets = np.asarray(starts, np.int64), np.asarray(targets, np.int64)
+    n_ep = starts.size
+    s, t = twin.states(starts).copy(), twin.states(targets)
+    plan = np.asarray(table)[np.asarray(rows)].copy()
+    forbid = np.zeros((n_ep, bp.n, 4), bool)
+    dirty = np.zeros(n_ep, bool)
+    nb = neighbour_cells(bp.mdp)
+    utargets = np.unique(targets)
+    r_twin, _ = twin.rewards(model.reward, twin.states(utargets))  # [U, N_twin, 4]
+    urow = np.searchsorted(utargets, targets)
+    done = s == t
+    steps = np.zeros(n_ep, np.int64)
+    travelled = np.zeros(n_ep, np.int64)
+    collisions = np.zeros(n_ep, np.int64)
+    replans = np.zeros(n_ep, np.int64)
+    returns = np.zeros(n_ep)
+    disc = np.ones(n_ep)
+    belief = (tracker.start if tracker is not None else loc.__getitem__)(twin.cells[s])
+    for _ in range(max_steps):
+        live = np.flatnonzero(~done)
+        if not live.size:
+            break
+        cell = twin.cells[s[live]]
+        b_cell = belief[live] if tracker is not None else loc[cell]
+        b = bp.state_of[b_cell]
+        # what the robot senses next to it, against what the blueprint says is next to where it believes it is
+        true_nb, believed_nb = nb[cell], nb[b_cell]
+        flag = np.where(true_nb >= 0, sensed[true_nb.clip(0)], False)
+        expect = np.where(believed_nb >= 0, expected[believed_nb.clip(0)], False)
+        new = ~flag & expect & (believed_nb != targets[live, None]) & ~forbid[live, b]
+        li, la = np.nonzero(new)
+        forbid[live[li], b[li], la] = True
+        dirty[live[li]] = True
+        again = live[dirty[live]]
+        if again.size:
+            plan[again] = learn(name, model, targets[again], cfg, forbidden=forbid[again])
+            dirty[again] = False
+            replans[again] += 1
+        a = plan[live, b]
+        st = s[live]
+        nxt = twin.next[st, a]
+        bump = twin.collides[st, a]
+        returns[live] += disc[live] * r_twin[urow[live], st, a]
+        disc[live] *= cfg.gamma
+        travelled[live] += nxt != st
+        collisions[live] += bump
+        steps[live] += 1
+        # a bump is a move the robot now knows is blocked: forbidden, and a new plan before the next move
+        forbid[live[bump], b[bump], a[bump]] = True
+        dirty[live[bump]] = True
+        s[live] = nxt
+        done[live] = nxt == t[live]
+        if tracker is not None:
+            belief[live] = tracker.step(b_cell, a, nxt != st, twin.cells[nxt])
+    shortest = twin.mdp.bfs_distances_many(utargets)[urow, starts]
+    return {
+        "success": done,
+        "steps": steps,
+        "travelled": travelled,
+        "shortest": shortest,
+        "collisions": collisions,
+        "returns": returns,
+        "replans": replans,
+    }
+
+
+__all__ = ["SENSING", "SUFFIX", "WINDOW", "follow_sensing", "neighbour_cells", "radio_flags"]
