@@ -103,6 +103,9 @@ class OfflineBenchConfig(Config):
     """environment steps logged per dataset (not medium-replay: the medium agent's whole run)"""
     n_steps: int = BENCH_UPDATES
     """d3rlpy updates per run"""
+    relabel: str = "auto"
+    """goal relabelling of every run (dtradar_rl.offline.relabel): auto (each algorithm's best measured mix, the
+    default), none (the logged targets, the benchmark before relabelling), or any mix --relabel takes"""
     shortest_prob: float = 0.5
     """noisy-shortest: probability of the shortest-path move"""
     epsilon: float = 0.3
@@ -131,6 +134,9 @@ class OfflineBenchConfig(Config):
     fqe_gamma: float = FQE_GAMMA
     """discount of the value FQE estimates and the rollouts measure (the agents train with 0.5, under which all
     reasonable agents are worth about the same; see dtradar_rl.offline.ope)"""
+    deep: bool = True
+    """train the d3rlpy algorithms (--no-deep: only the logged datasets' rows, the tabular learners and the ceilings,
+    seconds per dataset)"""
     tabular: bool = True
     """also run the tabular batch learners (CE, VI-LCB, Π_b-SPIBB) and each dataset's ceiling (--no-tabular: skip;
     seconds per dataset, see dtradar_rl.tabular.batch)"""
@@ -153,6 +159,8 @@ class OfflineBenchConfig(Config):
                 raise unknown_name("behaviour policy", b, BEHAVIOURS)
         if not self.seeds or not self.algorithms or not self.behaviours:
             raise ConfigError("--seeds, --algorithms and --behaviours must each list at least one value")
+        for a in self.algorithms:
+            OfflineConfig(algorithm=a, relabel=self.relabel).relabel_config()  # a mix that does not parse
         if self.workers < 0:
             raise ConfigError("--workers must be >= 0 (0 = one per CPU core)")
         if not 0 < self.fqe_gamma <= 1:
@@ -226,7 +234,7 @@ def _finish(
     out = cfg.out_dir
     result = {
         "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.__dict__.items()},
-        "algorithms": {a: NAMES[a] for a in cfg.algorithms},
+        "algorithms": {a: NAMES[a] for a in cfg.algorithms} if cfg.deep else {},
         **head,
         "summary": summarize(runs, list(cfg.behaviours), list(cfg.algorithms), list(cfg.variants)),
         "runs": runs,
@@ -234,13 +242,13 @@ def _finish(
         "layout": layout or {},
         "wall_s": time.perf_counter() - t_start,
     }
-    if cfg.fqe:
+    if cfg.fqe and cfg.deep:
         result["ope"] = ope_summary(runs, cfg.fqe_gamma, cfg.fqe_steps)
     write_atomic(out / "bench.json", json.dumps(result, indent=2) + "\n")
     write_atomic(out / "bench.md", markdown(result))
     if plots:
         plot(result, out / "bench.png")
-        if cfg.fqe:
+        if cfg.fqe and cfg.deep:
             plot_fqe(result, out / "bench_fqe.png")
     return result
 
@@ -361,6 +369,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
                 algorithm=algo,
                 seed=seed,
                 n_steps=cfg.n_steps,
+                relabel=cfg.relabel,
                 pairs=cfg.pairs,
                 eval_variants=tuple(cfg.variants),
                 shield=False,
@@ -375,7 +384,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
             fqe_gamma=cfg.fqe_gamma,
         )
         for beh in cfg.behaviours
-        for algo in cfg.algorithms
+        for algo in (cfg.algorithms if cfg.deep else ())
         for seed in cfg.seeds
     ]
 
@@ -409,7 +418,7 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     say(markdown(result), end="")
     say(
         f"results: {out / 'bench.json'}, {out / 'bench.md'}, {out / 'bench.png'}"
-        + (f", {out / 'bench_fqe.png'}" if cfg.fqe else "")
+        + (f", {out / 'bench_fqe.png'}" if cfg.fqe and cfg.deep else "")
     )
     return result
 

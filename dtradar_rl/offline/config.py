@@ -80,10 +80,10 @@ class OfflineConfig(BehaviourConfig):
     logged: str = ""
     """train on this stored logged dataset (e.g. cubicle/blueprint/mixture@v0, see `dtradar_rl log`); default: log
     (or reuse) <scene>/<variant>/<behaviour> with --behaviour, --transitions and --seed"""
-    relabel: str = "none"
+    relabel: str = "auto"
     """goal relabelling of the logged steps (dtradar_rl.offline.relabel; rewards and terminals recomputed exactly for
-    each goal): none (the logged targets); auto (the algorithm's best measured mix: own-next for bc and cql, ogbench
-    for bcq, dqn, ddqn, nfq); future (goals from the future of the same episode: with --algorithm bc this is GCBC);
+    each goal): auto, the default (the algorithm's best measured mix: own-next for bc and cql, ogbench for bcq, dqn,
+    ddqn, nfq); none (the logged targets: every run before relabelling existed); future (goals from the future of the same episode: with --algorithm bc this is GCBC);
     own-future; own-next (own 0.5, next 0.5); ogbench (OGBench's value goals: next 0.2, future 0.5, random 0.3);
     random; or probabilities like own=0.5,future=0.3,random=0.2 (sources own, future, random, next; summing to 1)"""
     relabel_discount: float = DEFAULT_DISCOUNT
@@ -94,6 +94,12 @@ class OfflineConfig(BehaviourConfig):
     with --seed)"""
     out: str = ""
     """output directory (default runs/<scene>/offline/<algorithm>)"""
+
+    @classmethod
+    def from_dict(cls, d):
+        """The config saved by ``to_dict``; a config saved before a field existed keeps the default it had then
+        (:data:`SAVED_DEFAULTS`: no relabelling), so an old run's ``config.json`` keeps its meaning."""
+        return super().from_dict({**SAVED_DEFAULTS, **d})
 
     def relabel_config(self) -> RelabelConfig:
         """The goal relabelling of this run (seeded with ``seed``): :class:`~dtradar_rl.offline.relabel.RelabelConfig`
@@ -125,6 +131,10 @@ class OfflineConfig(BehaviourConfig):
         super().validate()
         check_algorithm(self.algorithm)
         return self
+
+
+#: What a config saved without a field meant by it (:meth:`OfflineConfig.from_dict`): relabelling came later.
+SAVED_DEFAULTS: dict[str, object] = {"relabel": "none"}
 
 
 def check_algorithm(name: str) -> str:

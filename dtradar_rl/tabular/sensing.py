@@ -8,7 +8,8 @@ and whether its last move changed its cell. :func:`follow_sensing` acts as such 
 
 1. **localise**: the believed blueprint cell ``b``: the nearest fingerprint at the start, then carried along the
    robot's own moves (it knows which move it made and whether it bumped), :class:`~dtradar_rl.tabular.fingerprints.
-   Tracker` with :data:`WINDOW`; without a tracker, the nearest fingerprint at every step (as
+   Tracker` with :data:`WINDOW`, started afresh from the nearest fingerprint when the robot believes it stands on
+   its target but the episode goes on (a belief known to be wrong); without a tracker, the nearest fingerprint at every step (as
    :class:`~dtradar_rl.tabular.table_policy.TablePolicy` does), which near a new object misleads;
 2. **sense**: a neighbour the blueprint says has radio but that senses none is believed blocked, so the move
    ``(b, a)`` towards it is forbidden for the rest of the episode; a move that bumped likewise. A neighbour without
@@ -151,7 +152,10 @@ def follow_sensing(
         s[live] = nxt
         done[live] = nxt == t[live]
         if tracker is not None:
-            belief[live] = tracker.step(b_cell, a, nxt != st, twin.cells[nxt])
+            b_new = tracker.step(b_cell, a, nxt != st, twin.cells[nxt])
+            # believing to stand on the target while the episode goes on: the belief is wrong, start it afresh
+            lost = (b_new == targets[live]) & ~done[live]
+            belief[live] = np.where(lost, tracker.start(twin.cells[nxt]), b_new)
     shortest = twin.mdp.bfs_distances_many(utargets)[urow, starts]
     return {
         "success": done,

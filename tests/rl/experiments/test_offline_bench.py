@@ -56,11 +56,33 @@ def test_a_tiny_benchmark_runs_end_to_end_in_seconds(root, tmp_path):
     # the tabular rows: the data's ceiling on the blueprint, the three learners on both twins, exact return scores
     tab = saved["tabular"]["random"]
     assert 0 <= tab["ceiling"]["blueprint"]["spl"] <= 1 and "return_normalized" in tab["ceiling"]["blueprint"]
-    assert all(isinstance(tab[n][v]["normalized"], float) for n in ("ce", "lcb", "spibb") for v in cfg.variants)
+    names = ("ce", "lcb", "spibb", "ce-senses", "lcb-senses")
+    assert all(isinstance(tab[n][v]["normalized"], float) for n in names for v in cfg.variants)
+    assert all(tab[n][v]["replans"] >= 0 for n in ("ce-senses", "lcb-senses") for v in cfg.variants)
     assert "data ceiling" in md and "| CE |" in md and "Π_b-SPIBB" in md and "return-based" in md
+    assert "CE + senses" in md and "goals relabelled: auto" in md
     # --no-fqe: no off-policy evaluation anywhere
     assert "ope" not in saved and not any("fqe" in r for r in saved["runs"]) and "FQE" not in md
     assert not (tmp_path / "bench" / "bench_fqe.png").exists()
+
+
+def test_without_the_deep_learners_the_benchmark_writes_the_tabular_rows_alone(root, tmp_path):
+    cfg = OfflineBenchConfig(
+        scene="synthetic-8x6",
+        behaviours=("random",),
+        deep=False,
+        steps=400,
+        num_envs=8,
+        pairs=8,
+        out=str(tmp_path / "bench"),
+        verbose=False,
+    )
+    result = run_bench(cfg)
+    assert result["runs"] == [] and result["algorithms"] == {} and "ope" not in result
+    assert result["tabular"]["random"]["ce-senses"]["dynamic"]["success_rate"] >= 0
+    md = (tmp_path / "bench" / "bench.md").read_text()
+    assert "CE + senses" in md and "DiscreteCQL" not in md
+    assert (tmp_path / "bench" / "bench.png").is_file()
 
 
 def test_every_run_is_scored_on_the_normalised_scale_of_its_twin(root, tmp_path):
