@@ -176,7 +176,8 @@ def markdown(result: dict[str, Any]) -> str:
     refs = result.get("references") or {}
     lines = [
         f"Offline RL on `{cfg['scene']}`: d3rlpy algorithms trained on logged datasets of the blueprint twin, "
-        f"{cfg['n_steps']} updates per run, goals relabelled: {cfg.get('relabel', 'none')}, {len(cfg['seeds'])} seed(s) ({', '.join(map(str, cfg['seeds']))}), "
+        f"{cfg['n_steps']} updates per run, goals relabelled: {cfg.get('relabel', 'none')}, "
+        f"{len(cfg['seeds'])} seed(s) ({', '.join(map(str, cfg['seeds']))}), "
         f"mean ± std over seeds; evaluated greedy and unshielded on {cfg['pairs']} seeded (start, target) pairs "
         "(seed 2024) of each twin.",
         "",

@@ -9,8 +9,8 @@ and whether its last move changed its cell. :func:`follow_sensing` acts as such 
 1. **localise**: the believed blueprint cell ``b``: the nearest fingerprint at the start, then carried along the
    robot's own moves (it knows which move it made and whether it bumped), :class:`~dtradar_rl.tabular.fingerprints.
    Tracker` with :data:`WINDOW`, started afresh from the nearest fingerprint when the robot believes it stands on
-   its target but the episode goes on (a belief known to be wrong); without a tracker, the nearest fingerprint at every step (as
-   :class:`~dtradar_rl.tabular.table_policy.TablePolicy` does), which near a new object misleads;
+   its target but the episode goes on (a belief known to be wrong); without a tracker, the nearest fingerprint at
+   every step (as :class:`~dtradar_rl.tabular.table_policy.TablePolicy` does), which near a new object misleads;
 2. **sense**: a neighbour the blueprint says has radio but that senses none is believed blocked, so the move
    ``(b, a)`` towards it is forbidden for the rest of the episode; a move that bumped likewise. A neighbour without
    radio on the blueprint too (a free cell no path reaches) is not read as blocked, nor the target;
