@@ -85,7 +85,8 @@ class OfflineConfig(BehaviourConfig):
     each goal): auto, the default (the algorithm's best measured mix: own-next for bc and cql, ogbench for bcq, dqn,
     ddqn, nfq); none (the logged targets: every run before relabelling existed); future (goals from the future of the
     same episode: with --algorithm bc this is GCBC); own-future; own-next (own 0.5, next 0.5); ogbench (OGBench's
-    value goals: next 0.2, future 0.5, random 0.3); random; or probabilities like own=0.5,future=0.3,random=0.2 (sources own, future, random, next; summing to 1)"""
+    value goals: next 0.2, future 0.5, random 0.3); random; or probabilities like own=0.5,future=0.3,random=0.2
+    (sources own, future, random, next; summing to 1)"""
     relabel_discount: float = DEFAULT_DISCOUNT
     """relabelling: future goals are k >= 1 steps ahead, k geometric with parameter 1 - discount (mean 1 / (1 -
     discount) steps), cut at the episode's end"""
