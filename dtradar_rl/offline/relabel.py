@@ -225,6 +225,21 @@ class RelabelConfig(Config):
         return ",".join(f"{s}={getattr(self, s):g}" for s in SOURCES if getattr(self, s))
 
 
+#: The observation presets with a target part (the others cannot show a relabelled goal to the policy).
+TARGET_PRESETS: tuple[str, ...] = ("goal", "neighbors")
+
+
+def not_relabellable(ds: Dataset, preset: str) -> str | None:
+    """Why a log of twin ``ds`` observed with ``preset`` cannot be relabelled (None when it can): a moving twin (its
+    observations depend on the snapshot) or a preset without a target. ``--relabel auto`` then trains on the logged
+    targets; a mix named explicitly is refused by :class:`Relabeller` instead."""
+    if ds.is_moving:
+        return f"{ds.name} is a moving twin"
+    if preset not in TARGET_PRESETS:
+        return f"the {preset!r} observation has no target"
+    return None
+
+
 class Relabeller:
     """A logged dataset and its twin, ready to replay any of its steps towards any goal (module docstring).
 
@@ -585,9 +600,11 @@ __all__ = [
     "AUTO_MIXES",
     "MIXES",
     "SOURCES",
+    "TARGET_PRESETS",
     "RelabelConfig",
     "Relabelled",
     "Relabeller",
+    "not_relabellable",
     "relabel",
     "relabelled_mdp_dataset",
     "relabelled_sampler",

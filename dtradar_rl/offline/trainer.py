@@ -58,7 +58,7 @@ from dtradar_rl.offline.config import ALGORITHMS, OFFLINE_FORMAT, OfflineConfig,
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, check_compatible, log_dataset
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
-from dtradar_rl.offline.relabel import relabelled_sampler, relabeller
+from dtradar_rl.offline.relabel import RelabelConfig, not_relabellable, relabelled_sampler, relabeller
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runs import no_empty_folder_on_failure
@@ -299,6 +299,10 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
 
     relabel = cfg.relabel_config()
     train_data = logged_data
+    why = not_relabellable(ds, cfg.obs) if cfg.relabel.strip() == "auto" and not relabel.is_identity else None
+    if why:  # the default meets a log it cannot relabel: train on the logged targets, and say so
+        say(f"relabelling goals: auto does not apply ({why}), training on the logged targets")
+        relabel = RelabelConfig.parse("none", cfg.algorithm, seed=cfg.seed)
     if not relabel.is_identity:  # goals relabelled in every minibatch (or once): dtradar_rl.offline.relabel
         train_data = relabelled_sampler(logged_data, relabeller(store_log, ds), relabel)
         say(f"relabelling goals: {relabel.describe()}, discount {relabel.discount:g}, drawn per {relabel.resample}")

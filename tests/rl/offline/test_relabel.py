@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from dtradar_data.core.errors import InvalidSettingError, UnknownNameError
+from dtradar_data.core.errors import InvalidSettingError, SchemaMismatchError, UnknownNameError
 from dtradar_rl.cli import main
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.nav_env import DtradarNavEnv
@@ -245,3 +245,23 @@ def test_every_algorithm_trains_on_relabelled_minibatches(store, tmp_path, algor
     result = train_offline(cfg, dataset=twin)
     assert len(result.losses) == 10 and all(np.isfinite(v) for row in result.losses for v in row.values())
     assert result.logged["relabel"]["drawn"] == 10 * 16
+
+
+def test_the_default_relabels_by_algorithm_and_a_config_saved_before_it_reads_as_none():
+    assert OfflineConfig().relabel == "auto"
+    assert OfflineConfig(algorithm="cql").relabel_config() == RelabelConfig.parse("own-next")
+    assert OfflineConfig(algorithm="dqn").relabel_config() == RelabelConfig.parse("ogbench")
+    old = {k: v for k, v in OfflineConfig(algorithm="bc").to_dict().items() if not k.startswith("relabel")}
+    assert OfflineConfig.from_dict(old).relabel == "none"
+
+
+def test_the_default_trains_on_the_logged_targets_where_a_log_cannot_be_relabelled(store, tmp_path, capsys):
+    twin, _ = store
+    logged = log_dataset(LogConfig(**LOG, behaviour="random", steps=400, obs="paper"), twin)
+    common = dict(scene=SMALL, logged=logged.name, obs="paper", algorithm="bc", n_steps=5, batch_size=16)
+    common.update(hidden=(8,), eval_variants=(), threads=1, verbose=True)
+    result = train_offline(OfflineConfig(**common, out=str(tmp_path / "auto")), dataset=twin)
+    assert "auto does not apply (the 'paper' observation has no target)" in capsys.readouterr().out
+    assert "relabel" not in result.logged and len(result.losses) == 5
+    with pytest.raises(SchemaMismatchError, match="no target"):  # a mix named explicitly is refused
+        train_offline(OfflineConfig(**common, relabel="future", out=str(tmp_path / "future")), dataset=twin)
