@@ -41,8 +41,8 @@ format:
 docs:
 	$(PY) -m mkdocs build --strict --quiet
 
-# Every test, the slow ones included.
-test-all:
+# Lint, docs and every test, the slow ones included (worker processes, Ray sessions): what CI runs.
+test-all: lint docs
 	$(PY) -m pytest -q -m ''
 
 # Ray-trace both variants (blueprint and dynamic) of a scene into the data root (VARIANT=moving: its moving twin).

@@ -119,6 +119,7 @@ def test_a_port_that_answers_but_is_no_ray_cluster_fails_after_the_bounded_wait(
     assert time.monotonic() - t0 < 30
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_a_ray_without_the_cpus_a_task_needs_fails_instead_of_waiting_for_ever(tmp_path, monkeypatch):
     """A trace worker needs one CPU, a sweep run --threads of them on one node: a Ray that has no such node would
     leave them pending for ever, silently (this Ray is started here, so no node will join: it fails at once)."""

@@ -67,6 +67,7 @@ BUILDER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_a_second_build_process_started_mid_trace_waits_and_reuses_the_one_version(root, tmp_path):
     signals = tmp_path / "signals"
     signals.mkdir()

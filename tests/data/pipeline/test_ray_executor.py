@@ -53,6 +53,7 @@ def test_a_ray_build_stores_the_same_table_and_version_as_a_serial_build(root, m
     assert on_ray.table.equals(serial.table)
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_a_worker_killed_mid_build_is_replaced_and_the_build_finishes_unchanged(root, small_cubicle, local_ray):
     cfg = replace(config(samples=40_000), executor="ray", workers=2)
     spec_cfg = scene_config(cfg, small_cubicle)
@@ -95,6 +96,7 @@ def test_asking_for_ray_without_ray_installed_names_the_install_command(monkeypa
         BuildConfig(scene="cubicle", executor="ray")
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_a_ray_session_keeps_its_workers_warm_from_one_scene_to_the_next(small_cubicle, local_ray, tmp_path):
     from dtradar_data.pipeline.executors import RaySession
 

@@ -117,6 +117,7 @@ def test_the_planner_replanning_on_the_current_snapshot_reaches_its_targets_amon
     assert m_bp.success_rate >= 0.95
 
 
+@pytest.mark.slow  # trains, evaluates and draws an animation: ~9 s (make test-all)
 def test_make_eval_takes_the_moving_twin_and_draws_its_episodes_as_an_animation(tmp_path):
     from PIL import Image
 

@@ -168,6 +168,7 @@ def test_spearman_is_the_rank_correlation_and_none_when_undefined():
     assert spearman([1, 2], [1, 2]) is None and spearman([1, 1, 1], [1, 2, 3]) is None
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_two_worker_processes_train_the_same_agents_as_one_process(root, tmp_path):
     twin = load_dataset("synthetic-8x6/blueprint")
     logged = log_dataset(

@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from dtradar_rl.cli import main
 from dtradar_rl.experiments.paper import PaperConfig, cross_groups
 
@@ -141,6 +143,7 @@ def test_the_seeds_of_a_pair_are_judged_together_four_of_five_reproducing_it():
     assert summarize("cubicle", rows)["goal_met"]
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_seeds_trained_side_by_side_in_processes_give_the_same_runs_as_one_after_another(tmp_path):
     from dtradar_rl.experiments.paper_seeds import SeedJob, run_seeds
 

@@ -11,6 +11,7 @@ from dtradar_rl.task.config import ConfigError
 TINY = dict(scenes=("synthetic-8x6",), preset="tuned", total_env_steps=3_000, pairs=20)
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_a_sweep_of_two_seeds_on_ray_returns_both_results(tmp_path):
     ray = pytest.importorskip("ray")
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)

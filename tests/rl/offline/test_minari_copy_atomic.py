@@ -271,6 +271,7 @@ RACER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_two_processes_writing_the_same_copy_both_succeed_and_the_second_says_what_it_waits_for(stores, tmp_path):
     logged = put()
     signals = tmp_path / "signals"

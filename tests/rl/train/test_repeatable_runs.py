@@ -36,7 +36,10 @@ def _weights(result) -> dict[str, torch.Tensor]:
     return torch.load(result.checkpoint, map_location="cpu", weights_only=False)["q"]
 
 
-@pytest.mark.parametrize("preset", list(BUDGETS))
+@pytest.mark.parametrize(
+    "preset",
+    [pytest.param(p, marks=pytest.mark.slow) if p == "paper" else p for p in BUDGETS],  # paper: ~10 s
+)
 def test_the_same_seed_gives_the_same_weights_on_one_thread_and_on_two_beside_a_busy_process(preset, tmp_path):
     def run(threads, folder):
         cfg = config_for(
