@@ -104,7 +104,8 @@ BEHAVIOUR ?= noisy-shortest
 # A logged offline-RL dataset <scene>/blueprint/<behaviour> in the store (+ Minari copy), e.g.
 # make logged SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt" (a memoryless agent:
 # make train SCENE=cubicle ARGS="--preset tuned"). Dataset families (D4RL's names, no checkpoint needed): BEHAVIOUR=
-# random, expert, medium, medium-replay or mixed; BEHAVIOUR=all logs the five (docs/logged-datasets.md).
+# random, expert, medium, medium-replay or mixed, and OGBench's navigate, stitch or explore; BEHAVIOUR=all logs the
+# eight (docs/logged-datasets.md).
 logged:
 	$(PY) -m dtradar_rl log --scene $(SCENE) --behaviour $(BEHAVIOUR) $(ARGS)
 

@@ -132,9 +132,9 @@ def score_table(result: dict[str, Any], variant: str) -> list[str]:
     tab_cols = [c for c in TABULAR_COLUMNS if result.get("tabular")]
     best = best_per_dataset(result, variant)
     lines = [
-        "| dataset | behaviour itself | "
-        + "".join(f"{TABULAR_COLUMNS[c]} | " for c in tab_cols)
-        + " | ".join(result["algorithms"][a] for a in algos)
+        "| "
+        + " | ".join(["dataset", "behaviour itself", *(TABULAR_COLUMNS[c] for c in tab_cols)])
+        + "".join(f" | {result['algorithms'][a]}" for a in algos)
         + " |",
         "|" + "---|" * (2 + len(tab_cols) + len(algos)),
     ]

@@ -26,6 +26,10 @@ The **dataset families** (:data:`FAMILIES`), named like D4RL's (Fu et al. 2020) 
 - ``mixed``: a mixture of ``random``, ``medium`` and ``expert`` (robot ``i`` uses component ``i mod 3``). ``mixture``
   stays as the configurable mixture (``--components``, ``--checkpoint``); ``mixed`` is its family member.
 
+And the OGBench-style families (:data:`OGBENCH_FAMILIES`, named by how they were collected): ``navigate`` (a noisy
+expert walking from goal to goal), ``stitch`` (short hops) and ``explore`` (a persistent random walk), in
+:mod:`dtradar_rl.offline.walks`.
+
 The batched rollout that logs them is :func:`dtradar_rl.offline.collection.roll`.
 """
 
@@ -44,12 +48,15 @@ from dtradar_data.core.files import sha256_file
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED, METRIC, ShortestPathOracle
+from dtradar_rl.offline import walks
 from dtradar_rl.task.config import ConfigError, TwinConfig
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.train.checkpoints import load_policy
 
 #: The dataset families (D4RL's names), in the order ``--behaviour all`` logs them.
 FAMILIES: tuple[str, ...] = ("random", "expert", "medium", "medium-replay", "mixed")
+#: The OGBench-style families (:mod:`dtradar_rl.offline.walks`), logged by ``--behaviour all`` after D4RL's.
+OGBENCH_FAMILIES: tuple[str, ...] = walks.KINDS
 BEHAVIOURS: tuple[str, ...] = (
     "random",
     "noisy-shortest",
@@ -59,10 +66,11 @@ BEHAVIOURS: tuple[str, ...] = (
     "medium",
     "medium-replay",
     "mixed",
+    *OGBENCH_FAMILIES,
 )
 #: Kinds that act alone (a mixture's components).
 SINGLE: tuple[str, ...] = ("random", "noisy-shortest", "epsilon-greedy", "expert", "medium")
-#: ``--behaviour all``: every family of :data:`FAMILIES` on the twin.
+#: ``--behaviour all``: every family of :data:`FAMILIES` and :data:`OGBENCH_FAMILIES` on the twin.
 ALL = "all"
 
 #: ``expert``: probability of the breadth-first shortest-path move (else a uniformly random one).
@@ -181,6 +189,8 @@ class BehaviourSpec:
             d["checkpoint_sha256"] = sha256_file(Path(self.checkpoint))
         if self.needs_medium:
             d["medium"] = self.medium_recipe()
+        if self.kind in OGBENCH_FAMILIES:
+            d["walk"] = walks.parameters(self.kind)
         return d
 
     def describe(self) -> str:
@@ -197,6 +207,7 @@ class BehaviourSpec:
             f"log's seed) whose training stopped at the first evaluation (every {MEDIUM_EVAL_EVERY} environment "
             f"steps) where this behaviour's normalised score reached {self.medium_target:g}, replaced with "
             f"probability {MEDIUM_EPSILON} by a uniformly random move",
+            **walks.DESCRIPTIONS,
         }
         if self.kind in ("mixture", "mixed"):
             parts = "; ".join(f"component {i} `{c}`: {text[c]}" for i, c in enumerate(self.used))
@@ -222,7 +233,7 @@ class BehaviourConfig(TwinConfig):
 
     behaviour: str = "noisy-shortest"
     """behaviour policy: random, noisy-shortest, epsilon-greedy (a DQN checkpoint) or mixture (see --components); or a
-    dataset family (D4RL's names): random, expert, medium, medium-replay, mixed"""
+    dataset family: D4RL's random, expert, medium, medium-replay, mixed, or OGBench's navigate, stitch, explore"""
     shortest_prob: float = 0.5
     """noisy-shortest: probability of the breadth-first shortest-path move at each step"""
     epsilon: float = 0.3
@@ -266,20 +277,29 @@ class Actor:
     policy: Policy | None = None
     oracle: ShortestPathOracle | None = None
     component: torch.Tensor = field(default=None)  # type: ignore[assignment]
+    #: an OGBench-style family's walk (its moves' state, the episodes it starts), else None
+    walk: walks.Walk | None = None
 
     def __post_init__(self):
         n = self.env.num_envs
         k = max(1, len(self.spec.used))
         self.component = torch.arange(n, device=self.env.device) % k
-        if "noisy-shortest" in self.spec.used or "expert" in self.spec.used:
+        if {"noisy-shortest", "expert", "navigate", "stitch"} & set(self.spec.used):
             self.oracle = ShortestPathOracle(self.env)
+        if self.spec.kind in OGBENCH_FAMILIES:
+            self.walk = walks.Walk(self.spec.kind, self.env, self.gen)
 
     def _single(self, kind: str, obs: torch.Tensor, random_actions: torch.Tensor, coin: torch.Tensor) -> torch.Tensor:
         if kind == "random":
             return random_actions
-        if kind in ("noisy-shortest", "expert"):
-            p = self.spec.shortest_prob if kind == "noisy-shortest" else EXPERT_SHORTEST_PROB
+        if kind in ("noisy-shortest", "expert", "navigate", "stitch"):
+            p = {"noisy-shortest": self.spec.shortest_prob, "expert": EXPERT_SHORTEST_PROB}.get(
+                kind, walks.NAVIGATE_SHORTEST_PROB
+            )
+            # the oracle is refreshed when the pool grows (a walk's goals extend it)
             return torch.where(coin < p, self.oracle.act(self.gen), random_actions)
+        if kind == "explore":
+            return self.walk.explore(random_actions, coin)
         if kind not in GREEDY:
             raise ConfigError(f"the {kind} behaviour does not act: it is a training run's replay buffer")
         with torch.no_grad():
@@ -401,6 +421,7 @@ __all__ = [
     "EXPERT_SHORTEST_PROB",
     "FAMILIES",
     "MEDIUM_EPSILON",
+    "OGBENCH_FAMILIES",
     "MEDIUM_TARGET",
     "MEDIUM_TOLERANCE",
     "MIXED_COMPONENTS",

@@ -81,7 +81,10 @@ def roll(
         rec["next_obs"].append(next_o)
         rec["terminated"].append(term)
         rec["truncated"].append(trunc & ~term)
-        env.reset_where(term | trunc)
+        if actor.walk is not None:  # an OGBench-style family starts its own episodes (dtradar_rl.offline.walks)
+            actor.walk.next_episodes(term, trunc & ~term)
+        else:
+            env.reset_where(term | trunc)
         o = env.observe()
 
     return _assemble(rec, num_envs, horizon, actor.component.cpu().numpy(), t0)

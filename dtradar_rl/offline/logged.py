@@ -79,6 +79,7 @@ from dtradar_rl.offline.behaviours import (
     ALL,
     FAMILIES,
     MEDIUM_TOLERANCE,
+    OGBENCH_FAMILIES,
     BehaviourConfig,
     BehaviourPolicy,
     BehaviourSpec,
@@ -100,7 +101,8 @@ class LogConfig(BehaviourConfig):
 
     behaviour: str = "noisy-shortest"
     """behaviour policy: random, noisy-shortest, epsilon-greedy (a DQN checkpoint) or mixture (see --components); or a
-    dataset family (D4RL's names): random, expert, medium, medium-replay, mixed; or all (the five families)"""
+    dataset family: D4RL's random, expert, medium, medium-replay, mixed, OGBench's navigate, stitch, explore; or all
+    (the eight families)"""
     name: str = ""
     """third part of the dataset name (default: the behaviour)"""
     steps: int = 100_000
@@ -113,10 +115,10 @@ class LogConfig(BehaviourConfig):
         return f"{self.scene}/{self.variant}/{self.name or self.behaviour}"
 
     def families(self) -> list[LogConfig]:
-        """``--behaviour all``: one config per dataset family, in :data:`FAMILIES` order, else ``[self]``."""
+        """``--behaviour all``: one config per dataset family (D4RL's, then OGBench's), else ``[self]``."""
         if self.behaviour != ALL:
             return [self]
-        return [replace(self, behaviour=f, name="") for f in FAMILIES]
+        return [replace(self, behaviour=f, name="") for f in (*FAMILIES, *OGBENCH_FAMILIES)]
 
     def validate(self) -> LogConfig:
         if self.behaviour == ALL:
@@ -257,7 +259,7 @@ def _log(cfg: LogConfig, ds: Dataset, lid, inputs: dict[str, Any], say) -> Logge
         "stats": {"rollout": r.stats},
         "score": behaviour_score(cfg, ds, spec, c, settings["max_steps"]),
     }
-    if cfg.behaviour in FAMILIES:
+    if cfg.behaviour in FAMILIES or cfg.behaviour in OGBENCH_FAMILIES:
         meta["family"] = cfg.behaviour
     if agent is not None:
         meta["medium_agent"] = agent.summary()

@@ -22,6 +22,9 @@ BEHAVIOUR_KINDS: tuple[str, ...] = (
     "medium",
     "medium-replay",
     "mixed",
+    "navigate",
+    "stitch",
+    "explore",
 )
 
 

@@ -14,7 +14,7 @@ from dtradar_data.store.logged import arrays
 from dtradar_rl.agents.checkpoints import CHECKPOINT_FORMAT, read_checkpoint
 from dtradar_rl.cli import main
 from dtradar_rl.offline import logged as L
-from dtradar_rl.offline.behaviours import FAMILIES, MEDIUM_TARGET
+from dtradar_rl.offline.behaviours import FAMILIES, MEDIUM_TARGET, OGBENCH_FAMILIES
 from dtradar_rl.offline.collection import replay
 from dtradar_rl.offline.logged import LogConfig, log_dataset, log_families, medium_agent
 from dtradar_rl.task.config import ConfigError
@@ -33,7 +33,7 @@ def tiny():
 
 @pytest.fixture(scope="module")
 def families(tiny, tmp_path_factory):
-    """The five families logged once on the tiny twin, in a data root of their own."""
+    """The eight families logged once on the tiny twin, in a data root of their own."""
     with pytest.MonkeyPatch.context() as mp:
         root = tmp_path_factory.mktemp("families") / "root"
         mp.setenv("DTRADAR_DATA_ROOT", str(root))
@@ -44,7 +44,7 @@ def families(tiny, tmp_path_factory):
 
 def test_all_logs_every_family_under_its_name_with_its_normalised_score_in_the_card(families):
     out, _, _ = families
-    assert list(out) == list(FAMILIES)
+    assert list(out) == [*FAMILIES, *OGBENCH_FAMILIES]
     for family, logged in out.items():
         assert logged.name == f"{TINY}/blueprint/{family}"
         assert logged.meta["family"] == family
