@@ -44,131 +44,41 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from dtradar_data.core.files import write_atomic
 from dtradar_data.store.logged import episode_stats
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
-from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized, reference_scores
-from dtradar_rl.experiments.offline_jobs import BenchJob, auto_workers, parallel_gain, run_job, run_jobs
+from dtradar_rl.evaluation.normalized import normalized, reference_scores
+from dtradar_rl.experiments.offline_bench_config import (  # re-exported: the benchmark's settings
+    BENCH_FQE_STEPS,
+    BENCH_UPDATES,
+    EVAL_SEED,
+    NAMES,
+    NEED_ONLINE,
+    OfflineBenchConfig,
+)
+from dtradar_rl.experiments.offline_jobs import (
+    BenchJob,
+    auto_workers,
+    parallel_gain,
+    run_job,
+    run_jobs,
+    run_jobs_on_ray,
+)
 from dtradar_rl.experiments.offline_report import markdown, ope_summary, plot, plot_fqe, summarize
 from dtradar_rl.experiments.offline_tabular import tabular_section
-from dtradar_rl.offline.behaviours import BEHAVIOURS, FAMILIES, behaviour_policy
-from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
+from dtradar_rl.offline.behaviours import behaviour_policy
+from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig
 from dtradar_rl.offline.formats import as_logged
 from dtradar_rl.offline.logged import LogConfig, log_dataset, resolve_spec
-from dtradar_rl.offline.ope import FQE_GAMMA
-from dtradar_rl.task.config import Config, ConfigError
 from dtradar_rl.task.runs import dqn_checkpoint
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
-
-NAMES = {
-    "cql": "DiscreteCQL",
-    "bcq": "DiscreteBCQ",
-    "bc": "DiscreteBC",
-    "dqn": "DQN",
-    "ddqn": "DoubleDQN",
-    "nfq": "NFQ",
-}
-#: The evaluation pairs' seed: the normalised score's (and ``make eval``'s).
-EVAL_SEED = DEFAULT_SEED
-#: Behaviours that act with a memoryless online DQN checkpoint.
-NEED_ONLINE = ("epsilon-greedy", "mixture")
-#: The default budget, chosen by measurement (cubicle 29 min, Dallas Q3 27 min on 2 cores: docs/logged-datasets.md).
-BENCH_UPDATES = 4_000
-BENCH_FQE_STEPS = 1_000
-
-
-@dataclass(frozen=True)
-class OfflineBenchConfig(Config):
-    """Offline-RL benchmark: d3rlpy algorithms on every logged dataset family of a scene, several seeds, scored on
-    the normalised scale (0 random, 100 shortest-path expert) on the blueprint and dynamic twins, beside the
-    behaviour itself and the online agent."""
-
-    scene: str = "cubicle"
-    """scene whose blueprint twin is logged on (synthetic-<nx>x<ny> for a stand-in without a ray tracer)"""
-    behaviours: tuple[str, ...] = FAMILIES
-    """datasets to train on: the families random, expert, medium, medium-replay, mixed (default: all five), or the
-    older behaviours noisy-shortest, epsilon-greedy, mixture"""
-    algorithms: tuple[str, ...] = ("cql", "bcq", "bc", "dqn", "ddqn", "nfq")
-    """d3rlpy algorithms (cql, bcq, bc, dqn, ddqn, nfq)"""
-    seeds: tuple[int, ...] = (0, 1, 2)
-    """training seeds of every algorithm (the logged datasets are the same for all: seed 0)"""
-    steps: int = 100_000
-    """environment steps logged per dataset (not medium-replay: the medium agent's whole run)"""
-    n_steps: int = BENCH_UPDATES
-    """d3rlpy updates per run"""
-    relabel: str = "auto"
-    """goal relabelling of every run (dtradar_rl.offline.relabel): auto (each algorithm's best measured mix, the
-    default), none (the logged targets, the benchmark before relabelling), or any mix --relabel takes"""
-    shortest_prob: float = 0.5
-    """noisy-shortest: probability of the shortest-path move"""
-    epsilon: float = 0.3
-    """epsilon-greedy: probability of a random move"""
-    checkpoint: str = ""
-    """online agent evaluated beside the offline ones (default runs/<scene>/dqn/model.pt when it exists); the
-    epsilon-greedy and mixture behaviours act with it (a memoryless one; else a tuned DQN is trained into
-    <out>/online_dqn)"""
-    online_steps: int = 600_000
-    """environment steps of the online DQN when it has to be trained (tuned preset)"""
-    num_envs: int = 256
-    """robots logging in parallel"""
-    pairs: int = 500
-    """seeded (start, target) pairs per evaluated twin (500 = those of make eval and of the normalised score)"""
-    variants: tuple[str, ...] = ("blueprint", "dynamic")
-    """twins to evaluate on"""
-    device: str = "cpu"
-    """torch device of logging and training"""
-    workers: int = 0
-    """training processes side by side, one torch thread each (0 = auto: one per core when that many processes do
-    proportionally more work right now, else 1; 1 = all in this process)"""
-    fqe: bool = True
-    """estimate every agent's value with d3rlpy's FQE and measure it on the twin (--no-fqe: skip both)"""
-    fqe_steps: int = BENCH_FQE_STEPS
-    """FQE updates per agent (about 6 s each on 1 core at 1000)"""
-    fqe_gamma: float = FQE_GAMMA
-    """discount of the value FQE estimates and the rollouts measure (the agents train with 0.5, under which all
-    reasonable agents are worth about the same; see dtradar_rl.offline.ope)"""
-    deep: bool = True
-    """train the d3rlpy algorithms (--no-deep: only the logged datasets' rows, the tabular learners and the ceilings,
-    seconds per dataset)"""
-    tabular: bool = True
-    """also run the tabular batch learners (CE, VI-LCB, Π_b-SPIBB) and each dataset's ceiling (--no-tabular: skip;
-    seconds per dataset, see dtradar_rl.tabular.batch)"""
-    out: str = ""
-    """output folder (default results/offline_bench/<scene>)"""
-    verbose: bool = True
-    """print progress"""
-
-    @property
-    def out_dir(self) -> Path:
-        return Path(self.out or f"results/offline_bench/{self.scene}")
-
-    def validate(self) -> OfflineBenchConfig:
-        for a in self.algorithms:
-            check_algorithm(a)
-        for b in self.behaviours:
-            if b not in BEHAVIOURS:
-                from dtradar_data.core.errors import unknown_name
-
-                raise unknown_name("behaviour policy", b, BEHAVIOURS)
-        if not self.seeds or not self.algorithms or not self.behaviours:
-            raise ConfigError("--seeds, --algorithms and --behaviours must each list at least one value")
-        for a in self.algorithms:
-            OfflineConfig(algorithm=a, relabel=self.relabel).relabel_config()  # a mix that does not parse
-        if self.workers < 0:
-            raise ConfigError("--workers must be >= 0 (0 = one per CPU core)")
-        if not 0 < self.fqe_gamma <= 1:
-            raise ConfigError(f"--fqe-gamma must be in (0, 1], got {self.fqe_gamma}")
-        for name in ("steps", "n_steps", "pairs", "num_envs", "online_steps", "fqe_steps"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"--{name.replace('_', '-')} must be >= 1")
-        return self
 
 
 def _memoryless(path: Path) -> bool:
@@ -388,10 +298,15 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         for seed in cfg.seeds
     ]
 
-    workers, gain = (cfg.workers, None) if cfg.workers else auto_workers(len(jobs))
-    workers = min(workers, max(1, len(jobs)))
-    layout = {"jobs": len(jobs), "workers": workers, "torch_threads": 1, "parallel_gain": gain}
-    say(f"{len(jobs)} trainings of {cfg.n_steps} updates in {workers} process(es), 1 torch thread each")
+    if cfg.executor == "ray":
+        workers, gain = 0, None
+        layout = {"jobs": len(jobs), "executor": "ray", "ray_address": cfg.ray_address, "torch_threads": 1}
+        say(f"{len(jobs)} trainings of {cfg.n_steps} updates as Ray tasks of 1 CPU, 1 torch thread each")
+    else:
+        workers, gain = (cfg.workers, None) if cfg.workers else auto_workers(len(jobs))
+        workers = min(workers, max(1, len(jobs)))
+        layout = {"jobs": len(jobs), "workers": workers, "torch_threads": 1, "parallel_gain": gain}
+        say(f"{len(jobs)} trainings of {cfg.n_steps} updates in {workers} process(es), 1 torch thread each")
     runs: list[dict[str, Any]] = []
 
     def done(run: dict[str, Any]) -> None:
@@ -412,7 +327,10 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         )
         _finish(cfg, head, runs, m_start, t_start, plots=False, layout=layout)  # partial results survive
 
-    runs = run_jobs(jobs, workers, done)
+    if cfg.executor == "ray":
+        runs = run_jobs_on_ray(jobs, cfg.ray_address, done) if jobs else []
+    else:
+        runs = run_jobs(jobs, workers, done)
     runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
     result = _finish(cfg, head, runs, m_start, t_start, layout=layout)
     say(markdown(result), end="")

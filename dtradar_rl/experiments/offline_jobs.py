@@ -1,7 +1,9 @@
 """How the offline benchmark's trainings run: one :class:`BenchJob` per (dataset, algorithm, seed), trained,
 evaluated and (with FQE) off-policy evaluated by :func:`run_job`, in this process or in spawned worker processes with
-one torch thread each (:func:`run_jobs`), as many as the cores measurably work in parallel (:func:`auto_workers`).
-:mod:`dtradar_rl.experiments.offline_bench` builds the jobs and gathers their rows."""
+one torch thread each (:func:`run_jobs`), as many as the cores measurably work in parallel (:func:`auto_workers`),
+or as Ray tasks of one CPU each (:func:`run_jobs_on_ray`, ``--executor ray``, the executor of sweeps: a local Ray on
+this machine's cores or a cluster at an address). A job is seeded and trains on one torch thread, so its row is the
+same wherever it runs. :mod:`dtradar_rl.experiments.offline_bench` builds the jobs and gathers their rows."""
 
 from __future__ import annotations
 
@@ -153,4 +155,35 @@ def run_jobs(
     return rows
 
 
-__all__ = ["BenchJob", "auto_workers", "parallel_gain", "run_job", "run_jobs"]
+def run_jobs_on_ray(
+    jobs: list[BenchJob], address: str | None = None, done: Callable[[dict[str, Any]], None] = lambda run: None
+) -> list[dict[str, Any]]:
+    """Every job's row as a Ray task of one CPU (in the order they finish; ``done`` is called with each): a local
+    Ray on this machine's cores, or the cluster at ``address`` (whose nodes must hold the same data root: a job
+    opens its twin and its logged dataset there by name). A task whose worker dies is retried twice."""
+    from dtradar_data.core.ray_cluster import connect_ray, wait_for_cpus
+    from dtradar_rl.experiments.sweep import _import_ray
+
+    ray = _import_ray()
+    started = connect_ray(ray, address)  # bounded: a dead address fails in seconds, not minutes
+    rows: list[dict[str, Any]] = []
+    try:
+        wait_for_cpus(ray, 1, what="one training (1 CPU)", address=address)
+        task = ray.remote(num_cpus=1, max_retries=2)(_ray_job)
+        pending = [task.remote(job) for job in jobs]
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            rows.append(ray.get(ready[0]))
+            done(rows[-1])
+    finally:
+        if started:
+            ray.shutdown()
+    return rows
+
+
+def _ray_job(job: BenchJob) -> dict[str, Any]:
+    torch.set_num_threads(1)  # as a worker process does: the same arithmetic, so the same row
+    return run_job(job)
+
+
+__all__ = ["BenchJob", "auto_workers", "parallel_gain", "run_job", "run_jobs", "run_jobs_on_ray"]

@@ -287,7 +287,13 @@ def markdown(result: dict[str, Any]) -> str:
             else ""
         )
         + (
-            f" ({layout['jobs']} trainings in {layout['workers']} process(es), one torch thread each"
+            f" ({layout['jobs']} trainings "
+            + (
+                f"as Ray tasks of one CPU ({layout.get('ray_address') or 'a local Ray'})"
+                if layout.get("executor") == "ray"
+                else f"in {layout['workers']} process(es)"
+            )
+            + ", one torch thread each"
             + _gain(layout.get("parallel_gain"))
             + ")."
             if layout

@@ -17,9 +17,10 @@ from dtradar_rl.experiments.offline_bench import (
     run_bench,
     run_jobs,
 )
-from dtradar_rl.experiments.offline_report import aggregate, spearman
+from dtradar_rl.experiments.offline_report import aggregate, markdown, spearman
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.logged import LogConfig, log_dataset
+from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.twins import load_dataset
 
 
@@ -204,6 +205,27 @@ def test_two_worker_processes_train_the_same_agents_as_one_process(root, tmp_pat
     assert len(pids) >= 1 and all(r["pid"] != one[0]["pid"] for r in two)  # they ran in other processes
     for a, b in zip(sorted(one, key=key), sorted(two, key=key)):
         assert a["blueprint"] == b["blueprint"] and a["final_losses"] == b["final_losses"], (a, b)
+
+
+@pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
+def test_the_benchmark_on_ray_gives_the_same_table_as_in_one_process(root, tmp_path):
+    base = dict(scene="synthetic-8x6", behaviours=("random",), algorithms=("bc", "dqn"), seeds=(0, 1), steps=400)
+    base.update(n_steps=10, num_envs=8, pairs=8, fqe=False, tabular=False, verbose=False)
+    serial = run_bench(OfflineBenchConfig(**base, workers=1, out=str(tmp_path / "serial")))
+    on_ray = run_bench(OfflineBenchConfig(**base, executor="ray", out=str(tmp_path / "ray")))
+    assert on_ray["layout"]["executor"] == "ray" and len(on_ray["runs"]) == 4
+    scores = lambda r: [{k: v for k, v in e.items() if k != "train_s"} for e in r["summary"]]  # noqa: E731
+    assert scores(on_ray) == scores(serial)
+    # the quotable tables (one row per twin here), not the per-run metrics with their training seconds
+    table = lambda r: [line for line in markdown(r).splitlines() if line.startswith("| random | ")][:2]  # noqa: E731
+    assert table(on_ray) == table(serial)
+
+
+def test_ray_settings_without_the_ray_executor_are_refused():
+    with pytest.raises(ConfigError, match="--ray-address applies to --executor ray"):
+        OfflineBenchConfig(ray_address="auto").validate()
+    with pytest.raises(ConfigError, match="--workers applies"):
+        OfflineBenchConfig(executor="ray", workers=2).validate()
 
 
 def test_the_benchmark_command_refuses_an_unknown_algorithm(root, capsys):
