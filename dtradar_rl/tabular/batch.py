@@ -38,6 +38,7 @@ from dtradar_data.core.errors import CorruptDatasetError, InvalidSettingError, u
 from dtradar_data.store.logged import LoggedDataset
 from dtradar_rl.tabular.solver import (
     GAMMA,
+    TOL,
     TabularMDP,
     bellman_sweeps,
     check_gamma,
@@ -63,11 +64,16 @@ class BatchConfig:
     deterministic, so one visit shows a move exactly and keeping the (target-blind) behaviour elsewhere only costs"""
     spibb_iterations: int = 50
     """Π_b-SPIBB: most policy-iteration steps (it stops when the policy no longer changes)"""
+    tol: float = TOL
+    """CE and VI-LCB: value iteration stops at this relative change (the exact solution's 1e-12 by default; a
+    sensing robot re-plans with a looser one, dtradar_rl.tabular.sensing)"""
 
     def validate(self) -> BatchConfig:
         check_gamma(self.gamma)
         if not (np.isfinite(self.lcb_beta) and self.lcb_beta >= 0):
             raise InvalidSettingError(f"lcb_beta must be finite and >= 0, got {self.lcb_beta}", hint="e.g. 0.1")
+        if not (np.isfinite(self.tol) and 0 < self.tol < 1):
+            raise InvalidSettingError(f"tol must be in (0, 1), got {self.tol}", hint="e.g. 1e-12 (exact) or 1e-6")
         if self.spibb_n_wedge < 1 or self.spibb_iterations < 1:
             raise InvalidSettingError("spibb_n_wedge and spibb_iterations must be >= 1", hint="e.g. 5 and 50")
         return self
@@ -156,7 +162,9 @@ def certainty_equivalence(
     for i, t in _chunks(targets, tab.n):
         f = None if forbidden is None else forbidden[i : i + t.size]
         r, reached = tab.rewards(model.reward, tab.states(t))
-        v, _, _ = bellman_sweeps(r, reached, tab.next, cfg.gamma, allowed=model.seen, masked_value=0.0, forbidden=f)
+        v, _, _ = bellman_sweeps(
+            r, reached, tab.next, cfg.gamma, allowed=model.seen, masked_value=0.0, forbidden=f, tol=cfg.tol
+        )
         q = r + cfg.gamma * ~reached * v[np.arange(t.size)[:, None, None], tab.next[None]]
         q = np.where(model.seen[None], q, 0.0)
         out[i : i + t.size] = (q if f is None else np.where(f, -np.inf, q)).argmax(-1)
@@ -164,7 +172,12 @@ def certainty_equivalence(
 
 
 def _restricted(
-    model: EmpiricalModel, t: np.ndarray, gamma: float, penalty: np.ndarray | None, forbidden: np.ndarray | None = None
+    model: EmpiricalModel,
+    t: np.ndarray,
+    gamma: float,
+    penalty: np.ndarray | None,
+    forbidden: np.ndarray | None = None,
+    tol: float = TOL,
 ):
     """Values and greedy moves over logged moves only (``penalty`` subtracted from their rewards, ``forbidden``
     moves removed); a state with no logged move is worth standing still forever with the reward's lowest step."""
@@ -174,7 +187,7 @@ def _restricted(
         r = r - penalty[None]
     allowed = model.seen[None] if forbidden is None else model.seen[None] & ~forbidden
     floor = float(r.min()) / (1 - gamma)
-    v, _, _ = bellman_sweeps(r, reached, tab.next, gamma, allowed=allowed, floor=floor)
+    v, _, _ = bellman_sweeps(r, reached, tab.next, gamma, allowed=allowed, floor=floor, tol=tol)
     q = r + gamma * ~reached * v[np.arange(t.size)[:, None, None], tab.next[None]]
     return v, np.where(np.broadcast_to(allowed, q.shape), q, -np.inf).argmax(-1)
 
@@ -188,7 +201,7 @@ def lower_confidence_bound(
     out = np.empty((targets.size, model.tab.n), np.int64)
     for i, t in _chunks(targets, model.tab.n):
         f = None if forbidden is None else forbidden[i : i + t.size]
-        out[i : i + t.size] = _restricted(model, t, cfg.gamma, penalty, f)[1]
+        out[i : i + t.size] = _restricted(model, t, cfg.gamma, penalty, f, cfg.tol)[1]
     return out
 
 
