@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -246,6 +247,41 @@ def log_datasets(
     return datasets, ids
 
 
+def _tables(cfg: OfflineBenchConfig, ids, twins, refs, say, *, overlap: bool):
+    """A callable giving ``(tabular section, seconds)``: computed now, or (``overlap``) in a thread of this process
+    while the trainings run in other processes (the section is numpy, one core; it left a core idle for minutes
+    when it ran before them). An error in the thread is raised by the callable."""
+    if not cfg.tabular:
+        return lambda: (None, 0.0)
+    logged = {b: as_logged(i) for b, i in ids.items()}
+
+    def compute():
+        t0 = time.perf_counter()
+        return tabular_section(cfg.scene, logged, twins, refs, pairs=cfg.pairs, say=say), time.perf_counter() - t0
+
+    if not overlap:
+        out = compute()
+        return lambda: out
+    box: dict[str, Any] = {}
+
+    def work():
+        try:
+            box["out"] = compute()
+        except BaseException as e:  # noqa: BLE001  (handed to the main thread)
+            box["error"] = e
+
+    thread = threading.Thread(target=work, name="offline-bench-tables", daemon=True)
+    thread.start()
+
+    def result():
+        thread.join()
+        if "error" in box:
+            raise box["error"]
+        return box["out"]
+
+    return result
+
+
 def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     """Run the benchmark of ``cfg`` and write ``bench.{json,md,png}``; returns the JSON object."""
     cfg = cfg.validate()
@@ -263,10 +299,6 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     ckpt, online = _online(cfg, twins, refs, say)
     datasets, ids = log_datasets(cfg, ckpt, twins, blueprint, refs)
     head = {"references": refs, "online_dqn": online, "datasets": datasets}
-    if cfg.tabular:
-        head["tabular"] = tabular_section(
-            cfg.scene, {b: as_logged(i) for b, i in ids.items()}, twins, refs, pairs=cfg.pairs, say=say
-        )
     head["setup_s"] = time.perf_counter() - t_start
     jobs = [
         BenchJob(
@@ -307,6 +339,8 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         workers = min(workers, max(1, len(jobs)))
         layout = {"jobs": len(jobs), "workers": workers, "torch_threads": 1, "parallel_gain": gain}
         say(f"{len(jobs)} trainings of {cfg.n_steps} updates in {workers} process(es), 1 torch thread each")
+    # the tables run in this process: beside trainings that run elsewhere (worker processes, Ray), at the same time
+    tables = _tables(cfg, ids, twins, refs, say, overlap=bool(jobs) and (cfg.executor == "ray" or workers >= 2))
     runs: list[dict[str, Any]] = []
 
     def done(run: dict[str, Any]) -> None:
@@ -331,6 +365,8 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         runs = run_jobs_on_ray(jobs, cfg.ray_address, done) if jobs else []
     else:
         runs = run_jobs(jobs, workers, done)
+    if cfg.tabular:
+        head["tabular"], head["tabular_s"] = tables()
     runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
     result = _finish(cfg, head, runs, m_start, t_start, layout=layout)
     say(markdown(result), end="")

@@ -210,10 +210,14 @@ def test_two_worker_processes_train_the_same_agents_as_one_process(root, tmp_pat
 @pytest.mark.slow  # worker processes or a Ray session: seconds each (make test-all)
 def test_the_benchmark_on_ray_gives_the_same_table_as_in_one_process(root, tmp_path):
     base = dict(scene="synthetic-8x6", behaviours=("random",), algorithms=("bc", "dqn"), seeds=(0, 1), steps=400)
-    base.update(n_steps=10, num_envs=8, pairs=8, fqe=False, tabular=False, verbose=False)
+    base.update(n_steps=10, num_envs=8, pairs=8, fqe=False, verbose=False)  # the tables beside the trainings on Ray
     serial = run_bench(OfflineBenchConfig(**base, workers=1, out=str(tmp_path / "serial")))
     on_ray = run_bench(OfflineBenchConfig(**base, executor="ray", out=str(tmp_path / "ray")))
     assert on_ray["layout"]["executor"] == "ray" and len(on_ray["runs"]) == 4
+    senses = lambda r: {
+        v: r["tabular"]["random"]["ce-senses"][v] for v in base.get("variants", ("blueprint", "dynamic"))
+    }  # noqa: E731
+    assert senses(on_ray) == senses(serial)  # the tables' scores (not their seconds) wherever they ran
     scores = lambda r: [{k: v for k, v in e.items() if k != "train_s"} for e in r["summary"]]  # noqa: E731
     assert scores(on_ray) == scores(serial)
     # the quotable tables (one row per twin here), not the per-run metrics with their training seconds
