@@ -1,4 +1,4 @@
-"""Moving twins: every snapshot of a :class:`~dtradar_data.scenes.movers.MovingScene` traced into one table.
+"""Moving twins: every snapshot of a :class:`~dtradar_data.scenes.moving_scene.MovingScene` traced into one table.
 
 ``build --variant moving`` (:mod:`dtradar_data.pipeline.moving_build`) traces snapshot 0 in full, like a blueprint,
 and each snapshot ``k >= 1`` **differentially from snapshot k-1**: the changed objects are the movers that moved

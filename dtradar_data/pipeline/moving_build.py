@@ -26,7 +26,7 @@ from dtradar_data.pipeline.resources import check_resources
 from dtradar_data.pipeline.storing import NewVersion, store_version, version_meta
 from dtradar_data.pipeline.tracing import executor_session, trace_scene
 from dtradar_data.scenes import build_targets, load_moving_scene
-from dtradar_data.scenes.movers import MAX_SNAPSHOTS
+from dtradar_data.scenes.moving_scene import MAX_SNAPSHOTS
 from dtradar_data.store import versions
 
 
@@ -61,7 +61,8 @@ def moving_scenes(config: BuildConfig) -> list:
 
 def with_horizon(moving_scene, horizon_s: float):
     """``moving_scene`` over ``horizon_s`` seconds (``--horizon-s``): whole steps of its ``dt_s``, 1 to
-    :data:`~dtradar_data.scenes.movers.MAX_SNAPSHOTS`, else :class:`InvalidSettingError` saying which horizon fits."""
+    :data:`~dtradar_data.scenes.moving_scene.MAX_SNAPSHOTS`, else :class:`InvalidSettingError` saying which horizon
+    fits."""
     dt = moving_scene.dt_s
     snapshots = round(horizon_s / dt)
     if not 1 <= snapshots <= MAX_SNAPSHOTS:

@@ -8,7 +8,7 @@ path of the user's own scene file (``make dataset SCENE=path/to/room.toml``). A 
 user's ``.xml`` with ``--grid`` and ``--tx``, or a scene file with an ``[xml]`` section. :func:`tx_pose_error` makes
 the antenna-pose-error twin of any of them (``<scene>-txpose``: the transmitter moved and turned a little).
 :func:`load_moving_scene` reads a room's or a city quadrant's *moving* twin (people and vehicles moving through its
-blueprint: :mod:`dtradar_data.scenes.movers`), a series of static scenes that ``build --variant moving`` traces
+blueprint: :mod:`dtradar_data.scenes.moving_scene`), a series of static scenes that ``build --variant moving`` traces
 (:mod:`dtradar_data.pipeline.moving`). A user's
 scene file may not take a built-in name (:mod:`dtradar_data.scenes.names`), and the options that replace part of a
 scene are checked before any file is read (:mod:`dtradar_data.scenes.options`).
@@ -31,7 +31,8 @@ from dtradar_data.scenes.city.reader import (
 )
 from dtradar_data.scenes.indoor.reader import load_moving_room_file, load_room_file
 from dtradar_data.scenes.model import SceneSpec
-from dtradar_data.scenes.movers import MOVING_VARIANT, Mover, MoverChange, MovingScene
+from dtradar_data.scenes.mover import Mover
+from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MoverChange, MovingScene
 from dtradar_data.scenes.names import check_user_scene_name
 from dtradar_data.scenes.options import check_scene_options
 from dtradar_data.scenes.sionna_scenes import is_sionna_name, sionna_dataset_scenes, sionna_scene_names

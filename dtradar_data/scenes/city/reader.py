@@ -12,7 +12,7 @@ A city is one file (``dallas.toml``, ``houston.toml`` beside this module are com
     [quadrants.qN] tx_m = [x, y, z]                      (N = 1..4; the paper's Tables III and IV)
     [dynamic]      quadrant, seed, cars, buses, roads = [{name, from_m, to_m}, ...] or "auto"
     [moving]       quadrant, description, [base, dt_s, horizon_s], [[moving.mover]] (vehicles driving along lanes:
-                   :mod:`dtradar_data.scenes.movers`; read only for the moving twin, :func:`city_moving_scene`)
+                   :mod:`dtradar_data.scenes.moving_section`; read only for the moving twin, :func:`city_moving_scene`)
 
 Each quadrant is its own dataset, ``<city>-qN/blueprint`` (and ``<city>-qN/dynamic`` for the dynamic quadrant): its
 grid covers the quadrant, the geometry is the whole city (buildings outside the quadrant still reflect), the
@@ -70,7 +70,8 @@ from dtradar_data.scenes.model import (
     SceneSpec,
     TxSpec,
 )
-from dtradar_data.scenes.movers import MOVING_VARIANT, MovingScene, moving_scene_from_section
+from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MovingScene
+from dtradar_data.scenes.moving_section import moving_scene_from_section
 from dtradar_data.scenes.names import check_user_scene_name
 from dtradar_data.scenes.options import check_cell_m
 

@@ -19,7 +19,7 @@ place. The layout (``cubicle.toml`` beside this module is a commented example)::
                      remove = [names]
     [moving]         description, [base, dt_s, horizon_s], [[moving.mover]] (name, kind, speed_mps, waypoints,
                      [mode, start_offset_s, material, width_m, length_m, height_m, mesh]): read only for the
-                     moving twin (:mod:`dtradar_data.scenes.movers`), so it never changes the other two
+                     moving twin (:mod:`dtradar_data.scenes.moving_section`), so it never changes the other two
 """
 
 from __future__ import annotations
@@ -140,7 +140,8 @@ class RoomDocument(SceneFileModel):
     objects: list[dict[str, Any]]
     dynamic: DynamicModel | None = None
     moving: dict[str, Any] | None = None
-    """Checked only when the moving twin is read (:func:`dtradar_data.scenes.movers.moving_scene_from_section`)."""
+    """Checked only when the moving twin is read
+    (:func:`dtradar_data.scenes.moving_section.moving_scene_from_section`)."""
 
 
 OBJECT_KEYS = tuple(ObjectModel.model_fields)

@@ -8,9 +8,9 @@ a :class:`~dtradar_data.core.errors.SceneFileError` naming the file, the object 
 file per scene holds the *blueprint* objects and a ``[dynamic]`` section that lists the *changes* (objects added,
 moved / re-oriented by name, removed): the dynamic twin is built here as blueprint + changes, so the two variants can
 never drift apart silently. A ``[moving]`` section declares people walking through the room: the *moving* twin
-(:func:`load_moving_room_file`, a :class:`~dtradar_data.scenes.movers.MovingScene`), read only when asked for, so the
-other two never depend on it. The room frame: the interior floor spans ``[0, width_m] x [0, length_m]`` at ``z = 0``;
-walls stand outside it.
+(:func:`load_moving_room_file`, a :class:`~dtradar_data.scenes.moving_scene.MovingScene`), read only when asked
+for, so the other two never depend on it. The room frame: the interior floor spans ``[0, width_m] x [0, length_m]``
+at ``z = 0``; walls stand outside it.
 """
 
 from __future__ import annotations
@@ -37,7 +37,8 @@ from dtradar_data.scenes.indoor.document import (
     TxModel,
 )
 from dtradar_data.scenes.model import Box, Room, SceneSpec, TxSpec
-from dtradar_data.scenes.movers import MOVING_VARIANT, MovingScene, moving_scene_from_section
+from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MovingScene
+from dtradar_data.scenes.moving_section import moving_scene_from_section
 
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
 _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")

@@ -9,7 +9,7 @@ from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.pipeline.config import BuildConfig, scene_config
 from dtradar_data.pipeline.inputs import moving_build_inputs
 from dtradar_data.pipeline.moving_build import moving_scenes
-from dtradar_data.scenes.movers import MAX_SNAPSHOTS
+from dtradar_data.scenes.moving_scene import MAX_SNAPSHOTS
 from dtradar_data.store.versions import version_id
 
 

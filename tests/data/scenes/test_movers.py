@@ -15,16 +15,15 @@ from dtradar_data.scenes import build_targets, load_moving_scene, load_scene_spe
 from dtradar_data.scenes.city.reader import city_file, city_moving_scene, parse_city
 from dtradar_data.scenes.indoor.reader import parse_moving_room, parse_room
 from dtradar_data.scenes.model import Box, SceneSpec
-from dtradar_data.scenes.movers import (
+from dtradar_data.scenes.mover import MOVER_MESHES, Mover
+from dtradar_data.scenes.moving_scene import (
     DEFAULT_MAX_SNAPSHOTS,
     MAX_SNAPSHOTS,
-    MOVER_KINDS,
-    MOVER_MESHES,
     ROBOT_SPEED_MPS,
-    Mover,
     MovingScene,
     common_snapshots,
 )
+from dtradar_data.scenes.moving_section import MOVER_KINDS
 
 # A 6 m x 4 m room (0.5 m cells, 12 x 8) with a table in the middle and a shelf high on the north wall.
 ROOM = {
