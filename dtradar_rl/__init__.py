@@ -17,10 +17,10 @@ Never imports Sionna.
 from __future__ import annotations
 
 _EXPORTS = {
-    "GridMDP": "dtradar_rl.task.mdp",
-    "MovingGridMDP": "dtradar_rl.task.mdp",
-    "ACTIONS": "dtradar_rl.task.mdp",
-    "REWARDS": "dtradar_rl.task.mdp",
+    "GridMDP": "dtradar_rl.task.grid_mdp",
+    "MovingGridMDP": "dtradar_rl.task.grid_mdp",
+    "ACTIONS": "dtradar_rl.task.grid_mdp",
+    "REWARDS": "dtradar_rl.task.rewards",
     "OBS_PRESETS": "dtradar_rl.task.observations",
     "Normalizer": "dtradar_rl.task.observations",
     "build_observations": "dtradar_rl.task.observations",

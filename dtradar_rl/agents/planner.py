@@ -13,9 +13,9 @@ What a user would pick without learning. At every step each robot
    along a shortest path. If the sensed obstacles cut the target off (a mislocalisation can do that) the robot
    forgets them and replans on the blueprint alone.
 
-On a moving twin (:mod:`dtradar_rl.task.mdp`) the robot **forgets** what it sensed at every step: a mover that
+On a moving twin (:mod:`dtradar_rl.task.grid_mdp`) the robot **forgets** what it sensed at every step: a mover that
 was next to it a step ago may have walked on, so each step plans breadth-first on the static map (the blueprint's, or
-a moving twin's :func:`~dtradar_rl.task.mdp.background`) plus only what it senses now (neighbours without radio
+a moving twin's :func:`~dtradar_rl.task.moving_masks.background`) plus only what it senses now (neighbours without radio
 features in the current snapshot, and the cell a move just failed to enter). It is a static search on the current
 blocked mask, replanned every step: it does not predict where movers go. Where the detour around what it senses is
 more than :data:`DETOUR_MARGIN` steps longer than the static map's path (or there is none) it keeps to the static
@@ -55,7 +55,8 @@ from scipy.sparse.csgraph import shortest_path
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import flag_columns
-from dtradar_rl.task.mdp import GridMDP, background
+from dtradar_rl.task.grid_mdp import GridMDP
+from dtradar_rl.task.moving_masks import background
 from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
 
 #: Observation columns of the cell's own radio features (``neighbors`` preset).

@@ -39,13 +39,13 @@ With ``aug_obstacles=0`` nothing of this runs and the env is exactly the unaugme
 
 Moving twins
 ------------
-On a moving twin (:class:`~dtradar_rl.task.mdp.MovingGridMDP`; the rules are in :mod:`dtradar_rl.task.mdp`)
+On a moving twin (:class:`~dtradar_rl.task.grid_mdp.MovingGridMDP`; the rules are in :mod:`dtradar_rl.task.grid_mdp`)
 every robot has its own snapshot ``t`` (``env.t``): an episode starts at ``t0`` (``reset_where(..., t0=...)``, else
 drawn uniformly among the snapshots in which the start cell is free) and each step advances it by one, mod ``T``.
 A step reads the blocked masks of this snapshot and the next, and the observation of the robot's snapshot, from
 ``[T, cells]`` tables (row ``t * cells + cell``); ``info`` adds ``mover_collision``, ``mover_hit`` and ``t``. Random
 pairs are connected on the static map; whether the movers leave the target reachable in time is not checked here (the
-evaluation's pairs are, :meth:`~dtradar_rl.task.mdp.MovingGridMDP.sample_episodes`). The ``geodesic`` shaping
+evaluation's pairs are, :meth:`~dtradar_rl.task.grid_mdp.MovingGridMDP.sample_episodes`). The ``geodesic`` shaping
 and :meth:`BatchedNavEnv.shortest_moves` use the static map's breadth-first distance (movers ignored; still a
 potential, so the optimum is unchanged). On a static twin none of this runs: the step is the one above, op for op.
 
@@ -77,15 +77,7 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
-from dtradar_rl.task.mdp import (
-    GridMDP,
-    MovingGridMDP,
-    NoConnectedPairError,
-    check_max_steps,
-    check_reward,
-    potential_kind,
-    reward_fn,
-)
+from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP, NoConnectedPairError, check_max_steps
 from dtradar_rl.task.noise import ERRORS, NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
 from dtradar_rl.task.observations import (
     Normalizer,
@@ -94,6 +86,7 @@ from dtradar_rl.task.observations import (
     check_preset,
     ring_cells,
 )
+from dtradar_rl.task.rewards import check_reward, potential_kind, reward_fn
 
 #: Above this many (target, cell) entries the geodesic distance table keeps only a random pool of targets.
 MAX_DISTANCE_TABLE = 32_000_000
@@ -651,7 +644,7 @@ class BatchedNavEnv:
 
     def _reward(self, cell, nxt, target, tpool, penalised, reached) -> torch.Tensor:
         """The reward of moves ``cell -> nxt`` (elementwise; robots in a step, or every entry of the fast path's
-        table): :func:`~dtradar_rl.task.mdp.reward_fn` in float32."""
+        table): :func:`~dtradar_rl.task.rewards.reward_fn` in float32."""
         dx, dy = self.ix[target] - self.ix[nxt], self.iy[target] - self.iy[nxt]
         if self.potential:
             pb, pa = self._potential(cell, target, tpool), self._potential(nxt, target, tpool)

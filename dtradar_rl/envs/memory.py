@@ -37,7 +37,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.nav_env import DtradarNavEnv
-from dtradar_rl.task.mdp import ACTION_DELTAS, GridMDP
+from dtradar_rl.task.grid_mdp import ACTION_DELTAS, GridMDP
 from dtradar_rl.task.observations import (
     PAPER_COLUMNS,
     RADIO_FEATURES,

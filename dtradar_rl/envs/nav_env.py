@@ -13,17 +13,10 @@ from gymnasium import spaces
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError
-from dtradar_rl.task.mdp import (
-    ACTIONS,
-    GridMDP,
-    MovingGridMDP,
-    check_max_steps,
-    check_reward,
-    potential_kind,
-    reward_fn,
-)
+from dtradar_rl.task.grid_mdp import ACTIONS, GridMDP, MovingGridMDP, check_max_steps
 from dtradar_rl.task.noise import NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
 from dtradar_rl.task.observations import Normalizer, build_observations, check_preset
+from dtradar_rl.task.rewards import check_reward, potential_kind, reward_fn
 from dtradar_rl.task.twins import load_dataset
 
 
@@ -105,7 +98,7 @@ class DtradarNavEnv(gym.Env):
     or off the grid is a collision: the robot stays where it was.
 
     ## Moving twins
-    On a moving twin (snapshots in time, :mod:`dtradar_rl.task.mdp`) step ``n`` of an episode is in snapshot
+    On a moving twin (snapshots in time, :mod:`dtradar_rl.task.grid_mdp`) step ``n`` of an episode is in snapshot
     ``(t0 + n) mod T``: a move into a cell a mover covers at the next snapshot is a collision too (the robot stays,
     ``info["mover_collision"]``), a mover walking onto the robot is a *mover hit* (the robot stays,
     ``info["mover_hit"]``, charged the collision penalty), and the robot observes its cell (and neighbours) as they
@@ -121,8 +114,8 @@ class DtradarNavEnv(gym.Env):
     (``2 · (2R(R+1) - 4)`` columns).
 
     ## Rewards
-    Chosen by name (:mod:`dtradar_rl.task.mdp`). ``paper``: ``-(dx² + dy²)`` (cell units, distance to the target after
-    the move) ``+ 5000`` on reaching the target ``- 5000`` on a collision. ``scaled``: the same terms divided to
+    Chosen by name (:mod:`dtradar_rl.task.rewards`). ``paper``: ``-(dx² + dy²)`` (cell units, distance to the target
+    after the move) ``+ 5000`` on reaching the target ``- 5000`` on a collision. ``scaled``: the same terms divided to
     order one. ``euclidean`` / ``geodesic``: potential-based shaping with the straight-line / breadth-first
     distance, ``+1`` on reaching the target, ``-1`` on a collision.
 

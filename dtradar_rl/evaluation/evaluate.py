@@ -9,12 +9,12 @@ Metrics over a set of seeded (start, target) pairs, drawn among connected free c
 * ``collisions``: mean collisions per episode; ``steps``: mean decisions per episode (collisions included);
 * ``latency_ms``: median wall time of one greedy decision for one robot (table lookup + network), batch size 1.
 
-On a moving twin (:mod:`dtradar_rl.task.mdp`) an episode is ``(start, target, t0)``: the pairs of
+On a moving twin (:mod:`dtradar_rl.task.grid_mdp`) an episode is ``(start, target, t0)``: the pairs of
 :func:`sample_eval_pairs` carry a third column, the start snapshot (uniform among those in which the start is free,
 redrawn until the target can be reached in time). There
 
 * ``spl`` compares *time*: ``l_i`` is the space-time shortest path (the fewest steps from the start at ``t0``,
-  waiting allowed; :meth:`~dtradar_rl.task.mdp.MovingGridMDP.space_time_distances_many`) and ``p_i`` the steps
+  waiting allowed; :meth:`~dtradar_rl.task.grid_mdp.MovingGridMDP.space_time_distances_many`) and ``p_i`` the steps
   the episode took (waits and bumps included: each step is one snapshot of time);
 * ``collisions`` counts every move that failed (into a wall or a mover), ``wall_collisions`` and
   ``mover_collisions`` split it, and ``mover_hits`` counts the movers that walked onto the robot (per episode).
@@ -36,7 +36,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.agents.policy import Policy
-from dtradar_rl.task.mdp import GridMDP, MovingGridMDP
+from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runtime import DECISION_THREADS, torch_threads
 from dtradar_rl.task.twins import load_dataset

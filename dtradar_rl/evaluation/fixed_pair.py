@@ -16,7 +16,7 @@ import numpy as np
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.evaluation.evaluate import Rollouts, path_length, rollout
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.pairs import ResolvedPair, resolve, training_pair
 
 

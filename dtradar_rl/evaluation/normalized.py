@@ -15,7 +15,7 @@ seeded evaluation pairs (:func:`~dtradar_rl.evaluation.evaluate.sample_eval_pair
 - the expert scores exactly 1 by definition (it walks a shortest path, so ``l / p = 1`` on every pair whose
   shortest path fits in the step limit, which holds for every connected pair with the default limit
   ``4 · (nx + ny)``), so 100 is well defined and no policy can exceed it;
-- the return depends on the reward's shaping (``paper``, ``geodesic``, ... in :mod:`dtradar_rl.task.mdp`): the same
+- the return depends on the reward's shaping (``paper``, ``geodesic``, ... in :mod:`dtradar_rl.task.rewards`): the same
   behaviour would get another score under another reward, and the shaped rewards' scale changes with the twin.
 
 **References** (:func:`reference_scores`), rolled out on the same pairs with
@@ -46,7 +46,7 @@ from dtradar_rl.agents.policy import Policy
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout, sample_eval_pairs, spl
 from dtradar_rl.task.config import ConfigError
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 
 #: The raw metric the normalised score rescales (see the module docstring for why).
 METRIC = "spl"

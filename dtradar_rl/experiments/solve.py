@@ -28,7 +28,7 @@ from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED
 from dtradar_rl.tabular.evaluation import follow, path_metrics
 from dtradar_rl.tabular.solver import GAMMA, Solution, TabularMDP, check_gamma, solve_twin
 from dtradar_rl.task.config import Config, ConfigError
-from dtradar_rl.task.mdp import check_reward
+from dtradar_rl.task.rewards import check_reward
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.viz.value_map import plot_value_grid

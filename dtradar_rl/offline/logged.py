@@ -88,7 +88,7 @@ from dtradar_rl.offline.behaviours import (
 from dtradar_rl.offline.collection import replay, roll
 from dtradar_rl.offline.formats import export_minari
 from dtradar_rl.task.config import ConfigError, TwinConfig
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset

@@ -74,8 +74,9 @@ from dtradar_data.store.logged import LoggedDataset
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy
 from dtradar_rl.offline.logged import parent_version
 from dtradar_rl.task.config import Config, ConfigError
-from dtradar_rl.task.mdp import GridMDP, MovingGridMDP, potential_kind, reward_fn
+from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.task.rewards import potential_kind, reward_fn
 from dtradar_rl.task.twins import load_dataset
 
 #: Where a goal can come from (the module docstring), in the order of :class:`RelabelConfig`'s probabilities.

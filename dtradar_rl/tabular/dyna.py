@@ -47,8 +47,8 @@ from dtradar_rl.tabular.qlearning import (
     run,
     td_update,
 )
-from dtradar_rl.task.mdp import reward_fn
 from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.rewards import reward_fn
 
 
 @dataclass(frozen=True)

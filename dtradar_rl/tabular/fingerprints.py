@@ -17,7 +17,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_rl.task.mdp import ACTION_DELTAS, GridMDP, background
+from dtradar_rl.task.grid_mdp import ACTION_DELTAS, GridMDP
+from dtradar_rl.task.moving_masks import background
 from dtradar_rl.task.observations import RADIO_FEATURES, Normalizer
 
 #: The normalised columns a fingerprint holds (the radio features, no position).

@@ -64,8 +64,8 @@ from dtradar_rl.tabular.table_policy import (
     greedy_actions,
 )
 from dtradar_rl.task.config import ConfigError, JobConfig
-from dtradar_rl.task.mdp import check_reward
 from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.rewards import check_reward
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset

@@ -40,7 +40,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_rl.tabular.batch import BatchConfig, EmpiricalModel, learn
 from dtradar_rl.tabular.fingerprints import Tracker
 from dtradar_rl.tabular.solver import TabularMDP
-from dtradar_rl.task.mdp import ACTION_DELTAS, GridMDP
+from dtradar_rl.task.grid_mdp import ACTION_DELTAS, GridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
 
 #: The learners a sensing robot re-plans with (module docstring).

@@ -35,7 +35,8 @@ from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.core.files import open_atomic
 from dtradar_data.core.layout import data_root
 from dtradar_data.store.logged import table_digest
-from dtradar_rl.task.mdp import GridMDP, check_reward, reward_fn
+from dtradar_rl.task.grid_mdp import GridMDP
+from dtradar_rl.task.rewards import check_reward, reward_fn
 
 #: Working memory of one chunk of targets (its reward and value-gather arrays, float64 ``K x N x 4`` each).
 CHUNK_BYTES = 64 << 20

@@ -42,7 +42,7 @@ from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.tabular.fingerprints import fingerprints
 from dtradar_rl.tabular.solver import TooLargeError
-from dtradar_rl.task.mdp import background
+from dtradar_rl.task.moving_masks import background
 from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
 from dtradar_rl.task.twins import load_dataset
 

@@ -20,8 +20,8 @@ from typing import Any
 import torch
 
 from dtradar_data.core.errors import InvalidSettingError
-from dtradar_rl.task.mdp import check_reward
 from dtradar_rl.task.observations import check_preset
+from dtradar_rl.task.rewards import check_reward
 
 INDOOR_SCENES = ("cubicle", "meeting")
 
@@ -172,7 +172,7 @@ class TwinConfig(JobConfig):
     obs: str = "neighbors"
     """observation preset: paper (10 inputs, no target), goal (+ target), neighbors (+ neighbouring cells' radio)"""
     reward: str = "geodesic"
-    """reward: paper (exact), scaled, euclidean or geodesic (shaped; see dtradar_rl.task.mdp)"""
+    """reward: paper (exact), scaled, euclidean or geodesic (shaped; see dtradar_rl.task.rewards)"""
     max_steps: int = 0
     """episode step limit (truncation); 0 = 4 * (nx + ny)"""
     num_envs: int = 256

@@ -44,7 +44,7 @@ import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidSettingError, unknown_name
-from dtradar_rl.task.mdp import ACTION_DELTAS
+from dtradar_rl.task.grid_mdp import ACTION_DELTAS
 
 #: The paper's ten inputs, in order (see the module docstring for the tenth).
 PAPER_COLUMNS: tuple[str, ...] = (

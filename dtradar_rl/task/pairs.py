@@ -25,7 +25,7 @@ import numpy as np
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.grid import Grid
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 
 
 class PairError(DtradarError, ValueError):

@@ -204,7 +204,7 @@ def test_the_stored_moving_twin_follows_the_table_contract(in_built_root):
 
 @pytest.mark.sionna
 def test_the_rl_side_reads_the_built_moving_twin(in_built_root):
-    from dtradar_rl.task.mdp import moving_masks
+    from dtradar_rl.task.moving_masks import moving_masks
 
     blocked, mover = moving_masks(in_built_root[0])
     assert blocked.shape == (2, 36) and mover.any()

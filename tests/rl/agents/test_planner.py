@@ -3,7 +3,7 @@ import pytest
 
 from dtradar_rl.agents.planner import FingerprintPlanner
 from dtradar_rl.evaluation.evaluate import evaluate, metrics_from_rollouts, rollout
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
 
 

@@ -10,7 +10,7 @@ from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.task.config import ConfigError
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.twins import load_dataset, synthetic_blocked
 from dtradar_rl.train.checkpoints import load_policy

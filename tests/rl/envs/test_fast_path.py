@@ -8,8 +8,8 @@ import torch
 
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import MemoryNavEnv
-from dtradar_rl.task.mdp import REWARDS
 from dtradar_rl.task.observations import OBS_PRESETS, Normalizer
+from dtradar_rl.task.rewards import REWARDS
 from dtradar_rl.task.twins import load_dataset
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

@@ -10,7 +10,7 @@ from dtradar_data.core.errors import DtradarError
 from dtradar_rl.agents.planner import FingerprintPlanner
 from dtradar_rl.cli import main
 from dtradar_rl.evaluation.evaluate import LATENCY_DECISIONS, decision_latency_ms, markdown_table, path_length, spl
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
 
 

@@ -16,7 +16,7 @@ from dtradar_rl.evaluation.evaluate import (
     rollout,
     sample_eval_pairs,
 )
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
 
 X_PLUS, Y_MINUS = 1, 2

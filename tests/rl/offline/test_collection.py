@@ -6,8 +6,9 @@ import pytest
 
 from dtradar_rl.offline.behaviours import BehaviourSpec
 from dtradar_rl.offline.collection import roll
-from dtradar_rl.task.mdp import GridMDP, reward_fn
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.task.rewards import reward_fn
 from dtradar_rl.task.twins import load_dataset
 
 SMALL = "synthetic-12x8"

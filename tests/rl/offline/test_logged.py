@@ -17,7 +17,7 @@ from dtradar_rl.offline.formats import d3rlpy_arrays, export_minari, from_minari
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.trainer import train_offline
 from dtradar_rl.task.config import ConfigError
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.config import config_for

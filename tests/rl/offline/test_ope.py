@@ -12,7 +12,7 @@ from dtradar_rl.offline.formats import import_d3rlpy, to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.ope import episode_starts, fqe_estimate, initial_observations, true_value
 from dtradar_rl.offline.trainer import fast_sampling, fit, make_algorithm, train_offline
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.twins import load_dataset
 

@@ -7,7 +7,7 @@ import pytest
 from dtradar_rl.offline.behaviours import BehaviourSpec
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.walks import EXPLORE_KEEP, STITCH_HOP
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
 
 SCENE = "synthetic-12x8"

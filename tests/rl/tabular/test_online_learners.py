@@ -144,7 +144,7 @@ def blanked(ds, cells):
 
 def test_cells_without_radio_features_do_not_corrupt_the_row_of_the_cell_their_blank_fingerprint_matches():
     from dtradar_rl.tabular.fingerprints import localisation
-    from dtradar_rl.task.mdp import GridMDP
+    from dtradar_rl.task.grid_mdp import GridMDP
 
     torch.set_num_threads(1)
     base = load_dataset("synthetic-16x10/blueprint")

@@ -8,7 +8,7 @@ from dtradar_data.core.errors import InvalidSettingError
 from dtradar_rl.evaluation.evaluate import evaluate, evaluate_twins, rollout
 from dtradar_rl.tabular.fingerprints import localisation
 from dtradar_rl.tabular.table_policy import TablePolicy, UncoveredTargetError
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
 
 

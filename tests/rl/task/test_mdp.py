@@ -8,7 +8,8 @@ import pytest
 from dtradar_data.core.errors import UnknownNameError
 from dtradar_data.pipeline.synthetic import synthetic_dataset
 from dtradar_rl.envs.nav_env import DtradarNavEnv
-from dtradar_rl.task.mdp import GridMDP, NoConnectedPairError, default_max_steps, reward_fn
+from dtradar_rl.task.grid_mdp import GridMDP, NoConnectedPairError, default_max_steps
+from dtradar_rl.task.rewards import reward_fn
 
 X_MINUS, X_PLUS, Y_MINUS, Y_PLUS = range(4)
 

@@ -9,7 +9,8 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, SchemaMismatchError
 from dtradar_data.pipeline.synthetic import Mover, synthetic_moving_dataset
 from dtradar_rl.envs.nav_env import DtradarNavEnv
-from dtradar_rl.task.mdp import GridMDP, MovingGridMDP, background, moving_masks
+from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP
+from dtradar_rl.task.moving_masks import background, moving_masks
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.twins import load_dataset
 

@@ -12,7 +12,7 @@ from dtradar_data.scenes import load_scene_spec
 from dtradar_rl.cli import main
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.task.config import ConfigError
-from dtradar_rl.task.mdp import GridMDP
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.pairs import CAP_FACTOR, TABLE_VI, PairError, largest_region, resolve, to_grid, training_pair
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy

@@ -4,15 +4,16 @@ per twin and target however many MDPs of the twin ask."""
 import numpy as np
 import pytest
 
-from dtradar_rl.task import mdp as mdp_module
-from dtradar_rl.task.mdp import MovingGridMDP, clear_space_time_cache
+from dtradar_rl.task import space_time
+from dtradar_rl.task.grid_mdp import MovingGridMDP
+from dtradar_rl.task.space_time import clear_space_time_cache
 
 
 def frontier_distances(mdp: MovingGridMDP, targets, waiting: str) -> np.ndarray:
     """The previous implementation, kept as the reference: backward frontier propagation over (cell, t mod T), all
     targets at once."""
     targets = np.asarray(targets, np.int64)
-    move_ok, wait_ok = mdp._transitions(waiting)
+    move_ok, wait_ok = space_time.transitions(mdp, waiting)
     t_count, n = mdp.covered.shape
     dist = np.full((targets.size, t_count, n), -1, np.int32)
     dist[np.arange(targets.size), :, targets] = 0
@@ -57,10 +58,8 @@ def test_the_compiled_search_gives_the_frontier_propagations_distances_on_random
 
 def test_each_target_is_searched_once_per_twin_whatever_mdp_of_the_twin_asks(monkeypatch):
     searched = []
-    search = MovingGridMDP._space_time_search
-    monkeypatch.setattr(
-        MovingGridMDP, "_space_time_search", lambda self, t, g: searched.extend(t.tolist()) or search(self, t, g)
-    )
+    search = space_time._search
+    monkeypatch.setattr(space_time, "_search", lambda grid, t, g: searched.extend(t.tolist()) or search(grid, t, g))
     twin = random_twin(3)
     first = twin.space_time_distances_many([4, 2, 4])
     again = MovingGridMDP.from_masks(twin.covered.reshape(-1, *twin.blocked.shape)).space_time_distances_many([2, 5])
@@ -91,9 +90,9 @@ def test_changing_a_returned_table_does_not_change_the_cache():
 
 
 def test_a_cache_smaller_than_one_call_still_gives_every_distance(monkeypatch):
-    monkeypatch.setattr(mdp_module, "SPACE_TIME_CACHE_BYTES", 1)
-    monkeypatch.setattr(mdp_module, "SPACE_TIME_CHUNK", 2)
+    monkeypatch.setattr(space_time.SPACE_TIME_TABLES, "max_bytes", 1)
+    monkeypatch.setattr(space_time, "SPACE_TIME_CHUNK", 2)
     twin = random_twin(11)
     targets = np.arange(twin.num_cells)[::-1]
     np.testing.assert_array_equal(twin.space_time_distances_many(targets), frontier_distances(twin, targets, "free"))
-    assert len(mdp_module._SPACE_TIME_CACHE) <= 1
+    assert len(space_time.SPACE_TIME_TABLES) <= 1

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dtradar_data.core.errors import UnknownNameError
-from dtradar_rl.task.mdp import MovingGridMDP
+from dtradar_rl.task.grid_mdp import MovingGridMDP
 from dtradar_rl.task.twins import load_dataset
 
 # A corridor (y = 1) with walls above and below, a niche below x = 3 and a longer way round over the top (y = 3):

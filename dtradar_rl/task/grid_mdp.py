@@ -1,7 +1,10 @@
-"""A per-cell table as a grid navigation MDP: cells, moves, connectivity, shortest paths, rewards, start/target pairs.
+"""The navigation MDPs of a twin's per-cell table: :class:`GridMDP` (cells, moves, connectivity, shortest paths,
+start/target pairs) and, for a moving twin, :class:`MovingGridMDP` (the same in time).
 
 Everything here is plain numpy and framework-free; :mod:`dtradar_rl.envs.nav_env` (gymnasium) and
-:mod:`dtradar_rl.envs.batched` (torch) are two front ends over the same :class:`GridMDP`.
+:mod:`dtradar_rl.envs.batched` (torch) are two front ends over the same :class:`GridMDP`. The rewards are in
+:mod:`dtradar_rl.task.rewards`, a moving twin's masks in :mod:`dtradar_rl.task.moving_masks`, the shortest paths in
+time in :mod:`dtradar_rl.task.space_time`.
 
 Conventions
 -----------
@@ -9,23 +12,9 @@ Conventions
 * Free cells are states. Actions are ``0: X-``, ``1: X+``, ``2: Y-``, ``3: Y+`` (one cell per step).
 * A move into a blocked cell or off the grid is a **collision**: the robot stays where it was.
 * A moving twin (snapshots in time) is a :class:`MovingGridMDP`: a :class:`GridMDP` over its static map plus what
-  moves (below); :meth:`GridMDP.from_dataset` returns one for it.
+  moves (below); :meth:`GridMDP.from_dataset` returns one for it (so both classes live here: the static MDP builds
+  the moving one, and the moving one extends it).
 * Distances in rewards are in **cell units** (``dx = ix_target - ix``, ``dy = iy_target - iy``).
-
-Rewards (chosen by name, :data:`REWARDS`)
------------------------------------------
-``paper``      exactly the paper's reward: ``-(dx² + dy²)`` after the move, ``+5000`` on reaching the target,
-               ``-5000`` on a collision (the terms add).
-``scaled``     the paper's three terms rescaled to order one: ``-(dx² + dy²) / (nx² + ny²)``, ``+1`` on reaching the
-               target, ``-1`` on a collision. Same optimum as ``paper``, better conditioned for a neural network.
-``euclidean``  potential-based shaping (Ng et al. 1999) with the straight-line distance ``d``: ``d(s) - d(s')``
-               (cell units), ``+1`` on reaching the target, ``-1`` on a collision. Uses no map knowledge.
-``geodesic``   potential-based shaping with the breadth-first (obstacle-aware) distance ``g`` on the training twin:
-               ``g(s) - g(s')`` (+1 for a step along a shortest path, -1 for a step away), ``+1`` on reaching the
-               target, ``-1`` on a collision. The twin is known while training, so this is a legitimate training
-               signal; the policy itself still sees only its observation. Being potential-based it leaves the
-               shortest-path objective unchanged, and it makes every step informative, so it trains fastest;
-               it is the tuned default.
 
 Moving twins: the MDP in time
 -----------------------------
@@ -54,23 +43,15 @@ charged once for a step with any of the three. The robot observes its own cell (
 preset, its neighbours) at the snapshot it is in after the step. Agents keep their four moves: there is no wait
 action, a robot "waits" only by bumping (into a wall or a mover).
 
-Shortest paths in time: :meth:`MovingGridMDP.space_time_distances_many` is a breadth-first search over the states
-``(cell, t mod T)`` (backwards from the target, all starts at once): the fewest steps from ``(cell, t)`` to the
-target, where a step moves to a neighbour free at the next snapshot or **waits** on the cell (free at the next
-snapshot). ``waiting="free"`` (the default, what SPL on a moving twin compares with) allows a wait anywhere;
-``"bump"`` allows it only where one of the four moves bumps (a wall, the grid's edge or a mover next to the robot),
-which is the exact optimum of the four-action MDP. The search never enters or waits on a covered cell (it avoids
-hits). It is one compiled breadth-first search per target on the reversed space-time graph, and its tables are cached
-by twin content and target (:data:`SPACE_TIME_CACHE_BYTES`), so drawing an evaluation's episodes and scoring each of
-its rollouts search each target once.
+Shortest paths in time (the fewest steps from ``(cell, t)`` to a target, waits allowed) are
+:mod:`dtradar_rl.task.space_time`'s search, which :meth:`MovingGridMDP.space_time_distances_many` calls.
 """
 
 from __future__ import annotations
 
-import hashlib
 import math
 import numbers
-from collections import OrderedDict, deque
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -80,32 +61,17 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path as compiled_shortest_paths
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import (
-    DtradarError,
-    InvalidCoordinatesError,
-    InvalidSettingError,
-    SchemaMismatchError,
-    unknown_name,
-)
+from dtradar_data.core.errors import DtradarError, InvalidCoordinatesError, InvalidSettingError, SchemaMismatchError
+from dtradar_rl.task.moving_masks import moving_masks
+from dtradar_rl.task.space_time import distance_tables, shortest_path_in_time
 
 ACTIONS: tuple[str, ...] = ("X-", "X+", "Y-", "Y+")
 #: ``(dx, dy)`` of each action, in cells.
 ACTION_DELTAS = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]], dtype=np.int64)
 
-REWARDS: tuple[str, ...] = ("paper", "scaled", "euclidean", "geodesic")
-PAPER_GOAL_BONUS = 5000.0
-PAPER_COLLISION_PENALTY = 5000.0
-
 
 class NoConnectedPairError(DtradarError, ValueError):
     """A grid with no two connected free cells: no (start, target) pair can be drawn."""
-
-
-def check_reward(name: str) -> str:
-    """Return ``name`` if it is a known reward, else raise :class:`UnknownNameError` with a suggestion."""
-    if name not in REWARDS:
-        raise unknown_name("reward", name, REWARDS)
-    return name
 
 
 def default_max_steps(nx: int, ny: int) -> int:
@@ -134,30 +100,6 @@ def check_max_steps(max_steps) -> int | None:
             f"max_steps must be > 0, got {max_steps}", hint="pass a positive int, or None for the default 4 * (nx + ny)"
         )
     return int(max_steps) or None
-
-
-def reward_fn(name: str, *, d2_after, pot_before, pot_after, collision, reached, diag2: float):
-    """The reward of one step, elementwise, for numpy arrays, torch tensors or Python scalars.
-
-    ``d2_after``: squared straight-line distance to the target after the move (cell units²), used by
-    ``paper``/``scaled``; ``pot_before``/``pot_after``: the shaping distance before/after the move (straight-line
-    for ``euclidean``, breadth-first for ``geodesic``, see :func:`potential_kind`); ``collision``/``reached``:
-    booleans (bools or 0/1 numbers); ``diag2 = nx² + ny²``.
-    """
-    collision = collision * 1.0
-    reached = reached * 1.0
-    if name == "paper":
-        return -d2_after + PAPER_GOAL_BONUS * reached - PAPER_COLLISION_PENALTY * collision
-    if name == "scaled":
-        return -d2_after / diag2 + reached - collision
-    if name in ("euclidean", "geodesic"):
-        return (pot_before - pot_after) + reached - collision
-    raise unknown_name("reward", name, REWARDS)
-
-
-def potential_kind(name: str) -> str | None:
-    """Which distance a reward shapes with: ``"euclidean"``, ``"geodesic"`` or ``None``."""
-    return name if check_reward(name) in ("euclidean", "geodesic") else None
 
 
 @dataclass
@@ -338,90 +280,6 @@ class GridMDP:
         return (tx - x) ** 2 + (ty - y) ** 2
 
 
-# -- moving twins: the MDP in time (module docstring) ------------------------------------------------------------------
-#: How the space-time search may wait (see the module docstring).
-WAITING: tuple[str, ...] = ("free", "bump")
-#: Targets per compiled space-time search call (its float64 output is ``chunk x T x cells``: 28 MB on meeting/moving).
-SPACE_TIME_CHUNK = 32
-#: The space-time distance tables kept between calls, in bytes (least recently used first out): the targets of an
-#: evaluation of 500 episodes on meeting/moving (48 snapshots x 1 520 cells) take about 150 MB.
-SPACE_TIME_CACHE_BYTES = 512 << 20
-#: ``((twin digest, waiting), target) -> int32[T, cells]`` (read-only); see ``space_time_distances_many``.
-_SPACE_TIME_CACHE: OrderedDict[tuple, np.ndarray] = OrderedDict()
-
-
-def _cache_space_time(key: tuple, row: np.ndarray) -> None:
-    _SPACE_TIME_CACHE[key] = row
-    size = sum(r.nbytes for r in _SPACE_TIME_CACHE.values())
-    while size > SPACE_TIME_CACHE_BYTES and _SPACE_TIME_CACHE:
-        size -= _SPACE_TIME_CACHE.popitem(last=False)[1].nbytes
-
-
-def clear_space_time_cache() -> None:
-    """Forget every cached space-time distance table (tests, memory)."""
-    _SPACE_TIME_CACHE.clear()
-
-
-def moving_masks(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
-    """``(blocked, mover)``, each ``bool[T, H*W]``, of a moving twin, checked against the format: rows sorted by
-    ``(t, iy, ix)``, ``mover`` a subset of ``blocked``, and the static obstacles (``blocked & ~mover``) the same in
-    every snapshot; anything else is a :class:`SchemaMismatchError`."""
-    t_count = ds.snapshots
-    h, w = ds.shape
-    n = h * w
-    table = ds.table
-    if "mover" not in table.column_names:
-        raise SchemaMismatchError(
-            f"{ds.name}: a moving twin needs a bool 'mover' column (the blocked cells a mover covers at snapshot t)",
-            hint="rebuild it with make dataset SCENE=<scene> VARIANT=moving (its format: docs/navigation.md, "
-            "Navigation among movers)",
-        )
-    col = lambda name: table.column(name).to_numpy(zero_copy_only=False)  # noqa: E731
-    t, ix, iy = col("t"), col("ix"), col("iy")
-    iy_ref, ix_ref = np.divmod(np.arange(n), w)
-    if not (
-        (t.reshape(t_count, n) == np.arange(t_count)[:, None]).all()
-        and (ix.reshape(t_count, n) == ix_ref).all()
-        and (iy.reshape(t_count, n) == iy_ref).all()
-    ):
-        raise SchemaMismatchError(
-            f"{ds.name}: rows are not every cell of every snapshot in (t, iy, ix) order",
-            hint="sort the table by (t, iy, ix) (Dataset.from_table does) with all H x W cells per snapshot",
-        )
-    blocked = col("blocked").astype(bool).reshape(t_count, n)
-    mover = col("mover").astype(bool).reshape(t_count, n)
-    if (mover & ~blocked).any():
-        k, c = (int(v) for v in np.argwhere(mover & ~blocked)[0])
-        raise SchemaMismatchError(
-            f"{ds.name}: cell {tuple(int(v) for v in np.divmod(c, w)[::-1])} has a mover but is not blocked at "
-            f"snapshot {k}",
-            hint="blocked = static obstacle or mover",
-        )
-    static = blocked & ~mover
-    if (static != static[:1]).any():
-        k = int(np.flatnonzero((static != static[:1]).any(1))[0])
-        raise SchemaMismatchError(
-            f"{ds.name}: the static obstacles (blocked and not mover) of snapshot {k} differ from snapshot 0",
-            hint="mark every cell that changes over time as a mover",
-        )
-    return blocked, mover
-
-
-def background(ds: Dataset) -> Dataset:
-    """A moving twin as one static twin: every cell as it is in the first snapshot in which it is free (blocked only
-    where it is blocked in every snapshot), no ``t``/``mover`` columns, ``meta`` without ``"moving"``. A map and a
-    fingerprint table for a planner; a static twin is its own background."""
-    if not ds.is_moving:
-        return ds
-    blocked, _ = moving_masks(ds)
-    n = blocked.shape[1]
-    first_free = (~blocked).argmax(0)  # 0 where blocked in every snapshot
-    rows = first_free * n + np.arange(n)
-    table = ds.table.take(rows).drop_columns(["t", "mover"])
-    meta = {key: v for key, v in ds.meta.items() if key != "moving"}
-    return Dataset(ds.name, table, meta, ds.version, ds.path)
-
-
 @dataclass
 class MovingGridMDP(GridMDP):
     """The MDP of a moving twin (module docstring): the static map as a :class:`GridMDP` plus what moves."""
@@ -505,93 +363,12 @@ class MovingGridMDP(GridMDP):
             nxt = int(cell)
         return nxt, t1, wall, mover_collision, bool(self.covered[t1, nxt])
 
-    # -- shortest paths over (cell, time) ------------------------------------------------------------------------
-    def _transitions(self, waiting: str) -> tuple[np.ndarray, np.ndarray]:
-        """``move_ok bool[T, cells, 4]``: the move succeeds from (cell, t); ``wait_ok bool[T, cells]``: the robot
-        may stay on the cell into t+1 (free then; with ``"bump"`` only where a move bumps)."""
-        if waiting not in WAITING:
-            raise unknown_name("waiting rule", waiting, WAITING)
-        cov_next = np.roll(self.covered, -1, axis=0)  # [t] -> covered at t+1
-        into = cov_next[:, self.next_cell]  # [T, cells, 4]
-        swap = self.covered[:, self.next_cell] & cov_next[:, :, None]  # a mover comes the other way
-        move_ok = ~self.collides[None] & ~into & ~swap
-        wait_ok = ~cov_next
-        if waiting == "bump":
-            wait_ok = wait_ok & (~move_ok).any(2)
-        return move_ok, wait_ok
-
+    # -- shortest paths over (cell, time): dtradar_rl.task.space_time -------------------------------------------
     def space_time_distances_many(self, targets: Sequence[int] | np.ndarray, waiting: str = "free") -> np.ndarray:
         """``int32[K, T, H*W]``: the fewest steps from ``(cell, snapshot t)`` to each of ``targets`` (0 on the
-        target, -1 where it cannot be reached or the cell is a static obstacle).
-
-        A backward breadth-first search over the states (cell, t mod T), one compiled search per target
-        (``scipy.sparse.csgraph``, unweighted, from a source node one step before the target at every snapshot) on
-        the reversed space-time graph, and each target's table is kept in a cache shared by every MDP of the same
-        twin (:data:`SPACE_TIME_CACHE_BYTES`): an evaluation draws its episodes, then scores each rollout on the
-        same targets, each with its own MDP. Measured on one core against the numpy frontier propagation it
-        replaces (all targets at once), 100 targets: cubicle/moving 1.27 -> 0.23 s, meeting/moving 10.5 -> 1.3 s,
-        identical distances (tested against it)."""
-        targets = np.asarray(targets, np.int64).ravel()
-        t_count, n = self.covered.shape
-        if waiting not in WAITING:
-            raise unknown_name("waiting rule", waiting, WAITING)
-        key = (self._space_time_key(), waiting)
-        rows, missing = {}, []
-        for target in np.unique(targets).tolist():
-            row = _SPACE_TIME_CACHE.get((key, target))
-            if row is None:
-                missing.append(target)
-            else:
-                _SPACE_TIME_CACHE.move_to_end((key, target))
-                rows[target] = row
-        if missing:
-            graph = self._space_time_graph(waiting)
-            for i in range(0, len(missing), SPACE_TIME_CHUNK):
-                chunk = np.array(missing[i : i + SPACE_TIME_CHUNK], np.int64)
-                for target, row in zip(chunk.tolist(), self._space_time_search(chunk, graph)):
-                    row.flags.writeable = False  # shared through the cache: callers get copies
-                    rows[target] = row
-                    _cache_space_time((key, target), row)
-        out = np.empty((targets.size, t_count, n), np.int32)
-        for i, target in enumerate(targets.tolist()):
-            out[i] = rows[target]
-        return out
-
-    def _space_time_key(self) -> bytes:
-        """A digest of what the search reads (the static map and the covered cells of every snapshot): MDPs built
-        from the same twin share cache entries, and a change to ``covered`` is never served stale."""
-        h = hashlib.blake2b(digest_size=16)
-        for a in (np.asarray(self.blocked.shape), self.blocked, self.covered):
-            h.update(np.ascontiguousarray(a).tobytes())
-        return h.digest()
-
-    def _space_time_graph(self, waiting: str) -> tuple[np.ndarray, np.ndarray]:
-        """The reversed space-time graph's edges ``(from, to)`` as state indices ``t * cells + cell``: an edge from
-        ``(next cell, t + 1)`` back to ``(cell, t)`` for every move and wait the search allows from a free cell."""
-        move_ok, wait_ok = self._transitions(waiting)
-        t_count, n = self.covered.shape
-        t, c = np.nonzero(move_ok.any(2) | wait_ok)
-        keep = self.free[c]
-        t, c = t[keep], c[keep]
-        step_ok = np.concatenate([move_ok[t, c], wait_ok[t, c, None]], 1)  # [edges, 5]: four moves, the wait
-        dest = np.concatenate([self.next_cell[c], c[:, None]], 1)
-        which = np.nonzero(step_ok)
-        src = ((t[which[0]] + 1) % t_count) * n + dest[which]
-        return src, t[which[0]] * n + c[which[0]]
-
-    def _space_time_search(self, targets: np.ndarray, graph: tuple[np.ndarray, np.ndarray]) -> list[np.ndarray]:
-        """``int32[T, cells]`` per target, uncached: one compiled breadth-first search each on the reversed ``graph``
-        plus a source node per target with an edge to the target at every snapshot (distances one more)."""
-        t_count, n = self.covered.shape
-        states, k = t_count * n, targets.size
-        src, dst = graph
-        source = np.repeat(states + np.arange(k), t_count)
-        on_target = (np.arange(t_count)[None] * n + targets[:, None]).ravel()
-        rows, cols = np.concatenate([src, source]), np.concatenate([dst, on_target])
-        graph = csr_matrix((np.ones(rows.size, np.float32), (rows, cols)), shape=(states + k, states + k))
-        d = compiled_shortest_paths(graph, method="D", directed=True, unweighted=True, indices=states + np.arange(k))
-        d = np.where(np.isfinite(d[:, :states]), d[:, :states] - 1, -1).astype(np.int32).reshape(k, t_count, n)
-        return [row.copy() for row in d]  # one block each: the cache frees them one by one
+        target, -1 where it cannot be reached or the cell is a static obstacle); the search and its cache are
+        :func:`~dtradar_rl.task.space_time.distance_tables`."""
+        return distance_tables(self, targets, waiting)
 
     def space_time_distances(self, target: int, waiting: str = "free") -> np.ndarray:
         """``int32[T, H*W]``: :meth:`space_time_distances_many` for one target."""
@@ -604,21 +381,7 @@ class MovingGridMDP(GridMDP):
     def space_time_shortest_path(self, start: int, target: int, t0: int, waiting: str = "free") -> list[int] | None:
         """One shortest path ``[start, ..., target]`` over time, one cell per step (a repeated cell is a wait), or
         ``None`` if the target cannot be reached from ``start`` at ``t0``."""
-        dist = self.space_time_distances(target, waiting)
-        t_count = self.snapshots
-        t, cell = int(t0) % t_count, int(start)
-        if dist[t, cell] < 0:
-            return None
-        move_ok, wait_ok = self._transitions(waiting)
-        path = [cell]
-        while cell != target:
-            t1, d = (t + 1) % t_count, dist[t, cell]
-            options = [int(self.next_cell[cell, a]) for a in range(4) if move_ok[t, cell, a]]
-            options += [cell] if wait_ok[t, cell] else []
-            cell = next(c for c in options if dist[t1, c] == d - 1)
-            t = t1
-            path.append(cell)
-        return path
+        return shortest_path_in_time(self, start, target, t0, waiting)
 
     # -- episodes ------------------------------------------------------------------------------------------------
     def draw_t0(self, starts: np.ndarray, rng: np.random.Generator) -> np.ndarray:
