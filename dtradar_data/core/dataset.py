@@ -119,7 +119,7 @@ class Dataset:
         if self.is_moving:
             raise SchemaMismatchError(
                 f"{self.name} is a moving twin of {self.snapshots} snapshots: its {what} has one grid per snapshot",
-                hint="read one snapshot with ds.snapshot(k) (dtradar_rl.task.mdp.MovingGridMDP reads them all)",
+                hint="read one snapshot with ds.snapshot(k) (dtradar_rl.task.grid_mdp.MovingGridMDP reads them all)",
             )
 
     @property
