@@ -18,7 +18,7 @@ Device = Literal["auto", "cpu", "cuda"]
 
 
 #: What --rt.batch-independent means, hashed into the version: change it with anything that changes its rows
-#: (dtradar_data.rt.tracer.HASH_SLOTS_PER_RX, the packet width, the patched Sionna code).
+#: (dtradar_data.rt.batch_independent_solver.HASH_SLOTS_PER_RX, the packet width, the patched Sionna code).
 BATCH_INDEPENDENT_ENGINE = "dtradar-1: 65536 hash slots per receiver, 32-lane packets, buffer split (sionna-rt 2.2.0)"
 
 

@@ -1,4 +1,5 @@
-"""Sionna RT for dtradar: the only module that imports ``sionna.rt``, ``mitsuba`` or ``drjit``.
+"""Sionna RT for dtradar: with the patched solver it loads (:mod:`.batch_independent_solver`), the only module that
+imports ``sionna.rt``, ``mitsuba`` or ``drjit``.
 
 A :class:`RayTracer` owns the one mutable object, the Sionna scene, built once from a :class:`SceneSpec` (through the
 Mitsuba XML that :mod:`dtradar_data.geometry.meshes` writes). Solvers are called with explicit keyword settings and a
@@ -8,22 +9,27 @@ without the ray tracer.
 
 **Batch independence.** A receiver's paths are the same bytes whatever else is traced in the same PathSolver call
 (tests/data/rt/test_batch_independence.py). Sionna 2.2's solver couples the receivers of a call three ways, and
-:func:`_solver_class` removes each (measured on the cubicle, 592 cells in one call vs calls of 128):
+:class:`~dtradar_data.rt.batch_independent_solver.BatchIndependentPathSolver` removes each (measured on the cubicle,
+592 cells in one call vs calls of 128):
 
 1. *The candidate hash table.* Specular chains are de-duplicated through two counter tables of
    ``max(max_num_paths_per_src, 1e6)`` slots shared by all receivers of the call, indexed by ``hash(chain, receiver
    index) % size`` (``sb_candidate_generator.py``, ``_shoot_and_bounce_loop``). A new chain whose slot another entry
    holds is dropped, so the more receivers a call has, the more of each receiver's paths are lost, and which ones
    depends on the others (591 of 592 rows differed, up to 29 paths; 1e7 slots: 464; 2.7e8 slots: 34). Here each
-   receiver has its own region of :data:`HASH_SLOTS_PER_RX` slots, indexed by the chain's hash alone.
+   receiver has its own region of :data:`~.batch_independent_solver.HASH_SLOTS_PER_RX` slots, indexed by the
+   chain's hash alone.
 2. *Shared SIMD packets.* The image method re-intersects every candidate's segments with the scene, with the
    candidates of all receivers packed side by side into the LLVM backend's ray packets. Where two objects' faces
    coincide (wood flush with concrete), which one a packet reports depends on the other rays of the packet, and so
    does the material a refraction goes through (5 of 592 rows, up to 0.6 dB). Here each receiver's candidates fill
-   whole packets of :data:`_PACKET` lanes of their own (padded with copies of its last one, dropped afterwards).
+   whole packets of 32 lanes of their own (padded with copies of its last one, dropped afterwards).
 3. *The path buffer.* It holds ``max_num_paths_per_src`` candidates per call; when it fills, which survive depends
    on the call (NVlabs/sionna#1172). :meth:`RayTracer.trace` detects a full buffer and re-traces the call's
    receivers in halves, recursively; a receiver that fills it on its own keeps its (own) truncated paths.
+
+The patched solver copies parts of one Sionna release: before a tracer loads anything for it, the installed
+sionna-rt is checked against the releases it copies (:mod:`.sionna_version`).
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingErro
 from dtradar_data.geometry.meshes import write_mitsuba_scene
 from dtradar_data.rt.llvm import configure as configure_llvm
 from dtradar_data.rt.settings import Device, RTSettings
+from dtradar_data.rt.sionna_version import check_patched_sionna_rt
 
 
 @dataclass
@@ -69,13 +76,6 @@ class PathBatch:
 
 
 _MI = None  # the mitsuba module once a variant is set
-
-HASH_SLOTS_PER_RX = 1 << 16
-"""Slots of each receiver's region of the specular-chain tables (two tables of 4-byte counters: 512 KiB per
-receiver). A chain whose slot holds another of the same receiver's chains is still lost, but the same way in any
-call; the cubicle at 1e4 samples has ~1 000 candidate chains per receiver. Changing it changes results."""
-_PACKET = 32  # lanes per receiver group in the image method: a multiple of every LLVM/CUDA packet width
-_SOLVER = None  # the batch-independent PathSolver class, defined once Sionna is imported
 
 
 def _import_sionna(device: Device, *, cpu_only: bool = False):
@@ -115,6 +115,8 @@ class RayTracer:
     """A Sionna scene built from a :class:`SceneSpec`, with the paper's transmitter and receiver arrays."""
 
     def __init__(self, spec, settings: RTSettings = RTSettings(), *, scene_dir: Path | None = None):
+        if settings.batch_independent:
+            check_patched_sionna_rt()  # first: a wrong release fails before the scene loads, not deep in a trace
         self.spec = spec
         self.settings = settings
         self.mi, self.rt = _import_sionna(settings.device, cpu_only=settings.batch_independent)
@@ -145,7 +147,10 @@ class RayTracer:
                     "--rt.batch-independent is implemented for the CPU (LLVM) backend only",
                     hint="trace with --rt.device auto or cpu, or with --rt.no-batch-independent (Sionna's own solver)",
                 )
-            self._solver = _solver_class()()
+            # imports Sionna's internals, so only now that _import_sionna has picked the variant
+            from dtradar_data.rt.batch_independent_solver import BatchIndependentPathSolver
+
+            self._solver = BatchIndependentPathSolver()
         else:
             self._solver = rt.PathSolver(deterministic=settings.deterministic and self.variant.startswith("cuda"))
         self._rx_names: list[str] = []
@@ -327,247 +332,6 @@ def _concat(parts: list[PathBatch]) -> PathBatch:
         else:
             out[f.name] = values[0]
     return PathBatch(**out)
-
-
-def _solver_class():
-    """Sionna 2.2's PathSolver with the receivers of a call decoupled (module doc). Defined here, after
-    :func:`_import_sionna` has picked the Mitsuba variant; the two overridden parts copy Sionna 2.2.0 (Apache-2.0,
-    NVIDIA) apart from the lines marked CHANGED."""
-    # @dr.syntax recompiles the loop from its source without its closure: the names it uses are module globals
-    global _SOLVER, dr, mi, InteractionType, SampleData, fibonacci_lattice, hash_fnv1a, spawn_ray_from_sources
-    if _SOLVER is not None:
-        return _SOLVER
-    import drjit as dr
-    import mitsuba as mi
-    import sionna.rt as rt
-    from sionna.rt.constants import InteractionType
-    from sionna.rt.path_solvers.paths import Paths
-    from sionna.rt.path_solvers.sample_data import SampleData
-    from sionna.rt.path_solvers.sb_candidate_generator import SBCandidateGenerator
-    from sionna.rt.utils import fibonacci_lattice, hash_fnv1a, spawn_ray_from_sources
-
-    if rt.__version__ != "2.2.0":  # pragma: no cover - the copies below are of 2.2.0
-        raise RayTracerUnavailableError(
-            f"dtradar's path solver is written against sionna-rt 2.2.0, found {rt.__version__}",
-            hint="pip install sionna-rt==2.2.0",
-        )
-
-    class Generator(SBCandidateGenerator):
-        @dr.syntax
-        def _shoot_and_bounce_loop(
-            self,
-            mi_scene,
-            src_positions,
-            tgt_positions,
-            samples_per_src,
-            max_num_paths_per_src,
-            max_depth,
-            paths,
-            paths_counter_per_source,
-            specular_reflection_enabled,
-            diffuse_reflection_enabled,
-            refraction_enabled,
-            diffraction_enabled,
-            edge_diffraction_enabled,
-            sampler,
-            src_boxes=None,
-        ):
-            num_sources = dr.shape(src_positions)[1]
-            num_targets = dr.shape(tgt_positions)[1]
-            num_samples = samples_per_src * num_sources
-            samples_data = SampleData(num_sources, samples_per_src, max_depth, diffraction_enabled)
-            ray = spawn_ray_from_sources(fibonacci_lattice, samples_per_src, src_positions)
-            if dr.hint(src_boxes is not None, mode="scalar"):
-                ray.o, _ = src_boxes.advance(ray.o, ray.d, samples_data.src_indices)
-            k_tx = dr.copy(ray.d)
-            specular_chain = dr.full(mi.Bool, True, num_samples)
-            num_hashes = len(self.plane_hash_functions)
-            hashes = [dr.zeros(mi.UInt64, num_samples) for _ in range(num_hashes)]
-            region = HASH_SLOTS_PER_RX
-            spec_counter_size = region * num_targets  # CHANGED: one region per target (was max(max paths, 1e6))
-            specular_chain_counters = [dr.zeros(mi.UInt, spec_counter_size * num_sources) for _ in range(num_hashes)]
-            depth = dr.full(mi.UInt, 1, num_samples)
-            active = dr.full(mi.Mask, True, num_samples)
-            loc_en_inter = dr.full(mi.UInt, 0, num_samples)
-            if specular_reflection_enabled:
-                loc_en_inter |= InteractionType.SPECULAR
-            if diffuse_reflection_enabled:
-                loc_en_inter |= InteractionType.DIFFUSE
-            if refraction_enabled:
-                loc_en_inter |= InteractionType.REFRACTION
-            if diffraction_enabled:
-                loc_en_inter |= InteractionType.DIFFRACTION
-            counters, per_src = specular_chain_counters, paths_counter_per_source
-            while dr.hint(active, label="shoot_and_bounce", exclude=[counters, per_src]):
-                si_scene = mi_scene.ray_intersect(ray, coherent=True, ray_flags=mi.RayFlags.Minimal, active=active)
-                active &= si_scene.is_valid()
-                sample1 = sampler.next_1d()
-                sample2 = sampler.next_2d()
-                sample2_diffraction = sampler.next_2d()
-                s, n, wedges = self._sample_radio_material(
-                    si_scene,
-                    ray.o,
-                    ray.d,
-                    sample1,
-                    sample2,
-                    sample2_diffraction,
-                    loc_en_inter,
-                    diffraction_enabled,
-                    edge_diffraction_enabled,
-                    active,
-                )
-                k_world = s.wo
-                int_type = dr.select(active, s.sampled_component, InteractionType.NONE)
-                active &= int_type != InteractionType.NONE
-                specular = int_type == InteractionType.SPECULAR
-                transmission = int_type == InteractionType.REFRACTION
-                diffuse = int_type == InteractionType.DIFFUSE
-                diffraction = int_type == InteractionType.DIFFRACTION
-                loc_en_inter[diffraction] &= ~(mi.UInt(InteractionType.DIFFUSE + InteractionType.DIFFRACTION))
-                loc_en_inter[diffuse] &= ~mi.UInt(InteractionType.DIFFRACTION)
-                specular_chain &= active & (specular | transmission | diffraction)
-                samples_data.insert(
-                    depth, int_type, si_scene.shape, si_scene.prim_index, wedges, si_scene.p, s.pdf, active
-                )
-                for i in range(num_hashes):
-                    plane_hash = self.plane_hash_functions[i](si_scene.n, si_scene.p)
-                    edge_hash = self.edge_hash_functions[i](wedges.o, wedges.o + wedges.e_hat * wedges.length)
-                    inter_hash = dr.select(int_type == InteractionType.SPECULAR, plane_hash, int_type)
-                    inter_hash = dr.select(int_type == InteractionType.DIFFRACTION, edge_hash, inter_hash)
-                    hashes[i] = hash_fnv1a(inter_hash, h=hashes[i])
-                t = mi.UInt(0)
-                while dr.hint(t < num_targets, label="shoot_and_bounce_inner", exclude=[counters, per_src]):
-                    tgt_position = dr.gather(mi.Point3f, tgt_positions, t)
-                    los_ray = si_scene.spawn_ray_to(tgt_position)
-                    los_blocked = mi_scene.ray_test(los_ray, active=active)
-                    los_visible = ~los_blocked
-                    target_incident_side = dr.dot(n, los_ray.d) > 0.0
-                    valid = los_visible & diffuse & target_incident_side
-                    new_specular = specular_chain & los_visible
-                    for i in range(num_hashes):
-                        # CHANGED: the slot lies in target t's own region, at a place given by the chain alone
-                        # (was hash_fnv1a(t, h) % spec_counter_size, shared by all targets)
-                        h = hashes[i]
-                        counter_ind = mi.UInt((h ^ (h >> 32)) % region) + region * t
-                        counter_ind += spec_counter_size * samples_data.src_indices
-                        samples_counter = dr.scatter_inc(counters[i], counter_ind, new_specular)
-                        new_specular &= samples_counter == 0
-                    store = active & (valid | new_specular)
-                    num_path_per_src = dr.scatter_inc(per_src, samples_data.src_indices, store)
-                    store &= num_path_per_src < max_num_paths_per_src
-                    path_ind = dr.scatter_inc(paths.paths_counter, mi.UInt(0), store)
-                    paths.add_paths(depth, path_ind, samples_data, valid, t, k_tx, -los_ray.d, store)
-                    t += 1
-                depth += 1
-                active &= depth <= max_depth
-                ray = si_scene.spawn_ray(d=k_world)
-                specular_chain |= diffuse
-
-    class Solver(rt.PathSolver):
-        def __init__(self):
-            super().__init__(deterministic=False)
-            self._candidate_generator = Generator()
-            self.buffer_full = False  # whether the last call's candidate buffer filled
-
-        def __call__(
-            self,
-            scene,
-            max_depth=3,
-            max_num_paths_per_src=1000000,
-            samples_per_src=1000000,
-            synthetic_array=True,
-            los=True,
-            specular_reflection=True,
-            diffuse_reflection=False,
-            refraction=True,
-            diffraction=False,
-            edge_diffraction=False,
-            diffraction_lit_region=True,
-            seed=42,
-        ):
-            scene.all_set(radio_map=False)
-            src_positions, src_orientations, rel_ant_tx, tx_velocities = scene.sources(synthetic_array, True)
-            tgt_positions, tgt_orientations, rel_ant_rx, rx_velocities = scene.targets(synthetic_array, True)
-            dr.make_opaque(src_positions, tgt_positions, src_orientations, tgt_orientations)
-            buf = self._candidate_generator(
-                mi_scene=scene.mi_scene,
-                src_positions=src_positions,
-                tgt_positions=tgt_positions,
-                samples_per_src=samples_per_src,
-                max_num_paths_per_src=max_num_paths_per_src,
-                max_depth=max_depth,
-                los=los,
-                specular_reflection=specular_reflection,
-                diffuse_reflection=diffuse_reflection,
-                refraction=refraction,
-                diffraction=diffraction,
-                edge_diffraction=edge_diffraction,
-                seed=seed,
-            )
-            buf.schedule()
-            dr.eval()
-            # CHANGED: report a full buffer (the call's receivers then competed for its places)
-            self.buffer_full = int(dr.max(buf.paths_counter)[0]) >= max_num_paths_per_src * dr.width(src_positions)
-            buf.shrink()
-            buf.detach_geometry()
-            # CHANGED: each (target, source) pair's candidates fill whole packets of their own, in their order
-            buf, padding = _packed(buf)
-            buf = self._image_method(
-                scene=scene.mi_scene,
-                paths=buf,
-                src_positions=src_positions,
-                tgt_positions=tgt_positions,
-                diffraction=diffraction,
-                diffraction_lit_region=diffraction_lit_region,
-            )
-            buf = self._field_calculator(
-                wavelength=scene.wavelength,
-                paths=buf,
-                samples_per_src=samples_per_src,
-                diffraction=diffraction,
-                src_positions=src_positions,
-                tgt_positions=tgt_positions,
-                src_orientations=src_orientations,
-                tgt_orientations=tgt_orientations,
-                src_antenna_patterns=scene.tx_array.antenna_pattern.patterns,
-                tgt_antenna_patterns=scene.rx_array.antenna_pattern.patterns,
-            )
-            buf.valid = buf.valid & ~padding  # CHANGED: drop the padding copies
-            buf.discard_invalid()
-            return Paths(
-                scene,
-                src_positions,
-                tgt_positions,
-                tx_velocities,
-                rx_velocities,
-                synthetic_array,
-                buf,
-                rel_ant_tx,
-                rel_ant_rx,
-            )
-
-    def _packed(buf):
-        """``buf`` reordered so that each (target, source) pair's candidates, in their original order, start on a
-        multiple of :data:`_PACKET` lanes, padded with copies of the pair's last candidate; and the padding mask."""
-        n = buf.buffer_size
-        if n == 0:
-            return buf, mi.Bool(np.zeros(0, bool))
-        tgt = np.asarray(buf.target_indices, dtype=np.int64)[:n]
-        src = np.asarray(buf.source_indices, dtype=np.int64)[:n]
-        key = tgt * (int(src.max()) + 1) + src
-        order = np.argsort(key, kind="stable")
-        starts = np.flatnonzero(np.r_[True, key[order][1:] != key[order][:-1]])
-        counts = np.diff(np.r_[starts, n])
-        slots = -(-counts // _PACKET) * _PACKET
-        first = np.r_[0, np.cumsum(slots)[:-1]]  # where each pair's group starts in the packed buffer
-        lane = np.arange(int(slots.sum())) - np.repeat(first, slots)  # position within its group
-        group = np.repeat(np.arange(len(starts)), slots)
-        padding = lane >= counts[group]
-        index = order[np.repeat(starts, slots) + np.minimum(lane, counts[group] - 1)]
-        return buf.gather(mi.UInt(index.astype(np.uint32))), mi.Bool(padding)
-
-    _SOLVER = Solver
-    return _SOLVER
 
 
 def smoke_test() -> str:
