@@ -21,13 +21,13 @@ from pathlib import Path
 
 from dtradar_data.core.errors import InvalidSettingError, SceneFileError, unknown_name
 from dtradar_data.core.ids import VARIANTS
+from dtradar_data.scenes.city.document import read_city_file
 from dtradar_data.scenes.city.reader import (
     city_file,
     city_names,
     load_city_moving,
     load_city_spec,
     quadrant_scenes,
-    read_city_file,
 )
 from dtradar_data.scenes.indoor.reader import load_moving_room_file, load_room_file
 from dtradar_data.scenes.model import SceneSpec

@@ -4,8 +4,8 @@
 field types check a value *before* pydantic converts it (``BeforeValidator``) and fail with a problem and a hint
 (:func:`fail`: a ``PydanticCustomError`` of type ``"dtradar"``); each reader turns the first error into a
 :class:`~dtradar_data.core.errors.SceneFileError` that names the file, the section or object, and the field.
-Used by the room file's models (:mod:`dtradar_data.scenes.indoor.document`), the city reader
-(:mod:`dtradar_data.scenes.city.reader`) and the XML scene reader (:mod:`dtradar_data.scenes.xml_scene`).
+Used by the room file's models (:mod:`dtradar_data.scenes.indoor.document`), the city file's models
+(:mod:`dtradar_data.scenes.city.document`) and the XML scene reader (:mod:`dtradar_data.scenes.xml_scene`).
 """
 
 from __future__ import annotations

@@ -9,7 +9,8 @@ from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.pipeline import static_build, tracing
 from dtradar_data.scenes import load_scene_spec
 from dtradar_data.scenes.city import reader as city_reader
-from dtradar_data.scenes.city.reader import city_file, city_spec, quadrant_grid, read_city_file
+from dtradar_data.scenes.city.document import read_city_file
+from dtradar_data.scenes.city.reader import city_file, city_spec, quadrant_grid
 
 
 @pytest.fixture()

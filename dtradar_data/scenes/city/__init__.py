@@ -3,6 +3,7 @@
 Modules, each importing only those below it (an import-linter contract in pyproject.toml):
 
 - :mod:`.reader` — city scene files (``dallas.toml``, ``houston.toml``) into one scene per quadrant;
+  :mod:`.document` — the shape of a city scene file (pydantic models) and its errors in the file's words;
 - :mod:`.sources` — :func:`~.sources.load_footprints`, the one entry point that dispatches on the footprint source;
   :mod:`.streets` — roads between buildings, the transmitter's and the vehicles' places;
 - :mod:`.packaged` — the packaged footprint files; :mod:`.osm` — ``.osm`` XML files and OpenStreetMap downloads

@@ -1,18 +1,10 @@
-"""Read a city scene file (TOML) into one :class:`~dtradar_data.scenes.model.SceneSpec` per quadrant and variant.
+"""Build the scenes of a city scene file: one :class:`~dtradar_data.scenes.model.SceneSpec` per quadrant and variant.
 
-A city is one file (``dallas.toml``, ``houston.toml`` beside this module are commented examples)::
-
-    format = 1
-    [scene]        name, title, description
-    [city]         nw_lat_lon, se_lat_lon, crs, footprints, [ground_material, surface_material, surface_height_m]
-    [grid]         cell_m
-    [robot]        rx_height_m, robot_height_m
-    [tx]           [num_rows, num_cols, pattern, polarization, power_dbm, clearance_m]
-    [rt]           [samples_per_src, max_num_paths_per_src]      (instead of the indoor RTSettings defaults)
-    [quadrants.qN] tx_m = [x, y, z]                      (N = 1..4; the paper's Tables III and IV)
-    [dynamic]      quadrant, seed, cars, buses, roads = [{name, from_m, to_m}, ...] or "auto"
-    [moving]       quadrant, description, [base, dt_s, horizon_s], [[moving.mover]] (vehicles driving along lanes:
-                   :mod:`dtradar_data.scenes.moving_section`; read only for the moving twin, :func:`city_moving_scene`)
+A city is one TOML file (``dallas.toml``, ``houston.toml`` beside this module are commented examples), parsed and
+validated into a :class:`~dtradar_data.scenes.city.document.CityDocument` by
+:func:`~dtradar_data.scenes.city.document.read_city_file` (its module lists the sections). Here a document becomes
+scenes: the built-in cities' catalogue, the footprints, each quadrant's grid, transmitter and objects
+(:func:`city_spec`), and the moving twin of the ``[moving]`` quadrant (:func:`city_moving_scene`).
 
 Each quadrant is its own dataset, ``<city>-qN/blueprint`` (and ``<city>-qN/dynamic`` for the dynamic quadrant): its
 grid covers the quadrant, the geometry is the whole city (buildings outside the quadrant still reflect), the
@@ -28,10 +20,9 @@ import functools
 import math
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any
 
-import tomllib
-from pydantic import BaseModel, BeforeValidator, Field, ValidationError
+from shapely.geometry import Polygon
 
 from dtradar_data.core import layout
 from dtradar_data.core.errors import (
@@ -42,6 +33,7 @@ from dtradar_data.core.errors import (
     unknown_name,
 )
 from dtradar_data.core.grid import Grid, too_many_cells
+from dtradar_data.scenes.city.document import CityDocument, CityDynamic, read_city_file
 from dtradar_data.scenes.city.footprints import CityFootprints, LonLatBox
 from dtradar_data.scenes.city.frame import local_extent
 from dtradar_data.scenes.city.sources import load_footprints
@@ -53,131 +45,12 @@ from dtradar_data.scenes.city.streets import (
     place_vehicles,
     quadrant_rect,
 )
-from dtradar_data.scenes.fields import (
-    Material,
-    Num,
-    Pos,
-    PosInt,
-    SceneFileModel,
-    SceneName,
-    Text,
-)
-from dtradar_data.scenes.model import (
-    PATTERNS,
-    POLARIZATIONS,
-    Box,
-    Prism,
-    SceneSpec,
-    TxSpec,
-)
+from dtradar_data.scenes.model import Box, Prism, SceneSpec, TxSpec
 from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MovingScene
 from dtradar_data.scenes.moving_section import moving_scene_from_section
-from dtradar_data.scenes.names import check_user_scene_name
 from dtradar_data.scenes.options import check_cell_m
 
-FORMAT = 1
 GROUND_THICKNESS_M = 0.2
-
-
-def _lat_lon(value: Any) -> tuple[float, float]:
-    if not (isinstance(value, list) and len(value) == 2 and all(isinstance(v, (int, float)) for v in value)):
-        raise ValueError(f"must be [lat, lon] in degrees, got {value!r}")
-    return float(value[0]), float(value[1])
-
-
-def _vec(n: int):
-    def check(value: Any) -> tuple[float, ...]:
-        if not (
-            isinstance(value, list)
-            and len(value) == n
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-        ):
-            raise ValueError(f"must be a list of {n} numbers, got {value!r}")
-        return tuple(float(v) for v in value)
-
-    return check
-
-
-LatLon = Annotated[tuple[float, float], BeforeValidator(_lat_lon)]
-Vec2 = Annotated[tuple[float, float], BeforeValidator(_vec(2))]
-Vec3 = Annotated[tuple[float, float, float], BeforeValidator(_vec(3))]
-
-
-class CitySceneMeta(SceneFileModel):
-    name: SceneName
-    title: Text
-    description: Text
-
-
-class CitySection(SceneFileModel):
-    nw_lat_lon: LatLon
-    se_lat_lon: LatLon
-    crs: Text
-    footprints: Text
-    ground_material: Material = "concrete"
-    surface_material: Material = "concrete"
-    surface_height_m: Pos = 0.02
-
-
-class CityGrid(SceneFileModel):
-    cell_m: Pos
-
-
-class CityRobot(SceneFileModel):
-    rx_height_m: Pos = 1.5
-    robot_height_m: Pos = 1.5
-
-
-class CityTx(SceneFileModel):
-    num_rows: PosInt = 8
-    num_cols: PosInt = 2
-    pattern: Literal[PATTERNS] = "tr38901"  # type: ignore[valid-type]
-    polarization: Literal[POLARIZATIONS] = "VH"  # type: ignore[valid-type]
-    power_dbm: Num = 0.0
-    clearance_m: Num = Field(default=3.0, ge=0)
-
-
-class CityRt(SceneFileModel):
-    """Ray-tracing settings the city needs instead of the (indoor) RTSettings defaults."""
-
-    samples_per_src: PosInt | None = None
-    max_num_paths_per_src: PosInt | None = None
-
-
-class Quadrant(SceneFileModel):
-    tx_m: Vec3
-
-
-class RoadModel(SceneFileModel):
-    name: Text
-    from_m: Vec2
-    to_m: Vec2
-
-
-class CityDynamic(SceneFileModel):
-    quadrant: Literal["q1", "q2", "q3", "q4"]
-    seed: int = 0
-    cars: int = Field(default=0, ge=0)
-    buses: int = Field(default=0, ge=0)
-    roads: list[RoadModel] | Literal["auto"] = "auto"
-
-
-class CityDocument(SceneFileModel):
-    format: Literal[1]
-    scene: CitySceneMeta
-    city: CitySection
-    grid: CityGrid
-    robot: CityRobot = CityRobot()
-    tx: CityTx = CityTx()
-    rt: CityRt = CityRt()
-    quadrants: dict[Literal["q1", "q2", "q3", "q4"], Quadrant]
-    dynamic: CityDynamic | None = None
-    moving: dict[str, Any] | None = None
-    """Checked only when the moving twin is read (:func:`city_moving_scene`), so it never touches the others."""
-
-    @property
-    def box(self) -> LonLatBox:
-        return LonLatBox.from_corners(self.city.nw_lat_lon, self.city.se_lat_lon)
 
 
 # ------------------------------------------------------------------------------------------- the catalogue
@@ -210,63 +83,7 @@ def split_quadrant_scene(scene: str) -> tuple[str, str] | None:
     return None
 
 
-# ------------------------------------------------------------------------------------------- reading
-def read_city_file(path: str | Path) -> CityDocument:
-    """Parse and validate a city scene file; :class:`SceneFileError` names the file, the section and the field."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as e:
-        raise SceneFileError(
-            f"{path}: cannot read city scene file ({getattr(e, 'strerror', None) or e})", hint="check the path"
-        ) from e
-    except tomllib.TOMLDecodeError as e:
-        raise SceneFileError(f"{path}: not valid TOML: {e}", hint="fix the syntax at the reported line") from e
-    doc = parse_city(data, origin=str(path))
-    check_user_scene_name(doc.scene.name, path, derived=tuple(f"{doc.scene.name}-{q}" for q in sorted(doc.quadrants)))
-    return doc
-
-
-def parse_city(data: dict[str, Any], *, origin: str = "<city>") -> CityDocument:
-    try:
-        return CityDocument.model_validate(data)
-    except ValidationError as exc:
-        errors = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")
-        e = errors[0]
-        loc = [str(p) for p in e["loc"] if not (isinstance(p, str) and ("[" in p or p.startswith("function")))]
-        where = f"[{'.'.join(loc[:-1])}]" if len(loc) > 1 else "top level"
-        field = loc[-1] if loc else "(document)"
-        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
-        if e["type"] == "extra_forbidden":
-            allowed = _allowed_keys(loc[:-1])
-            close = did_you_mean(field, allowed)
-            raise SceneFileError(
-                f"{origin}: {where}: unknown key {field!r}" + (f"; {close}" if close else "") + more,
-                hint="allowed keys: " + ", ".join(allowed),
-            ) from exc
-        if e["type"] == "missing":
-            raise SceneFileError(
-                f"{origin}: {where}: missing {'section' if len(loc) == 1 else 'field'} {field!r}" + more,
-                hint="see dtradar_data/scenes/city/dallas.toml for the expected form",
-            ) from exc
-        msg = e["msg"].removeprefix("Value error, ")
-        hint = e.get("ctx", {}).get("hint") or "see dtradar_data/scenes/city/dallas.toml for the expected form"
-        raise SceneFileError(f"{origin}: {where}: {field}: {msg}" + more, hint=hint) from exc
-
-
-def _allowed_keys(loc: list[str]) -> list[str]:
-    model: Any = CityDocument
-    for part in loc:
-        field = getattr(model, "model_fields", {}).get(part)
-        if field is None:
-            break
-        ann = field.annotation
-        model = next(
-            (a for a in getattr(ann, "__args__", (ann,)) if isinstance(a, type) and issubclass(a, BaseModel)), ann
-        )
-    return sorted(getattr(model, "model_fields", {}))
-
-
+# ------------------------------------------------------------------------------------------- building
 @functools.lru_cache(maxsize=8)
 def _footprints(source: str, box: LonLatBox, crs: str, data_root: str, scene: str) -> CityFootprints:
     # keyed on the data root too: an OpenStreetMap download is cached there
@@ -313,20 +130,7 @@ def city_spec(
 ) -> SceneSpec:
     """One quadrant of a city as a scene: ground plane, buildings, lots and roads, the quadrant's grid and TX."""
     scene = f"{doc.scene.name}-{quadrant}"
-    if variant == MOVING_VARIANT:
-        raise SceneFileError(
-            f"{scene}/{MOVING_VARIANT} is a moving twin, a series of scenes, not one",
-            hint="read it with city_moving_scene / load_city_moving (a MovingScene: spec_at(k) is snapshot k)",
-        )
-    if quadrant not in doc.quadrants:
-        raise unknown_name(f"quadrant of {doc.scene.name}", quadrant, sorted(doc.quadrants))
-    dyn = doc.dynamic
-    if variant == "dynamic" and (dyn is None or dyn.quadrant != quadrant):
-        has = f"{doc.scene.name}-{dyn.quadrant}/dynamic" if dyn else "none"
-        raise UnknownNameError(
-            f"{scene} has no dynamic twin (the dynamic twin of {doc.scene.name} is {has})",
-            hint=f"use {scene}/blueprint" + (f" or {has}" if dyn else ""),
-        )
+    _check_twin(doc, quadrant, variant, scene)
     hx, hy = local_extent(doc.box, doc.city.crs)
     # the grid first: a bad --cell-m fails before the footprints are read (or downloaded); 0 is a value, not "unset"
     grid = quadrant_grid(
@@ -335,57 +139,18 @@ def city_spec(
     fp = city_footprints(doc, footprints)
     area = quadrant_rect(quadrant, hx, hy)
     buildings = [f.polygon() for f in fp.of_kind("building")]
-
     paper = doc.quadrants[quadrant].tx_m
     tx_xy = place_transmitter(
         paper[:2], [b for b in buildings if b.intersects(area.buffer(50))], area, doc.tx.clearance_m
     )
-    gx0, gy0, gx1, gy1 = grid.bounds()
-    tx = TxSpec(
-        position_m=(tx_xy[0], tx_xy[1], paper[2]),
-        look_at_m=(round((gx0 + gx1) / 2, 3), round((gy0 + gy1) / 2, 3), doc.robot.rx_height_m),
-        num_rows=doc.tx.num_rows,
-        num_cols=doc.tx.num_cols,
-        pattern=doc.tx.pattern,
-        polarization=doc.tx.polarization,
-        power_dbm=doc.tx.power_dbm,
-    )
-
-    ground = Box(
-        name="ground",
-        kind="floor",
-        material=doc.city.ground_material,
-        x_m=0.0,
-        y_m=0.0,
-        width_m=round(2 * hx, 3),
-        length_m=round(2 * hy, 3),
-        height_m=GROUND_THICKNESS_M,
-        z_m=-GROUND_THICKNESS_M,
-    )
-    prisms = []
-    for f in fp.features:
-        if f.kind == "building":
-            prisms.append(Prism(f.name, "building", f.material, f.exterior, f.height_m, f.holes))
-        else:  # parking lots and roads: flat surfaces of their own material, below the robot's clearance
-            prisms.append(
-                Prism(f.name, f.kind, doc.city.surface_material, f.exterior, doc.city.surface_height_m, f.holes)
-            )
-    objects = [ground]
+    tx = _transmitter(doc, grid, (tx_xy[0], tx_xy[1], paper[2]))
+    objects = [_ground(doc, hx, hy)]
+    prisms = _prisms(doc, fp)
     provenance: dict[str, Any] = {
         "city": doc.scene.name,
         "quadrant": quadrant,
         "quadrant_rect_m": list(area.bounds),
-        "footprints": {
-            "source": fp.source,
-            "licence": fp.licence,
-            "attribution": fp.attribution,
-            "retrieved_utc": fp.retrieved_utc,
-            "crs": fp.crs,
-            "box": fp.box.to_dict(),
-            "counts": fp.counts(),
-            "content_hash": fp.content_hash(),
-            "report": fp.report,
-        },
+        "footprints": _footprints_provenance(fp),
         "tx": {
             "paper_m": list(paper),
             "placed_m": list(tx.position_m),
@@ -395,23 +160,9 @@ def city_spec(
     }
     description = doc.scene.description
     if variant == "dynamic":
-        roads = (
-            [Road(r.name, r.from_m, r.to_m) for r in dyn.roads]
-            if dyn.roads != "auto"
-            else find_roads([b for b in buildings if b.intersects(area)], area)
-        )
-        vehicles = place_vehicles(roads, {"bus": dyn.buses, "car": dyn.cars}, dyn.seed, buildings, area)
+        vehicles, provenance["dynamic"], more = _dynamic_vehicles(doc.dynamic, buildings, area)
         objects += vehicles
-        provenance["dynamic"] = {
-            "seed": dyn.seed,
-            "roads": [r.to_dict() for r in roads],
-            "roads_from": "auto" if dyn.roads == "auto" else "scene file",
-            "vehicles": {"car": dyn.cars, "bus": dyn.buses},
-        }
-        description += (
-            f" Dynamic twin: {dyn.cars} cars (Sionna's low-poly car mesh) and {dyn.buses} buses (metal "
-            f"boxes) on {len(roads)} roads, placed with seed {dyn.seed}."
-        )
+        description += more
     q = quadrant.upper()
     return SceneSpec(
         scene=scene,
@@ -431,6 +182,106 @@ def city_spec(
         provenance=provenance,
         rt_defaults=doc.rt.model_dump(exclude_none=True),
     )
+
+
+def _check_twin(doc: CityDocument, quadrant: str, variant: str, scene: str) -> None:
+    """Refuse a moving twin (a series of scenes), a quadrant the city has not, a dynamic twin of another quadrant."""
+    if variant == MOVING_VARIANT:
+        raise SceneFileError(
+            f"{scene}/{MOVING_VARIANT} is a moving twin, a series of scenes, not one",
+            hint="read it with city_moving_scene / load_city_moving (a MovingScene: spec_at(k) is snapshot k)",
+        )
+    if quadrant not in doc.quadrants:
+        raise unknown_name(f"quadrant of {doc.scene.name}", quadrant, sorted(doc.quadrants))
+    dyn = doc.dynamic
+    if variant == "dynamic" and (dyn is None or dyn.quadrant != quadrant):
+        has = f"{doc.scene.name}-{dyn.quadrant}/dynamic" if dyn else "none"
+        raise UnknownNameError(
+            f"{scene} has no dynamic twin (the dynamic twin of {doc.scene.name} is {has})",
+            hint=f"use {scene}/blueprint" + (f" or {has}" if dyn else ""),
+        )
+
+
+def _transmitter(doc: CityDocument, grid: Grid, position_m: tuple[float, float, float]) -> TxSpec:
+    """The file's transmitter array at ``position_m`` (placed clear of the buildings), looking at the grid's centre
+    at the receivers' height."""
+    gx0, gy0, gx1, gy1 = grid.bounds()
+    return TxSpec(
+        position_m=position_m,
+        look_at_m=(round((gx0 + gx1) / 2, 3), round((gy0 + gy1) / 2, 3), doc.robot.rx_height_m),
+        num_rows=doc.tx.num_rows,
+        num_cols=doc.tx.num_cols,
+        pattern=doc.tx.pattern,
+        polarization=doc.tx.polarization,
+        power_dbm=doc.tx.power_dbm,
+    )
+
+
+def _ground(doc: CityDocument, hx: float, hy: float) -> Box:
+    """The ground plane under the whole city, its top at z = 0."""
+    return Box(
+        name="ground",
+        kind="floor",
+        material=doc.city.ground_material,
+        x_m=0.0,
+        y_m=0.0,
+        width_m=round(2 * hx, 3),
+        length_m=round(2 * hy, 3),
+        height_m=GROUND_THICKNESS_M,
+        z_m=-GROUND_THICKNESS_M,
+    )
+
+
+def _prisms(doc: CityDocument, fp: CityFootprints) -> list[Prism]:
+    """Every footprint as a prism: buildings at their height and material, lots and roads as thin surfaces."""
+    prisms = []
+    for f in fp.features:
+        if f.kind == "building":
+            prisms.append(Prism(f.name, "building", f.material, f.exterior, f.height_m, f.holes))
+        else:  # parking lots and roads: flat surfaces of their own material, below the robot's clearance
+            prisms.append(
+                Prism(f.name, f.kind, doc.city.surface_material, f.exterior, doc.city.surface_height_m, f.holes)
+            )
+    return prisms
+
+
+def _footprints_provenance(fp: CityFootprints) -> dict[str, Any]:
+    """Where the footprints came from, under which licence, and what they hold."""
+    return {
+        "source": fp.source,
+        "licence": fp.licence,
+        "attribution": fp.attribution,
+        "retrieved_utc": fp.retrieved_utc,
+        "crs": fp.crs,
+        "box": fp.box.to_dict(),
+        "counts": fp.counts(),
+        "content_hash": fp.content_hash(),
+        "report": fp.report,
+    }
+
+
+def _dynamic_vehicles(
+    dyn: CityDynamic, buildings: list[Polygon], area: Polygon
+) -> tuple[list[Box], dict[str, Any], str]:
+    """The dynamic twin's vehicles on its roads (the file's, or found between the buildings), their provenance and
+    the sentence the scene's description gains."""
+    roads = (
+        [Road(r.name, r.from_m, r.to_m) for r in dyn.roads]
+        if dyn.roads != "auto"
+        else find_roads([b for b in buildings if b.intersects(area)], area)
+    )
+    vehicles = place_vehicles(roads, {"bus": dyn.buses, "car": dyn.cars}, dyn.seed, buildings, area)
+    provenance = {
+        "seed": dyn.seed,
+        "roads": [r.to_dict() for r in roads],
+        "roads_from": "auto" if dyn.roads == "auto" else "scene file",
+        "vehicles": {"car": dyn.cars, "bus": dyn.buses},
+    }
+    description = (
+        f" Dynamic twin: {dyn.cars} cars (Sionna's low-poly car mesh) and {dyn.buses} buses (metal "
+        f"boxes) on {len(roads)} roads, placed with seed {dyn.seed}."
+    )
+    return vehicles, provenance, description
 
 
 def load_city_spec(

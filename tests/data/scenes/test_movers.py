@@ -12,7 +12,8 @@ import tomllib
 
 from dtradar_data.core.errors import InvalidSettingError, SceneFileError, UnknownNameError
 from dtradar_data.scenes import build_targets, load_moving_scene, load_scene_spec, scene_file
-from dtradar_data.scenes.city.reader import city_file, city_moving_scene, parse_city
+from dtradar_data.scenes.city.document import parse_city
+from dtradar_data.scenes.city.reader import city_file, city_moving_scene
 from dtradar_data.scenes.indoor.reader import parse_moving_room, parse_room
 from dtradar_data.scenes.model import Box, SceneSpec
 from dtradar_data.scenes.mover import MOVER_MESHES, Mover

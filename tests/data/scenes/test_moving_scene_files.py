@@ -9,7 +9,8 @@ import pytest
 
 from dtradar_data.core.errors import SceneFileError, UnknownNameError
 from dtradar_data.scenes import build_targets, load_moving_scene, load_scene_spec
-from dtradar_data.scenes.city.reader import city_file, city_moving_scene, city_spec, read_city_file
+from dtradar_data.scenes.city.document import read_city_file
+from dtradar_data.scenes.city.reader import city_file, city_moving_scene, city_spec
 from dtradar_data.scenes.moving_scene import MAX_SNAPSHOTS, ROBOT_SPEED_MPS, MovingScene
 
 # Computed with the code before movers existed (commit 242fba3): the [moving] sections must not change a byte of the

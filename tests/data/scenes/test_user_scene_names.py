@@ -10,7 +10,8 @@ from dtradar_data import cli
 from dtradar_data.core.errors import SceneFileError
 from dtradar_data.pipeline import static_build, tracing
 from dtradar_data.scenes import load_scene_spec, scene_file, xml_scene
-from dtradar_data.scenes.city.reader import city_file, read_city_file
+from dtradar_data.scenes.city.document import read_city_file
+from dtradar_data.scenes.city.reader import city_file
 from dtradar_data.scenes.names import reserved_because
 
 RESERVED = ["cubicle", "meeting", "dallas", "houston", "dallas-q3", "houston-q1", "sionna-munich", "sionna-mine"]

@@ -13,7 +13,8 @@ from shapely.geometry import Point, Polygon
 from dtradar_data.core.errors import SceneFileError, UnknownNameError
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.scenes import available_scenes, build_targets, load_scene_spec
-from dtradar_data.scenes.city.reader import city_file, city_spec, parse_city
+from dtradar_data.scenes.city.document import parse_city
+from dtradar_data.scenes.city.reader import city_file, city_spec
 from dtradar_data.scenes.city.streets import Road, find_roads, place_vehicles, quadrant_rect
 
 QUADRANTS = ("q1", "q2", "q3", "q4")
