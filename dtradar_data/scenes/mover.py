@@ -75,6 +75,12 @@ class Mover:
             raise SceneFileError(
                 f"a mover has no name ({name!r})", hint="give every mover a unique name, e.g. 'walker_01'"
             )
+        self._check_fields()
+        self._check_waypoints()
+
+    def _check_fields(self) -> None:
+        """Names, material, sizes, speed, start offset, mode and mesh."""
+        name = self.name
         for key in ("kind", "material"):
             if not isinstance(getattr(self, key), str) or not getattr(self, key):
                 raise mover_error(
@@ -112,6 +118,11 @@ class Mover:
                 f"mesh {self.mesh!r} is not a bundled mesh" + (f"; {close}" if close else ""),
                 "use one of: " + ", ".join(MOVER_MESHES) + ", or drop mesh to draw the box itself",
             )
+
+    def _check_waypoints(self) -> None:
+        """At least two points ``[x, y]``, stored as float pairs; no point repeated next to itself, and no loop that
+        repeats its first point at the end."""
+        name = self.name
         points = self.waypoints
         if not isinstance(points, (list, tuple)) or len(points) < 2:
             count = len(points) if isinstance(points, (list, tuple)) else points
