@@ -37,6 +37,11 @@ large-margin loss towards the twin's breadth-first shortest moves is added to it
 :mod:`dtradar_rl.experiments.adapt` fine-tunes with). Checkpoints carry the config and the
 feature normaliser; ``last.pt`` also carries optimiser, replay buffer and random states, so ``resume=True``
 continues a run exactly where it stopped.
+
+:func:`train` reads as these steps, each a function below it in that order: the set-up (:func:`_set_up`: the twin,
+the env, the networks, a resumed state), the loop (:func:`_training_loop`: :func:`_act`, :func:`_step`,
+:func:`_update`, then :func:`_checkpoint_and_log`) and the final saves (:func:`_finish`). What they share is a
+:class:`~dtradar_rl.train.run_state.RunState`, which is also what ``last.pt`` saves and a resumed run restores.
 """
 
 from __future__ import annotations
@@ -57,24 +62,18 @@ from torch import nn
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import open_atomic, write_atomic
-from dtradar_rl.agents.checkpoints import (
-    CHECKPOINT_FORMAT,
-    TRAINING_STATE,
-    CheckpointError,
-    save_checkpoint,
-    save_torch_atomic,
-    twin_record,
-    write_config,
-)
+from dtradar_rl.agents.checkpoints import save_checkpoint, twin_record, write_config
 from dtradar_rl.agents.policy import QNetwork
+from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import batched_env
 from dtradar_rl.task.observations import Normalizer
-from dtradar_rl.task.pairs import training_pair
+from dtradar_rl.task.pairs import ResolvedPair, training_pair
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import check_resumed_twin, check_run_folder
 from dtradar_rl.train.config import DQNConfig
 from dtradar_rl.train.replay import ReplayBuffer
+from dtradar_rl.train.run_state import RunState, restore_training_state, save_training_state
 from dtradar_rl.viz.plots import plot_curves
 
 
@@ -116,7 +115,18 @@ def train(
     stops training by returning True."""
     cfg = config.validate()
     t_start = time.perf_counter()
-    callback_s = 0.0
+    run = _set_up(cfg, dataset, init, normalizer)
+    callback_s = _training_loop(run, callback, t_start)
+    wall = time.perf_counter() - t_start - callback_s
+    return _finish(run, wall)
+
+
+# -- set-up ----------------------------------------------------------------------------------------------------------
+def _set_up(
+    cfg: DQNConfig, dataset: Dataset | None, init: dict[str, Any] | None, normalizer: Normalizer | None
+) -> RunState:
+    """Everything before the first step: torch's threads and seed, the run folder's checks, the twin, the env, the
+    networks, the optimiser and the buffer, every robot reset; a resumed run's state; then ``config.json``."""
     torch.set_num_threads(cfg.threads or auto_threads())
     torch.set_flush_denormal(True)  # tiny Adam moments otherwise slow every CPU update down several-fold
     torch.manual_seed(cfg.seed)
@@ -127,10 +137,54 @@ def train(
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
     if resumed is not None:
         check_resumed_twin(resumed, ds, out)
-    threads = {"threads": torch.get_num_threads(), "threads_setting": cfg.threads}  # the reproducibility record
+    threads = {"threads": torch.get_num_threads(), "threads_setting": cfg.threads}
     normalizer = normalizer or Normalizer.fit(ds)
     pair = training_pair(cfg, ds)
-    env = batched_env(
+    env = _make_env(cfg, ds, normalizer, pair, device)
+    q = QNetwork(env.obs_dim, cfg.hidden).to(device)
+    if init is not None:
+        q.load_state_dict(init)
+    q_target = copy.deepcopy(q)
+    optimizer = torch.optim.Adam(q.parameters(), lr=cfg.lr, foreach=True)
+    buffer = ReplayBuffer(min(cfg.buffer_size, max(cfg.total_env_steps, cfg.batch_size)), env.obs_dim, device)
+    gen = torch.Generator(device=device)
+    gen.manual_seed(cfg.seed + 1)
+    n = cfg.num_envs
+    run = RunState(
+        cfg=cfg,
+        out=out,
+        ds=ds,
+        normalizer=normalizer,
+        pair=pair,
+        env=env,
+        q=q,
+        q_target=q_target,
+        optimizer=optimizer,
+        buffer=buffer,
+        gen=gen,
+        threads=threads,
+        device=device,
+        ep_reward=torch.zeros(n, device=device),
+        ep_collisions=torch.zeros(n, dtype=torch.long, device=device),
+    )
+    run.reset_where(torch.ones(n, dtype=torch.bool, device=device))
+    if pair and cfg.verbose:
+        print(
+            f"pair ({pair.source}): start {pair.start} -> target {pair.target}, shortest {pair.shortest} steps, "
+            f"episode cap {env.max_steps}"
+        )
+    if resumed is not None:
+        restore_training_state(run, resumed)
+    # Only now, every check passed and the state loaded: a refused or failed start leaves the folder as it was.
+    write_config(cfg, out)
+    return run
+
+
+def _make_env(
+    cfg: DQNConfig, ds: Dataset, normalizer: Normalizer, pair: ResolvedPair | None, device: torch.device
+) -> BatchedNavEnv:
+    """The batched environment of ``cfg`` on ``ds`` (the memory env when the config has memory)."""
+    return batched_env(
         ds,
         cfg.num_envs,
         memory_radius=cfg.memory_radius,
@@ -148,190 +202,166 @@ def train(
         aug_potential=cfg.aug_potential,
         noise=cfg.noise,
     )
-    q = QNetwork(env.obs_dim, cfg.hidden).to(device)
-    if init is not None:
-        q.load_state_dict(init)
-    q_target = copy.deepcopy(q)
-    optimizer = torch.optim.Adam(q.parameters(), lr=cfg.lr, foreach=True)
-    buffer = ReplayBuffer(min(cfg.buffer_size, max(cfg.total_env_steps, cfg.batch_size)), env.obs_dim, device)
-    gen = torch.Generator(device=device)
-    gen.manual_seed(cfg.seed + 1)
 
-    n = cfg.num_envs
-    env_steps = updates = 0
-    episodes: list[tuple] = []  # (episode, env_step, reward, steps, collisions, success)
-    ep_reward = torch.zeros(n, device=device)
-    ep_collisions = torch.zeros(n, dtype=torch.long, device=device)
-    pair_cells = pair.cells(ds.shape[1]) if pair else None
 
-    def reset_where(mask: torch.Tensor) -> None:
-        k = int(mask.sum())
-        if pair_cells is None:
-            env.reset_where(mask)
-        else:
-            env.reset_where(mask, starts=[pair_cells[0]] * k, targets=[pair_cells[1]] * k)
-
-    reset_where(torch.ones(n, dtype=torch.bool, device=device))
-    if pair and cfg.verbose:
-        print(
-            f"pair ({pair.source}): start {pair.start} -> target {pair.target}, shortest {pair.shortest} steps, "
-            f"episode cap {env.max_steps}"
-        )
-    if resumed is not None:
-        state = resumed
-        try:
-            q.load_state_dict(state["q"])
-            q_target.load_state_dict(state["q_target"])
-            optimizer.load_state_dict(state["optimizer"])
-            if "replay" in state:
-                buffer.load_state_dict(state["replay"])
-            env_steps, updates, episodes = state["env_steps"], state["updates"], [tuple(e) for e in state["episodes"]]
-            gen.set_state(state["gen"].cpu())
-            env.gen.set_state(state["env_gen"].cpu())
-            if "env_noise_gen" in state:
-                env.noise_gen.set_state(state["env_noise_gen"].cpu())
-            for k in env.state_keys:
-                setattr(env, k, state["env"][k].to(device))
-            ep_reward, ep_collisions = state["ep_reward"].to(device), state["ep_collisions"].to(device)
-        except (KeyError, TypeError, ValueError, RuntimeError) as e:  # the family check lets none of these through
-            raise CheckpointError(
-                f"{out / 'last.pt'} does not fit this run ({type(e).__name__}: {e})",
-                hint=f"pick another --out, or train again without --resume (it replaces the run in {out})",
-            ) from e
-        if cfg.verbose:
-            print(f"resumed from {out / 'last.pt'} at {env_steps} env steps, {updates} updates")
-    # Only now, every check passed and the state loaded: a refused or failed start leaves the folder as it was.
-    write_config(cfg, out)
-
-    def save_last():
-        state = {
-            "format": CHECKPOINT_FORMAT,
-            "kind": TRAINING_STATE,
-            "config": json.dumps(cfg.to_dict()),
-            "dataset": twin_record(ds),
-            "stats": threads,
-            "q": q.state_dict(),
-            "q_target": q_target.state_dict(),
-            "optimizer": optimizer.state_dict(),
-            "env_steps": env_steps,
-            "updates": updates,
-            "episodes": episodes,
-            "gen": gen.get_state(),
-            "env_gen": env.gen.get_state(),
-            "env_noise_gen": env.noise_gen.get_state(),
-            "env": {k: getattr(env, k) for k in env.state_keys},
-            "ep_reward": ep_reward,
-            "ep_collisions": ep_collisions,
-            "normalizer": normalizer.to_dict(),
-        }
-        if cfg.save_replay:
-            state["replay"] = buffer.state_dict()
-        save_torch_atomic(state, out / "last.pt")
-
-    obs = env.observe()
+# -- the loop --------------------------------------------------------------------------------------------------------
+def _training_loop(run: RunState, callback: Callable[..., bool] | None, t_start: float) -> float:
+    """Act, step, update, then the callback, checkpoints and progress, until the step budget (or the episode budget)
+    is spent or the callback stops it; returns the seconds the callback took."""
+    cfg = run.cfg
+    obs = run.env.observe()
     t_loop = time.perf_counter()  # the callback's clock starts here: loading and env tables are set-up, not training
-    next_checkpoint = (env_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every if cfg.checkpoint_every else None
-    next_log = env_steps + cfg.total_env_steps // 10
-    # With an episode budget (the paper's protocol) the step backstop says nothing about progress: log by episodes.
-    log_every_ep = max(1, cfg.episodes // 25) if cfg.episodes else 0
-    next_log_ep = log_every_ep
-    while env_steps < cfg.total_env_steps and not (cfg.episodes and len(episodes) >= cfg.episodes):
-        # 1. act epsilon-greedily
-        eps = epsilon(cfg, env_steps)
-        with torch.no_grad():
-            greedy = q(obs).argmax(1)
-        explore = torch.rand(n, generator=gen, device=device) < eps
-        random_actions = torch.randint(4, (n,), generator=gen, device=device)
-        actions = torch.where(explore, random_actions, greedy)
-
-        # 2. step every robot, store the transitions (truncation is not termination: bootstrap through it)
-        expert = env.shortest_moves() if cfg.expert_weight > 0 else None
-        next_obs, reward, terminated, truncated, info = env.step(actions)
-        buffer.add(obs, actions, reward, next_obs, terminated, expert)
-        env_steps += n
-
-        # 3. book-keeping of finished episodes, then reset them
-        ep_reward += reward
-        ep_collisions += info["collision"].long()
-        done = terminated | truncated
-        if done.any():
-            for i in torch.nonzero(done, as_tuple=True)[0].tolist():
-                episodes.append(
-                    (
-                        len(episodes),
-                        env_steps,
-                        float(ep_reward[i]),
-                        int(info["steps"][i]),
-                        int(ep_collisions[i]),
-                        bool(terminated[i]),
-                    )
-                )
-            ep_reward[done], ep_collisions[done] = 0.0, 0
-            reset_where(done)
-        obs = env.observe()
-
-        # 4. gradient updates owed for the steps collected so far
-        owed = (env_steps - cfg.learning_starts) // cfg.env_steps_per_update if env_steps >= cfg.learning_starts else 0
-        while updates < owed:
-            b_obs, b_act, b_rew, b_next, b_term, b_expert = buffer.sample(cfg.batch_size, gen)
-            with torch.no_grad():
-                next_q = q_target(b_next)
-                if cfg.double_dqn:
-                    next_v = next_q.gather(1, q(b_next).argmax(1, keepdim=True)).squeeze(1)
-                else:
-                    next_v = next_q.max(1).values
-                td_target = b_rew + cfg.gamma * (1.0 - b_term) * next_v
-            q_all = q(b_obs)
-            q_sa = q_all.gather(1, b_act[:, None]).squeeze(1)
-            loss = F.smooth_l1_loss(q_sa, td_target)  # Huber
-            if cfg.expert_weight > 0:
-                loss = loss + cfg.expert_weight * expert_margin_loss(q_all, b_expert, cfg.expert_margin)
-            if cfg.lr_end >= 0:
-                for group in optimizer.param_groups:
-                    group["lr"] = cfg.lr + min(1.0, env_steps / cfg.total_env_steps) * (cfg.lr_end - cfg.lr)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            if cfg.max_grad_norm > 0:
-                nn.utils.clip_grad_norm_(q.parameters(), cfg.max_grad_norm)
-            optimizer.step()
-            updates += 1
-            if updates % cfg.target_update_every == 0:
-                q_target.load_state_dict(q.state_dict())
-
+    callback_s = 0.0
+    schedule = _Schedule.after(cfg, run.env_steps)
+    while run.env_steps < cfg.total_env_steps and not (cfg.episodes and len(run.episodes) >= cfg.episodes):
+        eps = epsilon(cfg, run.env_steps)
+        actions = _act(run, obs, eps)
+        obs = _step(run, obs, actions)
+        _update(run)
         if callback is not None:
             t_cb = time.perf_counter()
-            stop = callback(q, env_steps, t_cb - t_loop - callback_s)
+            stop = callback(run.q, run.env_steps, t_cb - t_loop - callback_s)
             callback_s += time.perf_counter() - t_cb
             if stop:
                 break
-        if next_checkpoint is not None and env_steps >= next_checkpoint:
-            save_last()
-            next_checkpoint += cfg.checkpoint_every
-        if cfg.verbose and (len(episodes) >= next_log_ep if log_every_ep else env_steps >= next_log):
-            s = _summary(episodes)
-            print(
-                f"[{time.perf_counter() - t_start:6.1f}s] steps {env_steps:>8d}  updates {updates:>6d}  "
-                f"episodes {len(episodes):>6d}  eps {eps:.3f}  success {s.get('success_rate', 0):.3f}  "
-                f"collisions/ep {s.get('collisions', 0):.2f}"
-            )
-            next_log += cfg.total_env_steps // 10
-            next_log_ep += log_every_ep
+        _checkpoint_and_log(run, schedule, eps, t_start)
+    return callback_s
 
-    wall = time.perf_counter() - t_start - callback_s
-    save_last()
+
+def _act(run: RunState, obs: torch.Tensor, eps: float) -> torch.Tensor:
+    """Every robot's action, epsilon-greedy on the Q-network."""
+    n, device = run.cfg.num_envs, run.device
+    with torch.no_grad():
+        greedy = run.q(obs).argmax(1)
+    explore = torch.rand(n, generator=run.gen, device=device) < eps
+    random_actions = torch.randint(4, (n,), generator=run.gen, device=device)
+    return torch.where(explore, random_actions, greedy)
+
+
+def _step(run: RunState, obs: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """Step every robot and store the transitions (truncation is not termination: bootstrap through it); record the
+    finished episodes and reset them. Returns the next observations."""
+    env = run.env
+    expert = env.shortest_moves() if run.cfg.expert_weight > 0 else None
+    next_obs, reward, terminated, truncated, info = env.step(actions)
+    run.buffer.add(obs, actions, reward, next_obs, terminated, expert)
+    run.env_steps += run.cfg.num_envs
+    run.ep_reward += reward
+    run.ep_collisions += info["collision"].long()
+    done = terminated | truncated
+    if done.any():
+        for i in torch.nonzero(done, as_tuple=True)[0].tolist():
+            run.episodes.append(
+                (
+                    len(run.episodes),
+                    run.env_steps,
+                    float(run.ep_reward[i]),
+                    int(info["steps"][i]),
+                    int(run.ep_collisions[i]),
+                    bool(terminated[i]),
+                )
+            )
+        run.ep_reward[done], run.ep_collisions[done] = 0.0, 0
+        run.reset_where(done)
+    return env.observe()
+
+
+def _update(run: RunState) -> None:
+    """The gradient updates owed for the steps collected so far: one Huber-loss (Double) DQN update on a random
+    minibatch each, DQfD's margin loss added with ``expert_weight`` > 0, the target network copied every
+    ``target_update_every`` updates."""
+    cfg, q, optimizer = run.cfg, run.q, run.optimizer
+    owed = (
+        (run.env_steps - cfg.learning_starts) // cfg.env_steps_per_update if run.env_steps >= cfg.learning_starts else 0
+    )
+    while run.updates < owed:
+        b_obs, b_act, b_rew, b_next, b_term, b_expert = run.buffer.sample(cfg.batch_size, run.gen)
+        with torch.no_grad():
+            next_q = run.q_target(b_next)
+            if cfg.double_dqn:
+                next_v = next_q.gather(1, q(b_next).argmax(1, keepdim=True)).squeeze(1)
+            else:
+                next_v = next_q.max(1).values
+            td_target = b_rew + cfg.gamma * (1.0 - b_term) * next_v
+        q_all = q(b_obs)
+        q_sa = q_all.gather(1, b_act[:, None]).squeeze(1)
+        loss = F.smooth_l1_loss(q_sa, td_target)  # Huber
+        if cfg.expert_weight > 0:
+            loss = loss + cfg.expert_weight * expert_margin_loss(q_all, b_expert, cfg.expert_margin)
+        if cfg.lr_end >= 0:
+            for group in optimizer.param_groups:
+                group["lr"] = cfg.lr + min(1.0, run.env_steps / cfg.total_env_steps) * (cfg.lr_end - cfg.lr)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        if cfg.max_grad_norm > 0:
+            nn.utils.clip_grad_norm_(q.parameters(), cfg.max_grad_norm)
+        optimizer.step()
+        run.updates += 1
+        if run.updates % cfg.target_update_every == 0:
+            run.q_target.load_state_dict(q.state_dict())
+
+
+# -- checkpoints and progress ----------------------------------------------------------------------------------------
+@dataclass
+class _Schedule:
+    """When the loop next saves ``last.pt`` (None: never) and next prints its progress."""
+
+    next_checkpoint: int | None
+    next_log: int
+    #: With an episode budget (the paper's protocol) the step backstop says nothing about progress: log by episodes.
+    log_every_ep: int
+    next_log_ep: int
+
+    @classmethod
+    def after(cls, cfg: DQNConfig, env_steps: int) -> _Schedule:
+        """The schedule of a loop that starts at ``env_steps`` (0, or where a resumed run stopped)."""
+        every = cfg.checkpoint_every
+        log_every_ep = max(1, cfg.episodes // 25) if cfg.episodes else 0
+        return cls(
+            next_checkpoint=(env_steps // every + 1) * every if every else None,
+            next_log=env_steps + cfg.total_env_steps // 10,
+            log_every_ep=log_every_ep,
+            next_log_ep=log_every_ep,
+        )
+
+
+def _checkpoint_and_log(run: RunState, schedule: _Schedule, eps: float, t_start: float) -> None:
+    """Save ``last.pt`` and print the progress when the schedule says so."""
+    cfg = run.cfg
+    if schedule.next_checkpoint is not None and run.env_steps >= schedule.next_checkpoint:
+        save_training_state(run)
+        schedule.next_checkpoint += cfg.checkpoint_every
+    log_due = len(run.episodes) >= schedule.next_log_ep if schedule.log_every_ep else run.env_steps >= schedule.next_log
+    if cfg.verbose and log_due:
+        s = _summary(run.episodes)
+        print(
+            f"[{time.perf_counter() - t_start:6.1f}s] steps {run.env_steps:>8d}  updates {run.updates:>6d}  "
+            f"episodes {len(run.episodes):>6d}  eps {eps:.3f}  success {s.get('success_rate', 0):.3f}  "
+            f"collisions/ep {s.get('collisions', 0):.2f}"
+        )
+        schedule.next_log += cfg.total_env_steps // 10
+        schedule.next_log_ep += schedule.log_every_ep
+
+
+# -- the end ---------------------------------------------------------------------------------------------------------
+def _finish(run: RunState, wall: float) -> TrainResult:
+    """The final saves: ``last.pt``, the policy checkpoint ``model.pt``, the curves and ``run.json``."""
+    save_training_state(run)
+    out, env, pair = run.out, run.env, run.pair
     ckpt = out / "model.pt"
     stats = {
-        "env_steps": env_steps,
-        "updates": updates,
-        "episodes": len(episodes),
+        "env_steps": run.env_steps,
+        "updates": run.updates,
+        "episodes": len(run.episodes),
         "wall_s": wall,
-        **threads,
+        **run.threads,
         **({"pair": pair.to_dict()} if pair else {}),
     }
-    save_checkpoint(ckpt, q, cfg, normalizer, getattr(env, "obs_names", env.obs_table.names), ds, stats=stats)
-    write_curves(episodes, out)
-    write_run_record(out, ds, stats)
-    return TrainResult(ckpt, out, env_steps, updates, len(episodes), wall, _summary(episodes))
+    obs_names = getattr(env, "obs_names", env.obs_table.names)
+    save_checkpoint(ckpt, run.q, run.cfg, run.normalizer, obs_names, run.ds, stats=stats)
+    write_curves(run.episodes, out)
+    write_run_record(out, run.ds, stats)
+    return TrainResult(ckpt, out, run.env_steps, run.updates, len(run.episodes), wall, _summary(run.episodes))
 
 
 def write_run_record(out: Path, ds: Dataset, stats: dict[str, Any]) -> Path:
