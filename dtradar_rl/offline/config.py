@@ -43,7 +43,7 @@ class OfflineConfig(BehaviourConfig):
     """d3rlpy algorithm: cql (DiscreteCQL), bcq (DiscreteBCQ), bc (DiscreteBC), dqn (DQN, offline), ddqn
     (DoubleDQN, offline), nfq (NFQ: fitted Q, no target network)"""
     reward: str = "geodesic"
-    """reward logged with each transition: paper, scaled, euclidean or geodesic (see dtradar_rl.task.mdp)"""
+    """reward logged with each transition: paper, scaled, euclidean or geodesic (see dtradar_rl.task.rewards)"""
     transitions: int = 100_000
     """environment steps to log when no --logged dataset is given (all robots together; rounded up to whole steps of
     num-envs robots): the log is the stored dataset <scene>/<variant>/<behaviour>, reused when one with the same

@@ -5,7 +5,7 @@ the number of times it was logged, ``n(s, a)``, and the cell it led to (the next
 target when the step ended the episode by reaching it; a step cut by truncation tells nothing). Moves on a twin are
 deterministic, so one visit shows a (cell, action) exactly; the model is checked to never see two successors. What
 the model does not know is every (cell, action) that was never logged. The reward is the twin's documented reward
-function of (cell, action, target) (:func:`~dtradar_rl.task.mdp.reward_fn`), known for *every* target: a transition
+function of (cell, action, target) (:func:`~dtradar_rl.task.rewards.reward_fn`), known for *every* target: a transition
 logged for one target teaches the move for all of them, the hindsight relabelling of goal-conditioned RL, exact here.
 
 The learners (one file, read top to bottom; the settings in :class:`BatchConfig`), solved for many targets at once:

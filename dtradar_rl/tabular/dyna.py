@@ -76,7 +76,7 @@ class DynaConfig(QLearningConfig):
 
 def rewards_for(env: BatchedNavEnv, cell: torch.Tensor, nxt: torch.Tensor, collided: torch.Tensor, rows: torch.Tensor):
     """``float32[m, k]``: the env's reward of the moves ``cell -> nxt`` (``m``, with ``collided``) towards each target
-    of its pool rows ``rows`` (``k``): :func:`~dtradar_rl.task.mdp.reward_fn` with the env's own distance tables."""
+    of its pool rows ``rows`` (``k``): :func:`~dtradar_rl.task.rewards.reward_fn` with the env's own distance tables."""
     target = env.pool[rows][None, :]  # [1, k]
     cell, nxt, collided = cell[:, None], nxt[:, None], collided[:, None]
     dx, dy = env.ix[target] - env.ix[nxt], env.iy[target] - env.iy[nxt]

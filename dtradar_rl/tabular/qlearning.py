@@ -79,7 +79,7 @@ class QLearningConfig(JobConfig):
     revision: str | None = None
     """dataset version tag or hash (default: the newest)"""
     reward: str = "geodesic"
-    """reward: paper (exact), scaled, euclidean or geodesic (shaped; see dtradar_rl.task.mdp), as the DQN's"""
+    """reward: paper (exact), scaled, euclidean or geodesic (shaped; see dtradar_rl.task.rewards), as the DQN's"""
     max_steps: int = 0
     """episode step limit (truncation); 0 = 4 * (nx + ny)"""
     num_envs: int = 256

@@ -1,8 +1,8 @@
 """The exact solution of a static twin: V* and Q* for every (cell, target), by value iteration over all targets at once.
 
 The navigation MDP is a lookup table: states are free cells, moves are deterministic
-(:class:`~dtradar_rl.task.mdp.GridMDP`), an episode ends on reaching the target, and every reward of
-:data:`~dtradar_rl.task.mdp.REWARDS` is a function of (cell, action, target). So the goal-conditioned MDP is a finite
+(:class:`~dtradar_rl.task.grid_mdp.GridMDP`), an episode ends on reaching the target, and every reward of
+:data:`~dtradar_rl.task.rewards.REWARDS` is a function of (cell, action, target). So the goal-conditioned MDP is a finite
 one per target, and Bellman's equation ``V(s) = max_a r(s, a, t) + γ · [s' != t] · V(s')`` can be solved exactly for
 every target. Here it is solved for many targets at once: ``V`` is ``float64[K targets, N free cells]``, one sweep is
 one gather ``V[:, next]`` and a max over the four moves, and the targets go in chunks of :data:`CHUNK_BYTES`.
@@ -105,7 +105,7 @@ class TabularMDP:
     def rewards(self, reward: str, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(float64[K, N, 4] r(s, a, t), bool[K, N, 4] reached)`` for the target states ``targets``.
 
-        The env's own :func:`~dtradar_rl.task.mdp.reward_fn`, term for term; the geodesic potential is the
+        The env's own :func:`~dtradar_rl.task.rewards.reward_fn`, term for term; the geodesic potential is the
         breadth-first distance on this twin (0 for cells the target cannot be reached from: no pair starts there)."""
         targets = np.asarray(targets, np.int64)
         nxt = self.next
