@@ -4,8 +4,9 @@ The navigation MDP is a lookup table: states are free cells, moves are determini
 (:class:`~dtradar_rl.task.grid_mdp.GridMDP`), an episode ends on reaching the target, and every reward of
 :data:`~dtradar_rl.task.rewards.REWARDS` is a function of (cell, action, target). So the goal-conditioned MDP is a
 finite one per target, and Bellman's equation ``V(s) = max_a r(s, a, t) + γ · [s' != t] · V(s')`` can be solved
-exactly for every target. Here it is solved for many targets at once: ``V`` is ``float64[K targets, N free cells]``, one sweep is
-one gather ``V[:, next]`` and a max over the four moves, and the targets go in chunks of :data:`CHUNK_BYTES`.
+exactly for every target. Here it is solved for many targets at once: ``V`` is ``float64[K targets, N free cells]``,
+one sweep is one gather ``V[:, next]`` and a max over the four moves, and the targets go in chunks of
+:data:`CHUNK_BYTES`.
 
 Exactness. The sweeps stop when no value moved by more than ``tol`` times the largest value (relative 1e-12 by
 default): then every value is within ``tol · γ / (1 - γ)`` of V*, far below the gap between a shortest and a longer
