@@ -58,7 +58,9 @@ from dtradar_rl.offline.config import ALGORITHMS, OFFLINE_FORMAT, OfflineConfig,
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, check_compatible, log_dataset
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
-from dtradar_rl.offline.relabel import RelabelConfig, not_relabellable, relabelled_sampler, relabeller
+from dtradar_rl.offline.relabel import RelabelConfig, not_relabellable
+from dtradar_rl.offline.relabelled_sampler import relabelled_sampler
+from dtradar_rl.offline.relabeller import relabeller
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runs import no_empty_folder_on_failure

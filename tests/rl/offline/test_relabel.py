@@ -16,20 +16,9 @@ from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig
 from dtradar_rl.offline.formats import to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.policy import load_offline_policy
-from dtradar_rl.offline.relabel import (
-    AUTO_MIXES,
-    FALLBACK,
-    FUTURE,
-    MIXES,
-    NEXT,
-    OWN,
-    RANDOM,
-    RelabelConfig,
-    relabel,
-    relabelled_mdp_dataset,
-    relabelled_sampler,
-    relabeller,
-)
+from dtradar_rl.offline.relabel import AUTO_MIXES, FALLBACK, FUTURE, MIXES, NEXT, OWN, RANDOM, RelabelConfig
+from dtradar_rl.offline.relabelled_sampler import relabelled_sampler
+from dtradar_rl.offline.relabeller import relabel, relabelled_mdp_dataset, relabeller
 from dtradar_rl.offline.trainer import fast_sampling, train_offline
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer

@@ -1,0 +1,87 @@
+"""Relabelled minibatches for d3rlpy: :class:`RelabelledSampler`, a ``ReplayBuffer`` over a log's episodes whose
+minibatches are its steps replayed towards drawn goals (:mod:`dtradar_rl.offline.relabeller`), so every algorithm
+trains on it unchanged. d3rlpy is imported when the class is first asked for.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from typing import Any
+
+import numpy as np
+
+from dtradar_data.core.errors import SchemaMismatchError
+from dtradar_rl.offline.formats import import_d3rlpy
+from dtradar_rl.offline.relabel import FALLBACK, RelabelConfig
+from dtradar_rl.offline.relabeller import Relabeller, source_shares
+
+
+@functools.cache
+def _sampler_class():
+    D = import_d3rlpy().dataset
+
+    class RelabelledSampler(D.ReplayBuffer):
+        """A d3rlpy ``ReplayBuffer`` over a log's episodes whose minibatches are relabelled steps (module
+        docstring): indices from numpy's global generator like d3rlpy's (and the trainer's flat sampler), goals from a
+        generator of the config's seed."""
+
+        def __init__(self, source, relabeller: Relabeller, cfg: RelabelConfig):
+            self.__dict__.update(source.__dict__)  # shared, not rebuilt: see the trainer's FlatTransitionSampler
+            if self.transition_count != len(relabeller):
+                raise SchemaMismatchError(
+                    f"the d3rlpy dataset holds {self.transition_count} transitions, the log {len(relabeller)}",
+                    hint="relabel the log the d3rlpy dataset was built from",
+                )
+            self.relabeller, self.config = relabeller, cfg
+            self.rng = np.random.default_rng(cfg.seed)
+            #: how many drawn goals came from each source (and how many fell back), over every minibatch
+            self.counts = np.zeros(FALLBACK + 1, np.int64)
+            self.draw_s = 0.0
+            self._fixed = None
+            if cfg.resample == "run":
+                t0 = time.perf_counter()
+                idx = np.arange(len(relabeller))
+                goal, src = relabeller.goals(idx, cfg, self.rng)
+                self._fixed = relabeller.transitions(idx, goal)
+                self._fixed_source = src
+                self.draw_s = time.perf_counter() - t0
+
+        def sample_transition_batch(self, batch_size: int):
+            i = np.random.randint(self.transition_count, size=batch_size)
+            if self._fixed is not None:
+                batch = {k: v[i] for k, v in self._fixed.items()}
+                src = self._fixed_source[i]
+            else:
+                t0 = time.perf_counter()
+                batch, src = self.relabeller.batch(i, self.config, self.rng)
+                self.draw_s += time.perf_counter() - t0
+            self.counts += np.bincount(src, minlength=FALLBACK + 1)
+            return D.TransitionMiniBatch(**batch, intervals=np.ones((batch_size, 1), np.float32), transitions=[])
+
+        def summary(self) -> dict[str, Any]:
+            return {
+                **self.config.to_dict(),
+                "mix": self.config.describe(),
+                "drawn": int(self.counts.sum()),
+                "shares": source_shares(self.counts),
+                "draw_s": self.draw_s,
+                "relabeller_build_s": self.relabeller.build_s,
+            }
+
+    return RelabelledSampler
+
+
+def relabelled_sampler(source, relabeller: Relabeller, cfg: RelabelConfig):
+    """The d3rlpy dataset a trainer fits on: ``source`` (the log's d3rlpy dataset,
+    :func:`~dtradar_rl.offline.formats.to_mdp_dataset`) with relabelled minibatches (:class:`RelabelledSampler`)."""
+    return _sampler_class()(source, relabeller, cfg)
+
+
+def __getattr__(name: str):
+    if name == "RelabelledSampler":
+        return _sampler_class()
+    raise AttributeError(name)
+
+
+__all__ = ["relabelled_sampler"]
