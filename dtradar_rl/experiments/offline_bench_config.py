@@ -25,7 +25,8 @@ NAMES = {
 EVAL_SEED = DEFAULT_SEED
 #: Behaviours that act with a memoryless online DQN checkpoint.
 NEED_ONLINE = ("epsilon-greedy", "mixture")
-#: The default budget, chosen by measurement (cubicle 29 min, Dallas Q3 27 min on 2 cores: docs/logged-datasets.md).
+#: The default budget, chosen by measurement (cubicle 29 min, Dallas Q3 27 min on 2 cores before relabelling; Dallas Q3
+#: 31.5 min relabelled, with the tables with senses, beside other jobs: docs/logged-datasets.md).
 BENCH_UPDATES = 4_000
 BENCH_FQE_STEPS = 1_000
 
