@@ -10,32 +10,10 @@ every robot (terminal ones included, which is what a replay buffer needs) and th
     next_obs, reward, terminated, truncated, info = env.step(actions)
     env.reset_where(terminated | truncated); obs = env.observe()
 
-Obstacle augmentation (domain randomisation, off by default)
------------------------------------------------------------
-``aug_obstacles=k`` blocks, on every episode reset and independently per robot, ``k`` random extra obstacles on free
-cells of the training twin: axis-aligned rectangles of 1 .. ``aug_obstacle_size`` cells a side (2 at 0.5 m cells:
-the footprint of a chair or a standing person), never covering the robot's start or target. For that robot, until
-its next reset, an extra-blocked cell behaves like a blocked cell of the table:
 
-* a move into it is a **collision** (the robot stays, collision penalty);
-* seen from a neighbouring cell (``neighbors`` preset), its 8 radio features read as missing (normalised value 0)
-  and its has-radio flag as 0, exactly as a blocked neighbour in a ray-traced table; with a wider sensing radius
-  (:mod:`dtradar_rl.task.observations`) its flags in the ring read 0 too, now and in the snapshot before (it stands
-  there the whole episode).
-
-What it does *not* simulate: in a real re-traced twin a new object also changes the radio features of the free
-cells around it (new reflections, shadowing of the strongest path), the robot's own cell included. That needs a ray
-tracer; here the other cells keep the blueprint's features.
-
-Pairs and shaping stay consistent: after the obstacles are drawn a breadth-first search from the target runs on the
-augmented grid (per robot, batched in torch), and the start is drawn uniformly among the cells still connected to
-the target (explicit starts that end up cut off lose that robot's extra obstacles). The ``geodesic`` potential is
-then either that per-robot distance (``aug_potential="replan"``, the default: a step along a shortest detour is
-rewarded +1, as on the blueprint) or the blueprint's distance (``"blueprint"``: detours around an extra obstacle
-look like steps away from the target and are rewarded -1 each; only the telescoping sum stays right). Note that
-``replan`` rewards a detour that starts before the obstacle is visible to the robot, which its observation cannot
-explain; ``blueprint`` rewards only what the map said.
-With ``aug_obstacles=0`` nothing of this runs and the env is exactly the unaugmented one (same random streams).
+Its parts live beside it, one job each: random pairs and the checks of explicit cells and snapshots
+(:mod:`dtradar_rl.envs.batched_resets`), obstacle augmentation (:mod:`dtradar_rl.envs.batched_augmentation`) and the
+fast path of the common case (:mod:`dtradar_rl.envs.batched_fast`), mixed into :class:`BatchedNavEnv`.
 
 Moving twins
 ------------
@@ -48,26 +26,6 @@ pairs are connected on the static map; whether the movers leave the target reach
 evaluation's pairs are, :meth:`~dtradar_rl.task.grid_mdp.MovingGridMDP.sample_episodes`). The ``geodesic`` shaping
 and :meth:`BatchedNavEnv.shortest_moves` use the static map's breadth-first distance (movers ignored; still a
 potential, so the optimum is unchanged). On a static twin none of this runs: the step is the one above, op for op.
-
-The fast path
--------------
-At 4 096 robots a step has ~200 us for 20 M steps/s, and a torch op on CPU costs a few us of dispatch whatever its
-size, so on a static twin without obstacle augmentation (the common case; ``fast_path=True``, the default) the env
-reads precomputed tables instead of evaluating the rules op by op:
-
-* ``step``: one flat index ``key = 4 * cell + action`` and three gathers: the next cell and the collision of
-  ``(cell, action)``, and the reward of ``(target, cell, action)`` from a ``float32[pool, cells, 4]`` table that
-  the general step's own reward code (:meth:`BatchedNavEnv._reward`) computed for every entry, so it is the same
-  float32 value bit for bit (every reward; cubicle: 592 targets x 756 cells x 4 = 1.8 M entries, 7 MB, built in
-  ~50 ms);
-* ``observe``: one row gather from ``[cell_part | 0]`` and the target's columns written into it (no ``cat``);
-* ``reset_where`` (random pairs): the same two draws (a pool row, then ``u`` in [0, 1)) from the same generator,
-  and the start read from a ``[pool, largest component]`` table of ``members[first + j + (j >= rank)]``.
-
-Everything else (moving twins, augmentation, explicit cells, a table over :data:`FAST_TABLE_MAX` entries, actions
-outside 0..3) takes the general path, which ``fast_path=False`` forces; a test checks that both give the same
-trajectories bit for bit (observations, rewards, terminations, info, state, random streams). Measured figures are in
-:meth:`BatchedNavEnv._step_fast`.
 """
 
 from __future__ import annotations
@@ -76,28 +34,19 @@ import numpy as np
 import torch
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import InvalidCoordinatesError, unknown_name
+from dtradar_data.core.errors import InvalidCoordinatesError
+from dtradar_rl.envs.batched_augmentation import AUG_POTENTIALS, MAX_DISTANCE_TABLE, AugmentationMixin
+from dtradar_rl.envs.batched_fast import FAST_TABLE_MAX, FastPathMixin
+from dtradar_rl.envs.batched_resets import ResetChecksMixin
 from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP, NoConnectedPairError, check_max_steps
 from dtradar_rl.task.noise import ERRORS, NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
-from dtradar_rl.task.observations import (
-    Normalizer,
-    ObservationTable,
-    build_observations,
-    check_preset,
-    ring_cells,
-)
+from dtradar_rl.task.observations import Normalizer, ObservationTable, build_observations, check_preset
 from dtradar_rl.task.rewards import check_reward, potential_kind, reward_fn
 
-#: Above this many (target, cell) entries the geodesic distance table keeps only a random pool of targets.
-MAX_DISTANCE_TABLE = 32_000_000
-#: How the geodesic potential treats augmented obstacles (see the module docstring).
-AUG_POTENTIALS: tuple[str, ...] = ("replan", "blueprint")
-#: Most entries of a fast-path table (the rewards: pool targets x cells x 4 actions, float32, 32 MB; the random
-#: starts: pool targets x largest component); above it the env keeps the general path (see the module docstring).
-FAST_TABLE_MAX = 8_000_000
+__all__ = ["AUG_POTENTIALS", "FAST_TABLE_MAX", "MAX_DISTANCE_TABLE", "BatchedNavEnv"]
 
 
-class BatchedNavEnv:
+class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
     """``num_envs`` independent navigation episodes on one grid, stepped together as torch tensors."""
 
     def __init__(
@@ -119,18 +68,7 @@ class BatchedNavEnv:
     ):
         if num_envs < 1:
             raise InvalidCoordinatesError(f"num_envs must be >= 1, got {num_envs}")
-        if aug_obstacles < 0 or aug_obstacle_size < 1:
-            raise InvalidCoordinatesError(
-                f"aug_obstacles must be >= 0 and aug_obstacle_size >= 1, got {aug_obstacles} and {aug_obstacle_size}"
-            )
-        if aug_potential not in AUG_POTENTIALS:
-            raise unknown_name("augmentation potential", aug_potential, AUG_POTENTIALS)
-        if aug_obstacles and num_envs * mdp.num_cells > MAX_DISTANCE_TABLE:
-            raise InvalidCoordinatesError(
-                f"obstacle augmentation keeps a [num_envs, cells] mask and distance table: {num_envs} x "
-                f"{mdp.num_cells} is over {MAX_DISTANCE_TABLE:,}",
-                hint="use fewer robots (num_envs)",
-            )
+        self._check_augmentation(mdp, num_envs, aug_obstacles, aug_obstacle_size, aug_potential)
         self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
         #: a moving twin (snapshots in time); decided here, once: a static twin's step is unchanged
         self.moving = isinstance(mdp, MovingGridMDP)
@@ -199,19 +137,7 @@ class BatchedNavEnv:
             self.covered = t(mdp.covered.ravel(), torch.bool)
             self.t_next = t((np.arange(self.snapshots) + 1) % self.snapshots, torch.long)
 
-        # Obstacle augmentation (only allocated when on; see the module docstring).
-        self.aug_obstacles, self.aug_obstacle_size = int(aug_obstacles), int(aug_obstacle_size)
-        self.aug_potential = aug_potential
-        if self.aug_obstacles:
-            self.free_cells = t(np.flatnonzero(mdp.free), torch.long)
-            self.free_mask = t(mdp.free, torch.bool)
-            #: ``bool[num_envs, cells]``: each robot's extra obstacles in its current episode.
-            self.extra = torch.zeros((n, mdp.num_cells), dtype=torch.bool, device=dev)
-            #: ``int32[num_envs, cells]``: BFS distance to each robot's target on its augmented grid (-1: cut off).
-            self.adist = torch.full((n, mdp.num_cells), -1, dtype=torch.int32, device=dev)
-            self._nbr_cols = self._neighbor_columns(obs_table)
-            #: ``long[cells, K]``: the wider ring around each cell (off the grid: cell 0, whose flag there is 0 anyway)
-            self._ring = t(ring_cells(mdp.nx, mdp.ny, obs_table.sense_radius).clip(min=0), torch.long)
+        self._init_augmentation(aug_obstacles, aug_obstacle_size, aug_potential)
 
         # Measurement noise (see dtradar_rl.task.noise): its own generator, so "none" leaves every draw unchanged.
         model = noise_model(noise)
@@ -221,7 +147,7 @@ class BatchedNavEnv:
         if self.noise is not None:  # drawn at every reset and step; nothing is observed before the first reset
             self.errors = torch.zeros((n, self.noise.groups, len(ERRORS)), dtype=torch.float64, device=dev)
 
-        #: use the fast path where it applies (module docstring); False keeps the general one (tests, the bench)
+        #: the fast path where it applies (dtradar_rl.envs.batched_fast); False keeps the general one (tests, bench)
         self.fast_path = bool(fast_path)
         self._build_fast()
 
@@ -233,115 +159,6 @@ class BatchedNavEnv:
             self.errors = self.noise.draw(self.num_envs, self.noise_gen)
         else:
             self.errors[idx] = self.noise.draw(idx.numel(), self.noise_gen)
-
-    # -- the fast path ----------------------------------------------------------------------------------------------
-    def _build_fast(self) -> None:
-        """Decide which fast paths apply and build their tables (again whenever the target pool grows)."""
-        plain = self.fast_path and not self.moving and not self.aug_obstacles
-        n, p, dev = self.mdp.num_cells, self.pool.numel(), self.device
-        #: ``observe`` is one row gather from ``_obs_wide`` (``[cell_part | 0]``) and the target's columns
-        self._fast_obs = plain and self.noise is None
-        if self._fast_obs:
-            dc, dt = self.cell_part.shape[1], self.target_part.shape[1]
-            self._obs_wide = torch.zeros((n, dc + dt), dtype=torch.float32, device=dev)
-            self._obs_wide[:, :dc] = self.cell_part
-            # The target's two float32 columns as one int64 (the same bytes): written as one strided column, 8x
-            # faster than a [N, 2] slice (whose 2-element inner loop costs ~50 us at 4 096 robots).
-            pairs = dt == 2 and dc % 2 == 0 and dev.type == "cpu"  # (a CPU kernel's cost; elsewhere the slice)
-            self._obs_target = self.target_part.view(torch.int64).reshape(-1) if pairs else None
-        #: ``step`` reads the next cell, the collision and the reward with one flat index ``(target, cell, action)``
-        self._fast_step = plain and p * n * 4 <= FAST_TABLE_MAX
-        if self._fast_step:
-            #: ``long[cells, 4]``: ``4 * cell + action``, indexed like ``next_cell`` (off a CPU: no host sync)
-            self._keys = torch.arange(n * 4, device=dev).view(n, 4)
-            self._next_flat = self.next_cell.reshape(-1).contiguous()
-            self._collides_flat = self.collides.reshape(-1).contiguous()
-            self._rtab = self._reward_table().reshape(-1)
-        # random starts: ``members[first + j + (j >= rank)]`` of the target's component, tabulated per (pool row, j)
-        span = self.comp_size[self.component[self.pool].clamp(min=0)] - 1
-        width = max(1, int(span.max()))
-        #: ``reset_where`` without explicit cells draws ``j`` as the general path does and reads the start
-        self._fast_reset = plain and bool((span >= 1).all()) and p * width <= FAST_TABLE_MAX
-        if self._fast_reset:
-            j = torch.arange(width, device=dev)[None]
-            c = self.component[self.pool][:, None]
-            at = self.comp_first[c] + j + (j >= self.rank[self.pool][:, None]).long()
-            valid = j < span[:, None]  # j = floor(u * span) < span for every u in [0, 1) (float32 included)
-            self._starts = torch.where(valid, self.members[at.clamp(max=self.members.numel() - 1)], 0).reshape(-1)
-            self._span, self._span_width = span.float(), width
-
-    def _reward_table(self) -> torch.Tensor:
-        """``float32[pool, cells, 4]``: the reward of each action from each cell towards each pool target, computed by
-        the general step's own code (:meth:`_reward`, broadcasting ``[targets, 1, 1]`` against ``[1, cells, 4]``), so
-        a lookup equals it bit for bit (the same float32 operations, elementwise). In blocks of ~1 M entries."""
-        n, p, dev = self.mdp.num_cells, self.pool.numel(), self.device
-        cell = torch.arange(n, device=dev)[None, :, None]
-        nxt, coll = self.next_cell[None], self.collides[None]  # [1, cells, 4]
-        out = torch.empty((p, n, 4), dtype=torch.float32, device=dev)
-        block = max(1, (1 << 20) // (n * 4))
-        for r0 in range(0, p, block):
-            tpool = torch.arange(r0, min(p, r0 + block), device=dev)[:, None, None]
-            target = self.pool[tpool]
-            out[r0 : r0 + tpool.shape[0]] = self._reward(cell, nxt, target, tpool, coll, nxt == target)
-        return out
-
-    @staticmethod
-    def _valid_actions(a: torch.Tensor) -> bool:
-        """All of ``a`` in 0..3 (else the general step: it wraps -4..-1 and raises on the rest, as it always did)."""
-        lo, hi = torch.aminmax(a)
-        return 0 <= int(lo) and int(hi) <= 3
-
-    def _step_fast(self, a: torch.Tensor):
-        """:meth:`step` on a static twin without augmentation: three gathers from the fast tables.
-
-        Measured with ``bench/bench_rl.py --env-only --threads 1`` (cubicle/blueprint, neighbors, geodesic; step +
-        ``reset_where(te | tr)`` + ``observe()``; medians of 5 interleaved rounds) on the 2-core AMD EPYC shared with
-        other jobs (1-min load 2.8-3.3), env steps/s; "before": the env as it was (advanced indexing everywhere),
-        interleaved with the other two in a run of its own (load 2.5; actions drawn per step):
-
-        ======  ===========  ============  ========  ==============================
-        robots  fast path    general path  before    fast path, 2 torch threads
-        ======  ===========  ============  ========  ==============================
-        1       16.6 K       7.7 K         7 K       14.7 K
-        256     2.07 M       1.24 M        1.07 M    2.30 M
-        4 096   13.8 M       5.24 M        3.30 M    0.26 M (threads wait on a busy core)
-        ======  ===========  ============  ========  ==============================
-
-        At a load of 1.7 the fast path did 15.0 M steps/s at 4 096 robots.
-
-        Per step at 4 096 robots: 37 torch ops instead of 56 (step 18 / 31, reset_where 14 / 22, observe 5 / 3),
-        none of them advanced indexing: ``cell_part[cell]`` alone took 228 us where ``index_select`` takes 31 us, and
-        ``next_cell[cell, a]`` 25 us where ``4 * cell + a`` and a flat ``index_select`` take 12 us. What is left:
-        the two 786 KB observations (step's and observe's, ~31 us each: memory copies), ~25 small ops on 4 096
-        elements (3-6 us each) and the robots' resets. ``torch.compile`` of this step (inductor, static shapes) took
-        28 s to compile and ran it 2x slower (275 vs 132 us), so it is not used. Two torch threads collapse at 4 096
-        robots whenever another process holds a core (the threads wait on each other): callers pick 1 for the env.
-        int32 instead of int64 indices: no faster for ``index_select`` (6.6 vs 7.0 us), and the state stays long."""
-        if a.device.type == "cpu":  # checked in step: 0 <= a <= 3
-            key = torch.add(a, self.cell, alpha=4)  # (cell, action) row-major; 2x faster than _keys[cell, a]
-        else:  # the general step's indexing (negative actions wrap, others fail), without a host sync
-            key = self._keys[self.cell, a]
-        nxt = self._next_flat.index_select(0, key)
-        collision = self._collides_flat.index_select(0, key)
-        reward = self._rtab.index_select(0, key.add_(self.tpool, alpha=4 * self.mdp.num_cells))
-        reached = torch.eq(nxt, self.target)
-        self.cell = nxt
-        self.steps += 1
-        self._draw_errors()
-        truncated = torch.gt(self.steps >= self.max_steps, reached)  # bools: a > b is a & ~b
-        info = {"collision": collision, "is_success": reached, "steps": self.steps.clone()}
-        return self.observe(), reward, reached, truncated, info
-
-    @staticmethod
-    def _neighbor_columns(obs_table: ObservationTable) -> torch.Tensor | None:
-        """``long[4, F+1]``: the cell-part columns (radio features + has-radio flag) of each neighbour, if observed."""
-        names = obs_table.names
-        acts = [nm.split(":")[0] for nm in names if nm.endswith(":has_radio")]  # X-, X+, Y-, Y+ (action order)
-        if not acts:
-            return None
-        return torch.as_tensor(
-            [[k for k, nm in enumerate(names) if nm.startswith(f"{a}:")] for a in acts], dtype=torch.long
-        )
 
     @property
     def state_keys(self) -> tuple[str, ...]:
@@ -428,153 +245,6 @@ class BatchedNavEnv:
         self.cell[idx], self.target[idx], self.tpool[idx] = st, tgt, tp
         self.steps[idx] = 0
         self._draw_errors(idx)
-
-    def _snapshot_arg(self, t0, k: int) -> torch.Tensor:
-        """``t0`` (one int, or ``k``) as a long tensor of snapshots, or :class:`InvalidCoordinatesError`."""
-        try:
-            t = torch.as_tensor(t0, device=self.device)
-        except (TypeError, ValueError, RuntimeError) as e:
-            raise InvalidCoordinatesError(f"reset_where t0 is {t0!r}, not snapshot indices", hint="pass ints") from e
-        if t.dtype.is_floating_point or t.dtype == torch.bool or t.is_complex():
-            raise InvalidCoordinatesError(
-                f"reset_where t0 must be integer snapshot indices, got {t.dtype}", hint=f"pass an int or {k} ints"
-            )
-        if t.numel() not in (1, k) or t.dim() > 1:
-            raise InvalidCoordinatesError(
-                f"reset_where t0: {t.numel()} snapshots for {k} robots", hint=f"pass one int, or one per robot ({k})"
-            )
-        t = t.reshape(-1).long().expand(k).clone()
-        if not bool(((t >= 0) & (t < self.snapshots)).all()):
-            raise InvalidCoordinatesError(
-                f"reset_where t0: a snapshot is outside 0..{self.snapshots - 1}",
-                hint="a static twin has one snapshot (0)"
-                if not self.moving
-                else f"pass ints in 0..{self.snapshots - 1}",
-            )
-        return t
-
-    def _start_snapshots(self, idx, st, tgt, t0, explicit: bool) -> torch.Tensor:
-        """The start snapshots of robots ``idx`` (moving twins); random starts a mover covers at a given ``t0`` are
-        redrawn (in place in ``st``) among the cells free then."""
-        n, dev = self.mdp.num_cells, self.device
-        if t0 is None:  # uniform among the snapshots in which the start is free (one exists: it is no wall)
-            free = ~self.covered.view(self.snapshots, n)[:, st].T
-            return torch.multinomial(free.float(), 1, generator=self.gen).squeeze(1)
-        bad = self.covered[t0 * n + st]
-        if bool(bad.any()):
-            if explicit:
-                c = int(st[bad][0])
-                raise InvalidCoordinatesError(
-                    f"reset_where: start cell {tuple(int(v) for v in self.mdp.xy(c))} is covered by a mover at "
-                    f"snapshot {int(t0[bad][0])}",
-                    hint="pick a start that is free at t0, or another t0",
-                )
-            b = torch.nonzero(bad, as_tuple=True)[0]
-            cells = torch.arange(n, device=dev)
-            if self.aug_obstacles:
-                ok = self.adist[idx[b]] > 0
-            else:
-                ok = (self.component[None] == self.component[tgt[b]][:, None]) & (cells[None] != tgt[b][:, None])
-            ok &= ~self.covered.view(self.snapshots, n)[t0[b]]
-            if not bool(ok.any(1).all()):
-                raise InvalidCoordinatesError(
-                    "reset_where: movers cover every start cell that reaches the target at t0",
-                    hint="pass another t0, or no t0",
-                )
-            st[b] = torch.multinomial(ok.float(), 1, generator=self.gen).squeeze(1)
-        return t0
-
-    def _cells(self, name: str, cells, k: int) -> torch.Tensor:
-        """``cells`` (``k`` free cell indices, one per robot reset) as a long tensor, or
-        :class:`InvalidCoordinatesError` naming ``name`` (fractions, a wrong count, an index off the grid or a blocked
-        cell)."""
-        t = torch.as_tensor(cells, device=self.device)
-        if t.dtype.is_floating_point or t.dtype == torch.bool or t.is_complex():
-            raise InvalidCoordinatesError(
-                f"reset_where {name} must be integer cell indices (iy * nx + ix), got {t.dtype}",
-                hint=f"pass {k} ints",
-            )
-        if t.numel() != k:
-            raise InvalidCoordinatesError(
-                f"reset_where {name}: {t.numel()} cells for {k} robots", hint=f"pass one cell per robot reset ({k})"
-            )
-        t = t.reshape(k).long()
-        inside = (t >= 0) & (t < self.mdp.num_cells)
-        if not bool((inside & (self.component[t.clamp(0, self.mdp.num_cells - 1)] >= 0)).all()):  # -1: blocked
-            raise InvalidCoordinatesError(
-                f"reset_where {name}: a cell is off the {self.mdp.nx} x {self.mdp.ny} grid or not free",
-                hint=f"pass free cell indices in 0..{self.mdp.num_cells - 1}",
-            )
-        return t
-
-    # -- obstacle augmentation -------------------------------------------------------------------------------------
-    def _draw_obstacles(self, k: int) -> torch.Tensor:
-        """``bool[k, cells]``: ``aug_obstacles`` random rectangles (1 .. ``aug_obstacle_size`` a side) on free cells."""
-        m, size, dev = self.aug_obstacles, self.aug_obstacle_size, self.device
-        nx, ny = self.mdp.nx, self.mdp.ny
-        seed = self.free_cells[torch.randint(self.free_cells.numel(), (k, m), generator=self.gen, device=dev)]
-        sy, sx = seed // nx, seed % nx
-        w = torch.randint(1, size + 1, (k, m), generator=self.gen, device=dev)
-        h = torch.randint(1, size + 1, (k, m), generator=self.gen, device=dev)
-        mask = torch.zeros((k, self.mdp.num_cells), dtype=torch.bool, device=dev)
-        rows = torch.arange(k, device=dev)[:, None].expand(k, m)
-        for dy in range(size):
-            for dx in range(size):
-                x, y = sx + dx, sy + dy
-                ok = (dx < w) & (dy < h) & (x < nx) & (y < ny)
-                mask[rows[ok], (y * nx + x)[ok]] = True
-        return mask & self.free_mask
-
-    def _bfs(self, targets: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
-        """``int32[k, cells]`` breadth-first distances to ``targets`` on the grid with ``extra`` cells blocked too
-        (-1: blocked or cut off). Frontier propagation on a zero-padded ``[k, ny+2, nx+2]`` grid with shifted views:
-        no gathers, a few tensor ops per step, so a batch of resets costs ~2-3 ms on the 42 x 18 cubicle."""
-        k, (h, w) = targets.numel(), self.mdp.blocked.shape
-        rows = torch.arange(k, device=self.device)
-        unvisited = torch.zeros((k, h + 2, w + 2), dtype=torch.bool, device=self.device)
-        open_ = unvisited[:, 1:-1, 1:-1]  # passable cells not reached yet
-        open_.copy_((self.free_mask[None] & ~extra).view(k, h, w))
-        frontier = torch.zeros_like(unvisited)
-        ty, tx = targets // w, targets % w
-        frontier[rows, ty + 1, tx + 1] = True
-        open_[rows, ty, tx] = False
-        waited = torch.zeros((k, h, w), dtype=torch.int32, device=self.device)  # steps each cell stayed unreached
-        step = 0
-        while True:
-            step += 1
-            new = (
-                frontier[:, :-2, 1:-1] | frontier[:, 2:, 1:-1] | frontier[:, 1:-1, :-2] | frontier[:, 1:-1, 2:]
-            ) & open_
-            open_ ^= new
-            frontier[:, 1:-1, 1:-1] = new
-            waited += open_
-            if step % 4 == 0 and not bool(new.any()):  # a few idle steps past the end change nothing
-                break
-        dist = (waited + 1).view(k, -1)
-        dist[open_.reshape(k, -1) | ~self.free_mask[None] | extra] = -1
-        dist[rows, targets] = 0
-        return dist
-
-    def _augment(self, idx: torch.Tensor, tgt: torch.Tensor, starts: torch.Tensor | None) -> torch.Tensor:
-        """Draw new extra obstacles for robots ``idx``; returns their starts (drawn here unless given)."""
-        k = idx.numel()
-        rows = torch.arange(k, device=self.device)
-        extra = self._draw_obstacles(k)
-        extra[rows, tgt] = False
-        if starts is not None:
-            extra[rows, starts] = False
-        dist = self._bfs(tgt, extra)
-        reachable = dist > 0
-        # Obstacles that cut the start (or every cell) off the target are dropped for that robot.
-        cut = ~reachable.any(1) if starts is None else ~reachable[rows, starts]
-        if bool(cut.any()):
-            extra[cut] = False
-            dist[cut] = self._bfs(tgt[cut], extra[cut])
-            reachable = dist > 0
-        if starts is None:
-            starts = torch.multinomial(reachable.float(), 1, generator=self.gen).squeeze(1)
-        self.extra[idx], self.adist[idx] = extra, dist
-        return starts
 
     def _pool_rows(self, targets: torch.Tensor) -> torch.Tensor:
         """Rows of the distance table for explicit targets, computing and appending missing ones."""
