@@ -1,0 +1,97 @@
+"""The Markdown report of ``bench/bench_rl.py``: the heading, the throughput rows and the full table (the script
+writes the JSON and calls these for ``results/bench_rl*.md``)."""
+
+from __future__ import annotations
+
+from dtradar_rl.evaluation.evaluate import markdown_table
+from dtradar_rl.task.runtime import describe
+
+
+def _header(r: dict) -> list[str]:
+    d = r["dataset"]
+    src = "synthetic 42x18 stand-in (no ray-traced table built yet)" if d["synthetic"] else f"real twin {d['name']}"
+    load = r["machine"]["load_1min_before"]
+    return [
+        (
+            f"## RL benchmark ({src}; {describe(r['machine'])}, torch {r['machine']['torch_threads']} threads, "
+            f"1-min load before start {'n/a' if load is None else f'{load:.2f}'})"
+        ),
+        "",
+        "| measure | ours | reference | ratio |",
+        "|---|---|---|---|",
+    ]
+
+
+def _throughput_label(key: str) -> str:
+    """``batched_4096`` -> ``batched 4096 robots``; ``batched_general_4096`` -> ``... (general path)``;
+    ``batched_4096_t1`` -> ``... (1 torch thread)``."""
+    parts = key.split("_")
+    general = "general" in parts
+    parts = [p for p in parts if p != "general"]
+    label = f"batched {parts[1]} robots"
+    if general:
+        label += " (general path)"
+    if len(parts) > 2:
+        n = parts[2][1:]
+        label += f" ({n} torch thread{'s' if n != '1' else ''})"
+    return label
+
+
+def _throughput_rows(thr: dict) -> list[str]:
+    return [
+        f"| env steps/s, {_throughput_label(k)} | {v:,.0f} | gymnasium env {thr['gymnasium']:,.0f} | "
+        f"{v / thr['gymnasium']:.2g}x |"
+        for k, v in thr.items()
+        if k != "gymnasium"
+    ]
+
+
+def render_markdown(r: dict) -> str:
+    t, sb3 = r["train"], r["sb3"]
+    lines = _header(r) + _throughput_rows(r["env_steps_per_s"])
+    lines.append(
+        f"| greedy decision latency | {r['decision_latency_ms']:.3f} ms | paper 17 ms | "
+        f"{r['decision_speedup_vs_paper']:.0f}x faster |"
+    )
+    lines.append(
+        f"| wall time, {t['env_steps']:,} env steps | {t['wall_s']:.1f} s | paper 46 min | "
+        f"{t['speedup_vs_paper']:.0f}x faster |"
+    )
+    rob = r.get("train_robust")
+    if rob:
+        lines.append(
+            f"| wall time, same budget, robust preset ({rob['config']['aug_obstacles']} extra obstacles "
+            f"per episode) | {rob['wall_s']:.1f} s | tuned {t['wall_s']:.1f} s | "
+            f"{rob['wall_s'] / t['wall_s']:.2f}x |"
+        )
+    for n, run in (r.get("sb3_by_threads") or {}).items():
+        if "wall_s_for_budget" in run and len(r["sb3_by_threads"]) > 1:
+            lines.append(
+                f"| SB3 DQN at {n} torch thread(s), same budget | | {run['wall_s_for_budget']:.0f} s "
+                f"({run['env_steps']:,} steps in {run['wall_s']:.0f} s) | |"
+            )
+    if "wall_s_for_budget" in sb3:
+        cap = f" (capped at {sb3['env_steps']:,} steps; extrapolated)" if sb3["capped"] else ""
+        if len(r.get("sb3_by_threads") or {}) > 1:
+            cap += f", its fastest: {sb3['threads']} thread(s)"
+        lines.append(
+            f"| wall time, same budget | {t['wall_s']:.1f} s | "
+            f"SB3 DQN {sb3['wall_s_for_budget']:.0f} s{cap} | {t['speedup_vs_sb3']:.1f}x faster |"
+        )
+        dft = r.get("train_default")
+        if dft and "speedup_vs_sb3" in dft:
+            lines.append(
+                f"| wall time, same budget, default preset ({dft['config']['preset']}, {dft['updates']:,} updates) | "
+                f"{dft['wall_s']:.1f} s | SB3 DQN {sb3['wall_s_for_budget']:.0f} s | "
+                f"{dft['speedup_vs_sb3']:.1f}x faster |"
+            )
+    lines += [
+        "",
+        (
+            f"Goal (budget in <= 60 s, >= 95 % success, SPL >= 0.9 on blueprint -> blueprint): "
+            f"**{'met' if t['goal_met'] else 'not met'}**."
+        ),
+        "",
+        markdown_table(r["eval"]),
+    ]
+    return "\n".join(lines)
