@@ -49,6 +49,7 @@ from dtradar_rl.agents.policy import Policy
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED, METRIC, ShortestPathOracle
 from dtradar_rl.offline import walks
+from dtradar_rl.offline.checkpoint_twin import check_logs_on_its_twin
 from dtradar_rl.task.config import ConfigError, TwinConfig
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.train.checkpoints import load_policy
@@ -321,9 +322,13 @@ class Actor:
         return out
 
 
-def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, device: str = "cpu") -> Policy | None:
+def checkpoint_policy(
+    spec: BehaviourSpec, obs: str, normalizer: Normalizer, device: str = "cpu", *, ds: Dataset | None = None
+) -> Policy | None:
     """The DQN of an ``epsilon-greedy`` (or ``medium``) behaviour, checked to observe like the log (preset and
-    normaliser). A ``medium`` spec must have been resolved (:func:`dtradar_rl.offline.logged.resolve_spec`)."""
+    normaliser) and, given the logged twin ``ds``, an ``epsilon-greedy`` one to be trained on it
+    (:mod:`.checkpoint_twin`). A ``medium`` spec must have been resolved
+    (:func:`dtradar_rl.offline.logged.resolve_spec`)."""
     if "epsilon-greedy" in spec.used:
         path = spec.checkpoint
     elif "medium" in spec.used:
@@ -336,6 +341,8 @@ def checkpoint_policy(spec: BehaviourSpec, obs: str, normalizer: Normalizer, dev
     else:
         return None
     policy = load_policy(path, device)
+    if ds is not None and "epsilon-greedy" in spec.used:  # the medium agent is trained on ds by resolve_spec
+        check_logs_on_its_twin(policy, ds, path)
     if getattr(policy.config, "memory_radius", 0):
         raise ConfigError(
             f"the checkpoint {path} is a memory agent ({policy.config.preset} preset): a logged step holds "
@@ -411,7 +418,7 @@ def behaviour_policy(
         meta={"dataset": {"name": ds.name, "version": ds.version}},
         spec=spec,
         seed=seed,
-        greedy=checkpoint_policy(spec, obs, normalizer, device),
+        greedy=checkpoint_policy(spec, obs, normalizer, device, ds=ds),
     )
 
 

@@ -65,7 +65,7 @@ def roll(
     )
     gen = torch.Generator(device=env.device)
     gen.manual_seed(seed + 1)
-    actor = Actor(spec, env, gen, policy=checkpoint_policy(spec, obs, normalizer, device))
+    actor = Actor(spec, env, gen, policy=checkpoint_policy(spec, obs, normalizer, device, ds=ds))
     horizon = -(-steps // num_envs)
     keys = ("obs", "action", "reward", "next_obs", "terminated", "truncated", "cell", "target")
     rec: dict[str, list[torch.Tensor]] = {k: [] for k in keys}
