@@ -16,13 +16,17 @@ from dtradar_data.core.ids import MOVING_VARIANT
 from dtradar_data.pipeline.config import BuildConfig
 from dtradar_data.pipeline.moving_build import build_moving
 from dtradar_data.pipeline.static_build import build_static
+from dtradar_data.store.writing import clean_stages
 
 __all__ = ["build", "build_moving", "build_static"]
 
 
 def build(config: BuildConfig) -> list[Dataset]:
     """Build the requested variant(s) of ``config.scene``; returns the stored datasets. Everything that can refuse
-    the build is checked before the first variant is traced (:func:`build_static`, :func:`build_moving`)."""
+    the build is checked before the first variant is traced (:func:`build_static`, :func:`build_moving`), after the
+    staging folders of killed builds and pulls are removed (their disk then counts as free; a resumable build's own
+    work folder is kept)."""
+    clean_stages()
     if config.variant == MOVING_VARIANT:
         return build_moving(config)
     return build_static(config)

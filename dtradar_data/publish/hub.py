@@ -7,7 +7,8 @@ plus a freshly rendered ``README.md`` card whose ``configs`` point at those file
 spellings of a revision resolve on the Hub as they do locally.
 
 The network calls are kept to a few lines; everything around them (what is uploaded, verification, installing into
-the store) runs offline. A pull downloads into a temp dir under ``<root>/work/``, checks every sha256 recorded in
+the store) runs offline. A pull downloads into a held stage under ``<root>/work/`` (a killed pull's is removed by
+the next pull or build: :func:`dtradar_data.store.writing.clean_stages`), checks every sha256 recorded in
 ``meta.json`` and the Parquet schemas, and only then renames the version into the store: without network, without
 a token or with ``HF_HUB_OFFLINE=1`` a :class:`HubError` says so and the local store is untouched.
 """
@@ -17,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +36,7 @@ from dtradar_data.core.ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
 from dtradar_data.store import listing, local, writing
 from dtradar_data.store.card import default_hub_repo, render_version_card
 from dtradar_data.store.catalog import as_id
+from dtradar_data.store.staging import held_stage
 
 #: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
 # every file of a version but its card (rendered for the Hub); the pictures only where the version has them
@@ -328,9 +329,9 @@ def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | N
         with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
             return local.resolve(did.with_revision(None), revision)[2]
     repo_id = repo_id or default_repo(did)
-    P.work_root().mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f"pull-{did.scene}-{did.variant}-", dir=P.work_root()))
-    try:
+    writing.clean_stages()
+    # held: a pull killed mid-download leaves its stage to the next pull or build, never one still downloading
+    with held_stage(P.work_root(), writing.stage_prefix(did)) as stage:
         with hub_errors("pull from", repo_id):
             # Offline, the real (local-files-only) download call still runs: the library's own check answers.
             remote = _remote_revision(repo_id, revision) if not offline() else (revision or "main")
@@ -343,5 +344,3 @@ def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | N
                 shutil.move(str(got / fname), version_dir / fname)
         preferred = revision if revision and is_tag(revision) else _card_tag(version_dir / P.CARD_FILE)
         return writing.install_staged(did.with_revision(None), version_dir, preferred_tag=preferred)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)

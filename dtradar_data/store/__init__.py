@@ -3,6 +3,7 @@
 - :mod:`.versions` — version ids (content hashes of the build inputs) and the tags in ``refs.json``;
 - :mod:`.local` — checked reads of a stored version, ``load``;
 - :mod:`.writing` — atomic writes of one version and installs of a download;
+- :mod:`.staging` — staging folders held by their process; those a killed writer or pull left are removed;
 - :mod:`.listing` — every dataset and version, full verification, history;
 - :mod:`.catalog` — which dataset names exist (built-in scenes and stored ones);
 - :mod:`.card` — the dataset card of a version, a pure function of its metadata;

@@ -6,7 +6,9 @@ write here, apart from the reads of :mod:`dtradar_data.store.local`, leaves one 
 directories or changes ``refs.json``. Files are written into a staging directory under ``<root>/work/`` (Parquet with
 zstd, page checksums and the build metadata as JSON under the schema-metadata key ``b"dtradar.meta"``; ``meta.json``
 with every data file's sha256 and size), renamed into ``<root>/datasets/<scene>/<variant>/<version>`` in one
-``rename`` and tagged by replacing ``refs.json`` atomically; an existing version is never rewritten.
+``rename`` and tagged by replacing ``refs.json`` atomically; an existing version is never rewritten. The staging
+directory is held by its process (:mod:`dtradar_data.store.staging`), as a pull's is (:mod:`dtradar_data.publish.hub`):
+the next build, write or pull removes those a killed one left (:func:`clean_stages`), never one a live process holds.
 
 A moving twin (``meta["moving"]``: :mod:`dtradar_data.core.dataset`) is stored the same way with its own schemas
 (:data:`~dtradar_data.core.schema.MOVING_CELL_SCHEMA`, ``MOVING_PATH_SCHEMA``), rows sorted by ``(t, iy, ix)`` and
@@ -20,7 +22,7 @@ import json
 import logging
 import os
 import shutil
-import tempfile
+import time
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -32,7 +34,7 @@ import pyarrow.parquet as pq
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import CorruptDatasetError, DtradarError, SchemaMismatchError
 from dtradar_data.core.files import json_safe, sha256_file, waiting_lock
-from dtradar_data.core.ids import HASH_RE, DatasetId
+from dtradar_data.core.ids import DATASET_VARIANTS, HASH_RE, SCENE_RE, DatasetId
 from dtradar_data.core.record import RECORD_FORMAT
 from dtradar_data.core.schema import MOVING_SCHEMA_VERSION, SCHEMA_VERSION, cell_schema, path_schema
 from dtradar_data.store.card import render_version_card
@@ -45,6 +47,7 @@ from dtradar_data.store.local import (
     verify_dir,
     version_exists,
 )
+from dtradar_data.store.staging import clean_stale_stages, held_stage
 from dtradar_data.store.versions import Refs, read_refs, write_refs
 
 log = logging.getLogger(__name__)
@@ -56,6 +59,50 @@ RESERVED_FILES = frozenset({P.CELLS_FILE, P.PATHS_FILE, P.META_FILE, P.CARD_FILE
 
 class InvalidTableError(DtradarError, ValueError):
     """A table whose rows do not form the grid described by its metadata, or metadata that is unusable."""
+
+
+# -------------------------------------------------------------------------------------------------------- staging
+
+_NAMED = rf"{SCENE_RE.pattern}-(?:{'|'.join(DATASET_VARIANTS)})-"
+#: The staging folders under ``<root>/work`` of a version written here (``stage-<scene>-<variant>-<version>-``) and
+#: of a pull (``pull-<scene>-<variant>-``): prefix -> what comes between it and ``tempfile``'s 8 characters. Neither
+#: matches the logged store's ``pull-logged-<8>`` or a build's ``work/<scene>`` folders.
+STAGES = {"stage-": _NAMED + r"[0-9a-f]{7,64}-", "pull-": _NAMED}
+#: A stage without a lock file (an older dtradar's) is removed once nothing in it changed for this long: that
+#: dtradar held it for the seconds of a write, or the minutes of a download, and it has no lock to ask.
+LOCKLESS_STAGE_AGE_S = 3600.0
+
+
+def stage_prefix(did: DatasetId, version: str | None = None) -> str:
+    """The prefix of a stage holding ``version`` of ``did`` (None: a pull's, whose version is known once downloaded)."""
+    return f"stage-{did.scene}-{did.variant}-{version}-" if version else f"pull-{did.scene}-{did.variant}-"
+
+
+def _lockless_stage(stage: Path) -> bool:
+    """Whether a lockless ``stage-`` / ``pull-`` folder is a stage an older dtradar left: a version's files only (a
+    pull: its download folders only), none changed for :data:`LOCKLESS_STAGE_AGE_S`."""
+    try:
+        entries = list(stage.iterdir())
+        if stage.name.startswith("pull-"):
+            ok = all(p.name in ("download", "cache", "version") for p in entries)
+        else:
+            ok = all(p.is_file() for p in entries)
+        newest = max((p.stat().st_mtime for p in [stage, *stage.rglob("*")]), default=0.0)
+    except OSError:
+        return False
+    return ok and time.time() - newest > LOCKLESS_STAGE_AGE_S
+
+
+def clean_stages() -> list[Path]:
+    """Remove the staging folders under ``<root>/work`` that a killed build, write or pull left (none a live process
+    holds); returns them. A build does it first (its disk check then counts what they held), every write and pull
+    too."""
+    work = P.data_root() / "work"
+    return [
+        p
+        for prefix, infix in STAGES.items()
+        for p in clean_stale_stages(work, prefix, infix=infix, lockless=_lockless_stage)
+    ]
 
 
 # ---------------------------------------------------------------------------------------------------------- schema
@@ -269,9 +316,9 @@ def write_version(
     # The Parquet copy of the metadata is the content description only: file hashes cannot include themselves.
     meta_json = json.dumps(meta, sort_keys=True, ensure_ascii=False, allow_nan=False).encode()
 
-    P.work_root().mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f"stage-{did.scene}-{did.variant}-{version}-", dir=P.work_root()))
-    try:
+    clean_stages()
+    # held: a kill leaves the stage to the next write; whatever is left of it on the way out is removed
+    with held_stage(P.work_root(), stage_prefix(did, version)) as stage:
         _write_parquet(cells, stage / P.CELLS_FILE, meta_json)
         if paths is not None:
             _write_parquet(paths, stage / P.PATHS_FILE, meta_json)
@@ -283,8 +330,6 @@ def write_version(
             if f.is_file()
         }
         return _install(did, version, stage, meta)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)  # after a successful install the stage is gone already
 
 
 def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], preferred_tag: str | None = None) -> Path:
