@@ -5,8 +5,9 @@ builds the moving twin instead (:mod:`.moving_build`: snapshot 0 in full, each l
 the one before). The version of a dataset is the hash of its inputs (:mod:`.inputs`: scene description, RT
 settings, schema version, library versions), computed before any tracing: building the same thing twice reuses the
 stored version (:mod:`.storing`). Tracing runs in receiver batches (:mod:`.tracing`); each finished batch is kept
-under ``<data root>/work/`` so an interrupted build continues where it stopped, and the work folder is removed once
-the version is stored. The flags and their checks: :mod:`.config`.
+under ``<data root>/work/`` so an interrupted build continues where it stopped, on the device it traced on
+(:mod:`.resume`), and the work folder is removed once the version is stored. The flags and their checks:
+:mod:`.config`.
 """
 
 from __future__ import annotations

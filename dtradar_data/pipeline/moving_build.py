@@ -95,6 +95,7 @@ def build_moving_one(moving_scene, config: BuildConfig) -> Dataset:
         version,
         functools.partial(_make, moving_scene, config, format_id(ds_id), version, inputs),
         progress=lambda work_dir: moving.work_progress(work_dir, moving_scene.snapshots),
+        rt=config.rt,
     )
 
 

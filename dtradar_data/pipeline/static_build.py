@@ -139,6 +139,7 @@ def build_one(spec, config: BuildConfig) -> Dataset:
         functools.partial(_make, job),
         progress=lambda work_dir: work_progress(work_dir, spec, config.rt),
         how=" (differential)" if parent is not None else "",
+        rt=config.rt,
     )
 
 

@@ -23,6 +23,7 @@ from dtradar_data.core.files import waiting_lock
 from dtradar_data.core.ids import DatasetId, format_id
 from dtradar_data.core.layout import work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
+from dtradar_data.pipeline.resume import claim_device
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.rt.tracer import active_variant
 from dtradar_data.store import local, writing
@@ -51,11 +52,19 @@ Make = Callable[[Path, Path], NewVersion]
 
 
 def store_version(
-    ds_id: DatasetId, version: str, make: Make, *, progress: Callable[[Path], str], how: str = ""
+    ds_id: DatasetId,
+    version: str,
+    make: Make,
+    *,
+    progress: Callable[[Path], str],
+    how: str = "",
+    rt: RTSettings | None = None,
 ) -> Dataset:
     """Build (or reuse) ``version`` of ``ds_id``: the stored one if it exists, else ``make``'s, written atomically;
     returns it loaded. ``progress(work_dir)`` says how far this build has come to another process waiting for it;
-    ``how`` (" (differential)") is added to what that one is told this build does."""
+    ``how`` (" (differential)") is added to what that one is told this build does. With ``rt``, the device it traces
+    on is claimed in the work folder first (:func:`~dtradar_data.pipeline.resume.claim_device`: a partial build of
+    the other device is refused)."""
     local.check_can_store(ds_id, version)  # a damaged version folder would otherwise fail only after tracing
     name = format_id(ds_id)
     work_dir = work_root() / ds_id.scene / ds_id.variant / version
@@ -72,13 +81,18 @@ def store_version(
         if local.version_exists(ds_id, version):
             print(f"{name}: version {version} already built, reusing it")
             return local.load(name, revision=version)
-        return write_new_version(ds_id, version, work_dir, make)
+        return write_new_version(ds_id, version, work_dir, make, rt)
 
 
-def write_new_version(ds_id: DatasetId, version: str, work_dir: Path, make: Make) -> Dataset:
-    """The lock held and the version not stored: ``make`` it, write it, then remove the work folder (its batches
-    are kept until the version is stored, so a failed build's retry does not trace again)."""
+def write_new_version(
+    ds_id: DatasetId, version: str, work_dir: Path, make: Make, rt: RTSettings | None = None
+) -> Dataset:
+    """The lock held and the version not stored: claim the device (with ``rt``), ``make`` it, write it, then remove
+    the work folder (its batches are kept until the version is stored, so a failed build's retry does not trace
+    again, on the device it traced on)."""
     name = format_id(ds_id)
+    if rt is not None:
+        claim_device(work_dir, rt, name)
     with tempfile.TemporaryDirectory(prefix="dtradar-build-") as tmp:
         new = make(work_dir, Path(tmp))
         out = writing.write_version(ds_id, version, new.cells, new.meta, paths=new.paths, extra_files=new.extra_files)

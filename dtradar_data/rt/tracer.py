@@ -91,7 +91,7 @@ def _import_sionna(device: Device, *, cpu_only: bool = False):
         raise RayTracerUnavailableError(
             f"Mitsuba/Dr.Jit is not importable: {e}", hint="run `make setup` (or `pip install sionna-rt==2.2.0`)"
         ) from e
-    use_cuda = device == "cuda" or (device == "auto" and not cpu_only and dr.has_backend(dr.JitBackend.CUDA))
+    use_cuda = _uses_cuda(dr, device, cpu_only=cpu_only)
     if device == "cuda" and not dr.has_backend(dr.JitBackend.CUDA):
         raise RayTracerUnavailableError(
             "device='cuda' requested but Dr.Jit finds no CUDA GPU", hint="use device='cpu' (or 'auto')"
@@ -105,6 +105,28 @@ def _import_sionna(device: Device, *, cpu_only: bool = False):
         raise RayTracerUnavailableError(f"sionna.rt failed to import: {e}", hint="run `make setup`") from e
     _MI = mi
     return mi, rt
+
+
+def _uses_cuda(dr, device: Device, *, cpu_only: bool) -> bool:
+    return device == "cuda" or (device == "auto" and not cpu_only and dr.has_backend(dr.JitBackend.CUDA))
+
+
+def trace_device(settings: RTSettings) -> str:
+    """``"cpu"`` or ``"cuda"``: where a :class:`RayTracer` made with ``settings`` traces, ``--rt.device auto``
+    resolved as the tracer resolves it, known before any scene loads (a partial build records it:
+    :mod:`dtradar_data.pipeline.resume`). Only ``auto`` with Sionna's own solver asks Dr.Jit for a GPU."""
+    if settings.device != "auto":
+        return settings.device
+    if settings.batch_independent:  # implemented for LLVM only: auto means the CPU (see _import_sionna)
+        return "cpu"
+    configure_llvm()  # before Dr.Jit's first import, as _import_sionna does
+    try:
+        import drjit as dr
+    except ImportError as e:  # pragma: no cover - depends on the install
+        raise RayTracerUnavailableError(
+            f"Dr.Jit is not importable: {e}", hint="run `make setup` (or `pip install sionna-rt==2.2.0`)"
+        ) from e
+    return "cuda" if _uses_cuda(dr, "auto", cpu_only=False) else "cpu"
 
 
 def active_variant() -> str | None:
