@@ -15,6 +15,13 @@ set-up of loading the twin and building its tables, about a second, count). The 
 plain DQN (``finetune-dqn``, with ``plain``) and train the checkpoint's preset from scratch with the same loss
 (``scratch``), for comparison. Writes ``adapt.{json,md}``, ``curve.csv`` and ``curve.png`` to
 ``runs/<scene>/adapt``.
+
+The changed twin must be traced as the checkpoint's blueprint was (the ray-tracing settings each dataset records in
+``meta["rt"]``; :func:`check_traced_alike`). A twin of another radio (carrier frequency, receiving antenna: what a
+feature value means) is refused: the checkpoint's network and normaliser learned the blueprint's radio, so the run
+would not be an update of the same agent. Any other difference (depth, interaction types, samples, engine) is
+warned about and recorded in ``adapt.json``: a cheaper or finer changed twin can be intended, but the curves then
+measure that change of settings together with the change of the scene.
 """
 
 from __future__ import annotations
@@ -22,18 +29,24 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.files import open_atomic, write_atomic
+from dtradar_data.rt.settings import flag as rt_flag
+from dtradar_data.store import local
+from dtradar_rl.agents.checkpoints import WrongTwinError
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.task.config import ConfigError, JobConfig, flag
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.runs import dqn_checkpoint, run_dir
-from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import check_trained_on_scene, load_policy
+from dtradar_rl.task.twins import is_synthetic, load_dataset
+from dtradar_rl.train.checkpoints import check_trained_on_scene, load_policy, trained_twin
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
 from dtradar_rl.viz.plots import plot_adapt_curves
@@ -88,6 +101,60 @@ class AdaptConfig(JobConfig):
         self.check_at_least(0, "learning_starts", "pair_seed", "expert_weight")
         self.check_at_least(-1, "aug_obstacles")
         self.check_within(0, 1, "eps")
+
+
+#: Ray-tracing settings that say what a feature value means, the radio observed: a changed twin traced with others is
+#: refused (the module docstring). Every other recorded setting is warned about.
+RADIO_SETTINGS: tuple[str, ...] = ("frequency_hz", "rx_pattern", "rx_polarization")
+#: What ``meta["rt"]`` records beside the settings (the reduction's text, the solver's name, the Mitsuba variant).
+NOT_SETTINGS: tuple[str, ...] = ("reduction", "solver", "mitsuba_variant")
+
+
+def _show(value: Any) -> str:
+    if value is None:
+        return "(not recorded)"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def check_traced_alike(start: Policy, ds: Dataset, ckpt: Path) -> dict[str, list[Any]]:
+    """``{setting: [blueprint's, changed twin's]}`` of the ray-tracing settings in which ``ds`` differs from the twin
+    ``start`` was trained on (that stored version's ``meta.json``); :class:`WrongTwinError` for one of
+    :data:`RADIO_SETTINGS`, a warning for the others. Empty, with nothing checked, when either twin records no
+    settings (a synthetic one) or the checkpoint's version is not in the store."""
+    twin = trained_twin(start)
+    name = f"{twin['scene']}/{twin['variant']}"
+    mine = ds.meta.get("rt")
+    if not isinstance(mine, dict) or is_synthetic(twin["scene"]) or not twin["version"]:
+        return {}
+    try:
+        theirs = local.read_meta(local.resolve(name, twin["version"])[2]).get("rt")
+    except DtradarError:  # a pulled checkpoint whose twin is not stored here: nothing to compare with
+        return {}
+    if not isinstance(theirs, dict):
+        return {}
+    keys = sorted((set(mine) | set(theirs)) - set(NOT_SETTINGS))
+    differs = {k: [theirs.get(k), mine.get(k)] for k in keys if theirs.get(k) != mine.get(k)}
+    listing = "; ".join(f"{rt_flag(k)} {_show(a)} there, {_show(b)} here" for k, (a, b) in differs.items())
+    radio = [k for k in differs if k in RADIO_SETTINGS]
+    if radio:
+        rebuild = " ".join(f"{rt_flag(k)} {_show(differs[k][0])}" for k in radio)
+        raise WrongTwinError(
+            f"{ckpt} was trained on {name}@{twin['version']}, traced with other radio settings than {ds.name}@"
+            f"{ds.version} ({listing}): its network and normaliser learned another radio, so fine-tuning it there is "
+            "no update of the same agent",
+            hint=f"rebuild {ds.name} as the blueprint was traced (`python -m dtradar_data build --scene "
+            f"{twin['scene']} --variant {ds.name.split('/')[1]} {rebuild}`), or start from an agent trained on a "
+            f"blueprint traced like {ds.name}",
+        )
+    if differs:
+        warnings.warn(
+            f"{ckpt} was trained on {name}@{twin['version']}, traced with other ray-tracing settings than "
+            f"{ds.name}@{ds.version} ({listing}): the curves measure that change together with the change of the "
+            "scene (recorded in adapt.json as rt_differences)",
+            UserWarning,
+            stacklevel=3,
+        )
+    return differs
 
 
 @dataclass
@@ -149,6 +216,7 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
     if twin["variant"] == cfg.variant and cfg.verbose:
         print(f"note: {ckpt} was trained on {cfg.scene}/{cfg.variant} itself; fine-tuning it there changes little")
     ds = load_dataset(f"{cfg.scene}/{cfg.variant}")
+    rt_differences = check_traced_alike(start, ds, ckpt)  # another radio refused, other settings warned about
     base = start.config
     if cfg.expert_weight > 0 and base.reward != "geodesic":
         raise ConfigError(
@@ -206,7 +274,7 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
             },
         )
         curves["scratch"] = _curve(cfg, "scratch", scratch_cfg, ds, None, out)
-    md = _report(cfg, ckpt, curves, out)
+    md = _report(cfg, ckpt, curves, out, rt_differences)
     return AdaptResult(out, curves, md)
 
 
@@ -215,7 +283,13 @@ def first_time_at(rows: list[dict[str, float]], success: float) -> float | None:
     return next((r["train_s"] for r in rows if r["success_rate"] >= success), None)
 
 
-def _report(cfg: AdaptConfig, ckpt: Path, curves: dict[str, list[dict[str, float]]], out: Path) -> str:
+def _report(
+    cfg: AdaptConfig,
+    ckpt: Path,
+    curves: dict[str, list[dict[str, float]]],
+    out: Path,
+    rt_differences: dict[str, list[Any]],
+) -> str:
     out.mkdir(parents=True, exist_ok=True)
     with open_atomic(out / "curve.csv", "w", newline="") as f:
         w = csv.writer(f)
@@ -235,6 +309,15 @@ def _report(cfg: AdaptConfig, ckpt: Path, curves: dict[str, list[dict[str, float
     write_atomic(out / "adapt.md", md)
     write_atomic(
         out / "adapt.json",
-        json.dumps({"config": dataclasses.asdict(cfg), "checkpoint": str(ckpt), "curves": curves}, indent=2) + "\n",
+        json.dumps(
+            {
+                "config": dataclasses.asdict(cfg),
+                "checkpoint": str(ckpt),
+                "rt_differences": rt_differences,
+                "curves": curves,
+            },
+            indent=2,
+        )
+        + "\n",
     )
     return md

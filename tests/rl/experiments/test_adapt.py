@@ -80,3 +80,46 @@ def test_adapting_a_checkpoint_without_the_geodesic_reward_asks_for_plain_fine_t
         )
     )
     assert set(result.curves) == {"finetune"}
+
+
+def test_adapting_to_a_twin_traced_with_another_radio_is_refused_and_other_ray_tracing_settings_are_warned_about(
+    root, tmp_path
+):
+    import dataclasses
+
+    import numpy as np
+
+    from dtradar_data.pipeline.synthetic import synthetic_dataset
+    from dtradar_data.store import writing
+    from dtradar_rl.agents.checkpoints import WrongTwinError, save_checkpoint
+    from dtradar_rl.agents.policy import QNetwork
+    from dtradar_rl.task.observations import Normalizer, build_observations
+    from dtradar_rl.task.twins import load_dataset
+
+    rt = {"frequency_hz": 2.4e9, "max_depth": 5, "samples_per_src": 10_000, "rx_pattern": "dipole", "solver": "x"}
+    blocked = np.zeros((6, 10), bool)
+    blocked[2:4, 4] = True
+
+    def store(variant, version, **changed):
+        ds = synthetic_dataset(10, 6, blocked, name=f"cubicle/{variant}")
+        writing.write_version(ds.name, version, ds.table, {**ds.meta, "rt": {**rt, **changed}, "licence": "CC0-1.0"})
+        return load_dataset(ds.name)
+
+    blueprint = store("blueprint", "0123456789abcdef")
+    norm = Normalizer.fit(blueprint)
+    names = build_observations(blueprint, "neighbors", norm).names
+    cfg = dataclasses.replace(config_for("tuned", scene="cubicle"), hidden=(8,))
+    ckpt = save_checkpoint(tmp_path / "bp" / "model.pt", QNetwork(len(names), (8,)), cfg, norm, names, blueprint)
+    run = dict(scene="cubicle", checkpoint=str(ckpt), seconds=0.2, eval_every_s=0.2, pairs=5, learning_starts=16)
+    run.update(plain=False, scratch=False, verbose=False, threads=1, out=str(tmp_path / "adapt"))
+
+    store("dynamic", "1111111111111111", frequency_hz=5.8e9, solver="y")  # another radio: refused, nothing written
+    with pytest.raises(WrongTwinError, match="--rt.frequency-hz 2.4e\\+09 there, 5.8e\\+09 here") as e:
+        adapt(AdaptConfig(**run))
+    assert "--rt.frequency-hz 2.4e+09" in e.value.hint and not (tmp_path / "adapt").exists()
+
+    store("dynamic", "2222222222222222", samples_per_src=1_000)  # traced more coarsely: can be meant, warned about
+    with pytest.warns(UserWarning, match="--rt.samples-per-src 10000 there, 1000 here"):
+        adapt(AdaptConfig(**run))
+    saved = json.loads((tmp_path / "adapt" / "adapt.json").read_text())
+    assert saved["rt_differences"] == {"samples_per_src": [10_000, 1_000]}
