@@ -11,7 +11,7 @@ process waits on, saying for whom, are :func:`dtradar_data.core.files.waiting_lo
 
 The same helpers serve the RT store (``<root>/work/stage-*`` of a version written, ``<root>/work/pull-*`` of a
 download: :mod:`dtradar_data.store.writing`), the logged store (``<root>/work/logged-*``, ``<root>/work/pull-logged-*``)
-and the Minari copies of :mod:`dtradar_rl.offline.formats` (hidden ``.dtradar-stage-*`` folders in the Minari data
+and the Minari copies of :mod:`dtradar_rl.offline.minari_copy` (hidden ``.dtradar-stage-*`` folders in the Minari data
 path). A writer whose prefix names what it writes (``stage-<scene>-<variant>-<version>-``) holds its stage under that
 prefix, and the cleaner of every such stage takes the common prefix and the pattern of the rest (``infix``).
 """

@@ -74,7 +74,8 @@ from dtradar_rl.experiments.offline_tabular import tabular_section
 from dtradar_rl.offline.behaviours import behaviour_policy
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig
 from dtradar_rl.offline.formats import as_logged
-from dtradar_rl.offline.logged import LogConfig, log_dataset, resolve_spec
+from dtradar_rl.offline.logged import LogConfig, log_dataset
+from dtradar_rl.offline.medium_agent import resolve_spec
 from dtradar_rl.task.runs import dqn_checkpoint
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset

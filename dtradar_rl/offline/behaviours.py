@@ -20,7 +20,7 @@ The **dataset families** (:data:`FAMILIES`), named like D4RL's (Fu et al. 2020) 
 - ``medium``: an online DQN (the ``tuned`` preset, seeded) stopped at the first evaluation where the normalised
   score of this very behaviour reaches ``medium_target`` (50: half the expert), then logged with its greedy move
   replaced with probability :data:`MEDIUM_EPSILON` (0.1) by a random one. The agent is trained once per recipe and
-  cached (:func:`dtradar_rl.offline.logged.medium_agent`).
+  cached (:func:`dtradar_rl.offline.medium_agent.medium_agent`).
 - ``medium-replay``: every transition that medium agent's run collected while it trained, up to its stop (its replay
   buffer; :func:`dtradar_rl.offline.collection.replay`).
 - ``mixed``: a mixture of ``random``, ``medium`` and ``expert`` (robot ``i`` uses component ``i mod 3``). ``mixture``
@@ -103,7 +103,7 @@ class BehaviourSpec:
     medium_target: float = MEDIUM_TARGET
     medium_budget: int = MEDIUM_BUDGET
     hidden: tuple[int, ...] = (256, 256)
-    #: the trained medium agent's model.pt, filled in by :func:`dtradar_rl.offline.logged.resolve_spec` (not a
+    #: the trained medium agent's model.pt, filled in by :func:`dtradar_rl.offline.medium_agent.resolve_spec` (not a
     #: parameter: the medium recipe is, see :meth:`medium_recipe`)
     medium_checkpoint: str = ""
 
@@ -328,7 +328,7 @@ def checkpoint_policy(
     """The DQN of an ``epsilon-greedy`` (or ``medium``) behaviour, checked to observe like the log (preset and
     normaliser) and, given the logged twin ``ds``, an ``epsilon-greedy`` one to be trained on it
     (:mod:`.checkpoint_twin`). A ``medium`` spec must have been resolved
-    (:func:`dtradar_rl.offline.logged.resolve_spec`)."""
+    (:func:`dtradar_rl.offline.medium_agent.resolve_spec`)."""
     if "epsilon-greedy" in spec.used:
         path = spec.checkpoint
     elif "medium" in spec.used:
@@ -336,7 +336,7 @@ def checkpoint_policy(
         if not path:
             raise ConfigError(
                 f"the {spec.kind} behaviour acts with the medium agent, which this spec does not name yet",
-                hint="resolve it first: dtradar_rl.offline.logged.resolve_spec(config, dataset) trains or reuses it",
+                hint="resolve it first: dtradar_rl.offline.medium_agent.resolve_spec(config, dataset) trains or reuses",
             )
     else:
         return None
@@ -402,7 +402,7 @@ def behaviour_policy(
     spec: BehaviourSpec, ds: Dataset, obs: str = "neighbors", seed: int = 0, device: str = "cpu"
 ) -> BehaviourPolicy:
     """The behaviour ``spec`` observing like a log on ``ds`` (its preset, the normaliser fitted on ``ds``); a
-    ``medium`` or ``mixed`` spec resolved first (:func:`dtradar_rl.offline.logged.resolve_spec`)."""
+    ``medium`` or ``mixed`` spec resolved first (:func:`dtradar_rl.offline.medium_agent.resolve_spec`)."""
     spec.validate()
     if not spec.used:
         raise ConfigError(

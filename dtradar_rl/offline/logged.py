@@ -1,7 +1,8 @@
 """Logged offline-RL datasets: log a behaviour policy on a twin into the store, and open the result as Minari or d3rlpy.
 
     from dtradar_rl.offline.logged import LogConfig, log_dataset
-    from dtradar_rl.offline.formats import to_mdp_dataset, export_minari
+    from dtradar_rl.offline.formats import to_mdp_dataset
+    from dtradar_rl.offline.minari_copy import export_minari
     logged = log_dataset(LogConfig(scene="cubicle", behaviour="noisy-shortest"))   # cubicle/blueprint/noisy-shortest
     logged = dtradar_data.load("cubicle/blueprint/noisy-shortest")                 # the same, from the store
     mdp = to_mdp_dataset(logged)            # d3rlpy MDPDataset, every logged transition kept and aligned
@@ -19,9 +20,9 @@ Its formats (Parquet in the store, Minari, d3rlpy) are :mod:`dtradar_rl.offline.
 **Dataset families** (D4RL's names, :data:`~dtradar_rl.offline.behaviours.FAMILIES`): ``random``, ``expert``,
 ``medium``, ``medium-replay`` and ``mixed`` are behaviours like the others (``--behaviour medium``);
 :func:`log_families` (``--behaviour all``) logs all five on a twin. The medium agent is an online DQN trained once per
-recipe by :func:`medium_agent` and cached under ``<root>/logged/<scene>/<variant>/medium/agents/<key>/`` (``model.pt``,
-``last.pt`` with its replay buffer, ``medium.json``), where ``key`` hashes the twin, the recipe, the seed, the logging
-settings and the library versions; ``medium``, ``medium-replay`` and ``mixed`` of the same settings share it.
+recipe and cached (:mod:`dtradar_rl.offline.medium_agent`); ``medium``, ``medium-replay`` and ``mixed`` of the same
+settings share it. What ties a log to its twin (parent version, settings, the trainer's check) is
+:mod:`dtradar_rl.offline.log_settings`.
 
 **Normalised score** (:mod:`dtradar_rl.evaluation.normalized`): every logged version's ``meta.json`` and card give it
 twice: the behaviour itself rolled out on the twin's seeded evaluation pairs (``score.policy``; absent for
@@ -31,41 +32,28 @@ twice: the behaviour itself rolled out on the twin's seeded evaluation pairs (``
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dtradar_data.core import layout as P
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import CorruptDatasetError, SchemaMismatchError
-from dtradar_data.core.files import sha256_file, waiting_lock, write_atomic
 from dtradar_data.store.logged import (
-    LOGGED_LIBRARIES,
     MINARI_ENV,
     LoggedDataset,
     clean_logged_stages,
     load_logged,
     local_versions,
-    logged_dir,
     logged_version,
     logging_inputs,
     logging_lock,
     minari_root,
     parse_logged_id,
-    table_digest,
     transitions_table,
     write_logged,
 )
-from dtradar_data.store.logged.staging import held_stage
-from dtradar_data.store.versions import library_versions, version_id
 from dtradar_rl.agents.checkpoints import CHECKPOINT_FORMAT, read_checkpoint
-from dtradar_rl.agents.policy import Policy
-from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout, sample_eval_pairs
 from dtradar_rl.evaluation.normalized import (
     DEFAULT_PAIRS,
     DEFAULT_SEED,
@@ -78,17 +66,16 @@ from dtradar_rl.evaluation.normalized import (
 from dtradar_rl.offline.behaviours import (
     ALL,
     FAMILIES,
-    MEDIUM_TOLERANCE,
     OGBENCH_FAMILIES,
     BehaviourConfig,
-    BehaviourPolicy,
     BehaviourSpec,
     behaviour_policy,
 )
 from dtradar_rl.offline.collection import replay, roll
-from dtradar_rl.offline.formats import export_minari
-from dtradar_rl.task.config import ConfigError, TwinConfig
-from dtradar_rl.task.grid_mdp import GridMDP
+from dtradar_rl.offline.log_settings import parent_version, settings_of
+from dtradar_rl.offline.medium_agent import medium_agent, resolve_spec
+from dtradar_rl.offline.minari_copy import export_minari
+from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
@@ -134,22 +121,6 @@ class LogConfig(BehaviourConfig):
             self.check_at_least(1, "steps")
         parse_logged_id(self.logged_name)  # the name must fit the grammar
         return self
-
-
-def parent_version(ds: Dataset) -> str:
-    """The parent's stored content version, or a hash of its table (synthetic twins have no stored version)."""
-    return ds.version or table_digest(ds.table)
-
-
-def settings_of(cfg: LogConfig, ds: Dataset) -> dict[str, Any]:
-    max_steps = cfg.max_steps or GridMDP.from_dataset(ds).max_steps
-    return {
-        "num_envs": cfg.num_envs,
-        "obs": cfg.obs,
-        "reward": cfg.reward,
-        "max_steps": int(max_steps),
-        "device_kind": "cuda" if cfg.device.startswith("cuda") else "cpu",
-    }
 
 
 def log_inputs(cfg: LogConfig, ds: Dataset) -> dict[str, Any]:
@@ -314,238 +285,10 @@ def behaviour_score(
     }
 
 
-# -- the medium agent ------------------------------------------------------------------------------------------------
-#: The medium agents' folder inside ``<root>/logged/<scene>/<variant>/medium`` (not a version: no hash name).
-MEDIUM_AGENTS = "agents"
-MEDIUM_RECORD = "medium.json"
-_AGENT_STAGE = "logged-agent-"
-
-
-@dataclass(frozen=True)
-class MediumAgent:
-    """A trained medium agent in its cache folder: ``model.pt`` (the agent at the stop), ``last.pt`` (its training
-    state, with the replay buffer of everything it collected) and ``medium.json`` (:attr:`record`)."""
-
-    path: Path
-    record: dict[str, Any]
-
-    @property
-    def checkpoint(self) -> Path:
-        return self.path / "model.pt"
-
-    @property
-    def last(self) -> Path:
-        return self.path / "last.pt"
-
-    def summary(self) -> dict[str, Any]:
-        """What a logged dataset's meta records of it (no history)."""
-        keys = ("key", "stopped_at_env_steps", "updates", "episodes", "train_s", "spl", "score", "target")
-        keys += ("tolerance", "within_tolerance", "checkpoint_sha256", "evaluations")
-        return {k: self.record.get(k) for k in keys}
-
-
-def medium_key_inputs(cfg: BehaviourConfig, ds: Dataset) -> dict[str, Any]:
-    """What identifies a medium agent: the twin (name and content), the recipe, the seed, the logging settings (robots,
-    observation preset, reward, step limit, device kind) and the library versions."""
-    return {
-        "parent": ds.name,
-        "parent_version": parent_version(ds),
-        "medium": cfg.spec().medium_recipe(),
-        "seed": int(cfg.seed),
-        "settings": settings_of(cfg, ds),
-        "library_versions": library_versions(LOGGED_LIBRARIES),
-    }
-
-
-def medium_agent_dir(cfg: BehaviourConfig, key: str) -> Path:
-    return logged_dir(parse_logged_id(f"{cfg.scene}/{cfg.variant}/medium")) / MEDIUM_AGENTS / key
-
-
-def _stored_agent(path: Path, key: str) -> MediumAgent | None:
-    try:
-        record = json.loads((path / MEDIUM_RECORD).read_text())
-        agent = MediumAgent(path, record)
-        if record.get("key") == key and agent.last.is_file():
-            if sha256_file(agent.checkpoint) == record.get("checkpoint_sha256"):
-                return agent
-    except (OSError, ValueError):
-        pass
-    return None
-
-
-def medium_agent(cfg: BehaviourConfig, ds: Dataset, say=print) -> MediumAgent:
-    """The medium agent of ``cfg`` on ``ds``: the cached one when its folder is whole, else trained now (and a
-    damaged folder replaced). Two processes take turns; the second reuses the first's agent."""
-    inputs = medium_key_inputs(cfg, ds)
-    key = version_id(inputs)
-    path = medium_agent_dir(cfg, key)
-    with waiting_lock(
-        path.parent / f".{key}.lock", f"training the medium agent {key} of {ds.name}", then="this process reuses it"
-    ):
-        agent = _stored_agent(path, key)
-        if agent is not None:
-            say(
-                f"medium agent {key}: reused ({agent.record['stopped_at_env_steps']} env steps, normalised score "
-                f"{agent.record['score']:.1f})"
-            )
-            return agent
-        return _train_medium(cfg, ds, inputs, key, path, say)
-
-
-def _train_medium(cfg: BehaviourConfig, ds: Dataset, inputs: dict[str, Any], key: str, dest: Path, say) -> MediumAgent:
-    """Train the online DQN of the recipe, evaluating the epsilon-greedy agent every ``eval_every`` environment steps
-    on the normalised score's pairs, and stop at the first evaluation at or above the target."""
-    import torch
-
-    from dtradar_rl.train.config import config_for
-    from dtradar_rl.train.dqn import train
-
-    recipe, settings = inputs["medium"], inputs["settings"]
-    refs = reference_scores(ds, pairs=recipe["pairs"], seed=recipe["eval_seed"], device=cfg.device)
-    normalizer = Normalizer.fit(ds)
-    pairs = sample_eval_pairs(ds, recipe["pairs"], recipe["eval_seed"])
-    eval_spec = BehaviourSpec("epsilon-greedy", epsilon=recipe["epsilon"])
-    history: list[list[float]] = []
-    next_eval = [recipe["eval_every"]]
-    say(
-        f"training the medium agent {key} on {ds.name} ({recipe['preset']} DQN, seed {cfg.seed}, up to "
-        f"{recipe['budget']} env steps, until its normalised score reaches {recipe['target']:g})"
-    )
-    threads = torch.get_num_threads()
-    with held_stage(P.work_root(), _AGENT_STAGE) as stage:
-        out = stage / "run"
-        dqn_cfg = config_for(
-            recipe["preset"],
-            scene=cfg.scene,
-            variant=cfg.variant,
-            revision=cfg.revision,
-            obs=cfg.obs,
-            reward=cfg.reward,
-            max_steps=settings["max_steps"],
-            num_envs=cfg.num_envs,
-            hidden=tuple(recipe["hidden"]),
-            device=cfg.device,
-            seed=cfg.seed,
-            threads=recipe["threads"],
-            total_env_steps=recipe["budget"],
-            buffer_size=recipe["budget"] + cfg.num_envs,  # never wraps: the replay buffer keeps every transition
-            checkpoint_every=0,
-            save_replay=True,
-            out=str(out),
-            verbose=False,
-        )
-
-        def callback(q, env_steps: int, train_s: float) -> bool:
-            if env_steps < next_eval[0]:
-                return False
-            while next_eval[0] <= env_steps:
-                next_eval[0] += recipe["eval_every"]
-            greedy = Policy(q, dqn_cfg, normalizer, cfg.obs, {})
-            bp = BehaviourPolicy(
-                q=None, config=None, normalizer=normalizer, obs_preset=cfg.obs, meta={}, spec=eval_spec,
-                seed=recipe["eval_seed"], greedy=greedy,
-            )  # fmt: skip
-            spl = metrics_from_rollouts(rollout(bp, ds, pairs, device=cfg.device)).spl
-            score = normalized(spl, refs)
-            history.append([int(env_steps), round(float(train_s), 3), spl, score])
-            if cfg.verbose:
-                say(f"  medium agent: {env_steps:>7d} env steps, {train_s:6.1f} s, normalised score {score:6.1f}")
-            return score >= recipe["target"]
-
-        try:
-            result = train(dqn_cfg, ds, normalizer=normalizer, callback=callback)
-        finally:
-            torch.set_num_threads(threads)
-        if not history or history[-1][3] < recipe["target"]:
-            best = max((h[3] for h in history), default=float("nan"))
-            raise ConfigError(
-                f"the medium agent reached a normalised score of {best:.1f} at most in {result.env_steps} env steps "
-                f"on {ds.name}, short of the target {recipe['target']:g}",
-                hint="raise --medium-budget, or lower --medium-target",
-            )
-        steps, _, spl, score = history[-1]
-        record = {
-            "key": key,
-            "inputs": inputs,
-            "stopped_at_env_steps": int(result.env_steps),
-            "updates": int(result.updates),
-            "episodes": int(result.episodes),
-            "train_s": float(result.wall_s),
-            "spl": float(spl),
-            "score": float(score),
-            "target": float(recipe["target"]),
-            "tolerance": MEDIUM_TOLERANCE,
-            "within_tolerance": bool(score - recipe["target"] <= MEDIUM_TOLERANCE),
-            "references": refs,
-            "evaluations": len(history),
-            "history": [{"env_steps": h[0], "train_s": h[1], "spl": h[2], "score": h[3]} for h in history],
-            "checkpoint_sha256": sha256_file(out / "model.pt"),
-        }
-        write_atomic(out / MEDIUM_RECORD, json.dumps(record, indent=2, sort_keys=True) + "\n")
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        if dest.exists():  # damaged: moved into the stage, removed with it
-            os.rename(dest, stage / "damaged")
-        shutil.move(str(out), dest)
-    note = "" if record["within_tolerance"] else f" (more than {MEDIUM_TOLERANCE:g} past the target)"
-    say(
-        f"medium agent {key}: stopped at {record['stopped_at_env_steps']} env steps ({record['train_s']:.1f} s), "
-        f"normalised score {score:.1f}{note}"
-    )
-    return MediumAgent(dest, record)
-
-
-def resolve_spec(cfg: BehaviourConfig, ds: Dataset, *, agent: MediumAgent | None = None, say=print) -> BehaviourSpec:
-    """``cfg``'s behaviour spec, with the medium agent's checkpoint filled in when the behaviour acts with it (trained
-    or reused by :func:`medium_agent`), so :func:`~dtradar_rl.offline.behaviours.behaviour_policy` and
-    :func:`~dtradar_rl.offline.collection.roll` can act with it."""
-    spec = cfg.spec()
-    if "medium" not in spec.used:
-        return spec
-    agent = agent or medium_agent(cfg, ds, say)
-    return replace(spec, medium_checkpoint=str(agent.checkpoint))
-
-
-def check_compatible(logged: LoggedDataset, cfg: TwinConfig, ds: Dataset) -> None:
-    """:class:`SchemaMismatchError` when ``logged`` was not logged on ``ds`` with ``cfg``'s observation preset (the
-    trainer would otherwise learn from features another normaliser or preset produced)."""
-    meta = logged.meta
-    problems = []
-    if meta.get("parent") != ds.name:
-        problems.append(f"it was logged on {meta.get('parent')!r}, the trainer uses {ds.name!r}")
-    elif meta.get("parent_version") != parent_version(ds):
-        problems.append(
-            f"it was logged on version {meta.get('parent_version')} of {ds.name}, the trainer loaded "
-            f"{parent_version(ds)}"
-        )
-    preset = (meta.get("observations") or {}).get("preset")
-    if preset != cfg.obs:
-        problems.append(f"its observation preset is {preset!r}, the trainer's {cfg.obs!r}")
-    stored = meta.get("normalizer")
-    if stored and not problems:
-        fitted = Normalizer.fit(ds)
-        if not np.allclose(stored["mean"], fitted.mean, rtol=1e-5) or not np.allclose(
-            stored["std"], fitted.std, rtol=1e-5
-        ):
-            problems.append("its feature normaliser differs from the one fitted on the twin")
-    if problems:
-        raise SchemaMismatchError(
-            f"logged dataset {logged.name}@{logged.version} does not fit: " + "; ".join(problems),
-            hint=f"train with --scene/--variant/--obs of the log (parent {meta.get('parent')}, "
-            f"preset {preset}), or log again on this twin",
-        )
-
-
 __all__ = [
     "LogConfig",
-    "MediumAgent",
     "behaviour_score",
-    "check_compatible",
     "log_dataset",
     "log_families",
     "log_inputs",
-    "medium_agent",
-    "medium_key_inputs",
-    "parent_version",
-    "resolve_spec",
-    "settings_of",
 ]

@@ -19,7 +19,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import SchemaMismatchError
 from dtradar_data.store.logged import LoggedDataset
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy
-from dtradar_rl.offline.logged import parent_version
+from dtradar_rl.offline.log_settings import parent_version
 from dtradar_rl.offline.relabel import (
     FALLBACK,
     FUTURE,

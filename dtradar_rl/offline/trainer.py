@@ -56,7 +56,8 @@ from dtradar_rl.evaluation.evaluate import write_results
 from dtradar_rl.offline.behaviours import BehaviourConfig
 from dtradar_rl.offline.config import ALGORITHMS, OFFLINE_FORMAT, OfflineConfig, check_algorithm
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, to_mdp_dataset
-from dtradar_rl.offline.logged import LogConfig, check_compatible, log_dataset
+from dtradar_rl.offline.log_settings import check_compatible
+from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
 from dtradar_rl.offline.relabel import RelabelConfig, not_relabellable
 from dtradar_rl.offline.relabelled_sampler import relabelled_sampler
@@ -260,7 +261,7 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | N
 
     The logged data is always a stored, versioned dataset: ``dataset`` or ``cfg.logged`` when given (a
     :class:`~dtradar_data.store.logged.LoggedDataset` or its name), checked to have been logged on the twin
-    with ``cfg.obs`` (:func:`dtradar_rl.offline.logged.check_compatible`); otherwise
+    with ``cfg.obs`` (:func:`dtradar_rl.offline.log_settings.check_compatible`); otherwise
     ``<scene>/<variant>/<behaviour>`` logged by :func:`dtradar_rl.offline.logged.log_dataset` with ``cfg``'s
     behaviour, ``transitions`` and ``seed`` (reused when that version is stored). A :class:`Dataset` given as
     ``dataset`` is the twin to log on and evaluate against (default: load ``cfg.dataset_name``).

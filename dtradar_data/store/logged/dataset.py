@@ -5,7 +5,7 @@ The Minari copy of a data root's logged version is a Minari dataset in :func:`mi
 ``MINARI_DATASETS_PATH`` when it is set, else ``<data root>/minari``, one Minari folder per data root (not Minari's
 default ``~/.minari/datasets``, which every data root would share: the same id ``dtradar/...-v0`` names the first
 version logged in *each* data root, so two roots would write different data under one id). Load it with
-``MINARI_DATASETS_PATH=<data root>/minari`` set, or with :func:`dtradar_rl.offline.formats.load_minari`.
+``MINARI_DATASETS_PATH=<data root>/minari`` set, or with :func:`dtradar_rl.offline.minari_copy.load_minari`.
 """
 
 from __future__ import annotations

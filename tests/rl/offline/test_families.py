@@ -13,10 +13,11 @@ from dtradar_data.core.files import sha256_file
 from dtradar_data.store.logged import arrays
 from dtradar_rl.agents.checkpoints import CHECKPOINT_FORMAT, read_checkpoint
 from dtradar_rl.cli import main
-from dtradar_rl.offline import logged as L
+from dtradar_rl.offline import medium_agent as M
 from dtradar_rl.offline.behaviours import FAMILIES, MEDIUM_TARGET, OGBENCH_FAMILIES
 from dtradar_rl.offline.collection import replay
-from dtradar_rl.offline.logged import LogConfig, log_dataset, log_families, medium_agent
+from dtradar_rl.offline.logged import LogConfig, log_dataset, log_families
+from dtradar_rl.offline.medium_agent import medium_agent
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.replay import replay_transitions
@@ -130,7 +131,7 @@ def test_logging_medium_again_reuses_the_cached_agent(families, tiny, monkeypatc
     def boom(*a, **k):
         raise AssertionError("trained again")
 
-    monkeypatch.setattr(L, "_train_medium", boom)
+    monkeypatch.setattr(M, "_train_medium", boom)
     logged = log_dataset(LogConfig(behaviour="medium", **{**SETTINGS, "steps": 1_000}), tiny)
     assert logged.meta["medium_agent"]["key"] == agent.record["key"]
     assert logged.meta["inputs"]["steps"] == 1_000

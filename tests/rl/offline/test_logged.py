@@ -13,8 +13,9 @@ from dtradar_rl.agents.checkpoints import save_checkpoint
 from dtradar_rl.agents.policy import QNetwork
 from dtradar_rl.offline.behaviours import BehaviourSpec
 from dtradar_rl.offline.config import OfflineConfig
-from dtradar_rl.offline.formats import d3rlpy_arrays, export_minari, from_minari, to_mdp_dataset
+from dtradar_rl.offline.formats import d3rlpy_arrays, to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, log_dataset
+from dtradar_rl.offline.minari_copy import export_minari, from_minari
 from dtradar_rl.offline.trainer import train_offline
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.grid_mdp import GridMDP

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from dtradar_data.store import logged as T
-from dtradar_rl.offline import formats
+from dtradar_rl.offline import minari_copy
 from dtradar_rl.task.config import ConfigError
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
@@ -77,10 +77,10 @@ def assert_whole(logged, mid=MID):
     """The copy is there (in $MINARI_DATASETS_PATH), holds every logged transition and is recorded complete."""
     m = minari.load_dataset(mid)
     assert (m.total_episodes, m.total_steps) == (logged.meta["stats"]["episodes"], len(logged))
-    back = formats.from_minari(mid)
+    back = minari_copy.from_minari(mid)
     for k, v in back.items():
         np.testing.assert_array_equal(v, logged.arrays()[k], err_msg=k)
-    assert formats.copy_state(Path(os.environ["MINARI_DATASETS_PATH"]) / mid, logged)[0] == "complete"
+    assert minari_copy.copy_state(Path(os.environ["MINARI_DATASETS_PATH"]) / mid, logged)[0] == "complete"
 
 
 def run(script: str, *args: str) -> subprocess.Popen:
@@ -129,7 +129,7 @@ KILLED_EXPORT = textwrap.dedent("""
 
     from minari.dataset._storages import hdf5_storage
 
-    from dtradar_rl.offline.formats import export_minari
+    from dtradar_rl.offline.minari_copy import export_minari
 
     real = hdf5_storage.HDF5Storage.update_episodes
 
@@ -151,7 +151,7 @@ def test_a_minari_copy_killed_mid_write_is_absent_and_the_next_export_writes_a_w
     root = stores.parent / "minari"
     assert not (root / MID).exists(), "a killed write leaves no copy under the id (it left 0 episodes there)"
     assert [p.name for p in root.glob(".dtradar-stage-*") if p.is_dir()], "what it wrote is in a hidden stage"
-    assert formats.export_minari(logged) == MID
+    assert minari_copy.export_minari(logged) == MID
     assert_whole(logged)
     assert not [p for p in root.glob(".dtradar-stage-*") if p.is_dir()], "the killed writer's stage is removed"
     assert MID in minari.list_local_datasets()
@@ -159,7 +159,7 @@ def test_a_minari_copy_killed_mid_write_is_absent_and_the_next_export_writes_a_w
 
 def zero_episodes(folder):
     """What a write killed after Minari's metadata left before staging existed: a copy with no episode."""
-    (folder / formats.RECORD_FILE).unlink()
+    (folder / minari_copy.RECORD_FILE).unlink()
     (folder / "data" / "main_data.hdf5").unlink()
     meta = json.loads((folder / "data" / "metadata.json").read_text())
     (folder / "data" / "metadata.json").write_text(json.dumps({**meta, "total_episodes": 0, "total_steps": 0}))
@@ -178,26 +178,26 @@ def fewer_episodes(folder):
 
 
 def no_record(folder):
-    (folder / formats.RECORD_FILE).unlink()
+    (folder / minari_copy.RECORD_FILE).unlink()
 
 
 @pytest.mark.parametrize("damage", [zero_episodes, flipped_byte, fewer_episodes, no_record])
 def test_a_copy_found_incomplete_or_damaged_in_place_is_rewritten_not_reused(stores, damage):
     logged = put()
-    formats.export_minari(logged)
+    minari_copy.export_minari(logged)
     folder = stores.parent / "minari" / MID
     damage(folder)
-    assert formats.export_minari(logged) == MID
+    assert minari_copy.export_minari(logged) == MID
     assert_whole(logged)
 
 
 def test_a_copy_of_another_version_that_no_data_root_holds_any_more_is_replaced(stores):
     old = put(seed=0)
-    formats.export_minari(old)
+    minari_copy.export_minari(old)
     shutil.rmtree(T.logged_root())  # the store is emptied: its next v0 is another version
     new = put(seed=1, n_episodes=2)
     assert new.tag == "v0" and new.version != old.version
-    formats.export_minari(new)
+    minari_copy.export_minari(new)
     assert_whole(new)
 
 
@@ -210,17 +210,17 @@ def test_two_data_roots_write_their_copies_apart_and_a_shared_minari_folder_is_r
     for name, seed in (("a", 0), ("b", 1)):
         monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / name))
         logged[name] = put(seed=seed)
-        assert formats.export_minari(logged[name]) == MID  # both are v0 of their own root
+        assert minari_copy.export_minari(logged[name]) == MID  # both are v0 of their own root
         assert (tmp_path / name / "minari" / MID / "data").is_dir(), "in the data root's own Minari folder"
-        assert formats.copy_state(tmp_path / name / "minari" / MID, logged[name])[0] == "complete"
-        np.testing.assert_array_equal(formats.load_minari(logged[name]).total_steps, len(logged[name]))
+        assert minari_copy.copy_state(tmp_path / name / "minari" / MID, logged[name])[0] == "complete"
+        np.testing.assert_array_equal(minari_copy.load_minari(logged[name]).total_steps, len(logged[name]))
 
     monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "shared"))
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "a"))
-    formats.export_minari(logged["a"])
+    minari_copy.export_minari(logged["a"])
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "b"))
     with pytest.raises(ConfigError) as e:
-        formats.export_minari(logged["b"])
+        minari_copy.export_minari(logged["b"])
     text = f"{e.value.message} {e.value.hint}"
     assert str(tmp_path / "a") in e.value.message, "it names the data root that holds the copy"
     assert "MINARI_DATASETS_PATH" in e.value.hint and "--no-minari" in e.value.hint
@@ -239,7 +239,7 @@ RACER = textwrap.dedent("""
 
     import minari
 
-    from dtradar_rl.offline import formats
+    from dtradar_rl.offline import minari_copy
 
     role, signals, name = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
 
@@ -267,7 +267,7 @@ RACER = textwrap.dedent("""
     else:
         wait_for("first-writing")
         (signals / "second-exporting").touch()
-    print(f"{role} done: {formats.export_minari(name)}", flush=True)
+    print(f"{role} done: {minari_copy.export_minari(name)}", flush=True)
 """)
 
 

@@ -17,7 +17,7 @@ import pytest
 from dtradar_data.core.errors import SchemaMismatchError
 from dtradar_rl.envs.nav_env import DtradarNavEnv
 from dtradar_rl.envs.registration import TWIN_ENTRY_POINT, make_twin_env
-from dtradar_rl.offline import formats
+from dtradar_rl.offline import minari_copy
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 
 minari = pytest.importorskip("minari")
@@ -70,8 +70,8 @@ def test_the_recovered_env_is_the_logging_twin_at_its_version_with_the_logged_se
     for action in (0, 1, 2, 3, 3):
         obs, reward, *_ = env.step(action)
         assert ds.observation_space.contains(obs) and np.isfinite(reward)
-    rec = json.loads((logged.minari_path / formats.RECORD_FILE).read_text())
-    assert rec["format"] == formats.RECORD_FORMAT == 3 and rec["env_spec"]["kwargs"] == kw
+    rec = json.loads((logged.minari_path / minari_copy.RECORD_FILE).read_text())
+    assert rec["format"] == minari_copy.RECORD_FORMAT == 3 and rec["env_spec"]["kwargs"] == kw
     assert "recover_environment()" in ds.storage.metadata["description"]
 
 
@@ -149,21 +149,21 @@ def test_a_fresh_process_that_imports_only_minari_recovers_both_envs(stores):
 def test_a_copy_an_older_dtradar_wrote_without_an_env_spec_is_rewritten_once(stores, monkeypatch):
     logged = log_dataset(dataclasses.replace(CFG, minari=False))
     with monkeypatch.context() as m:  # what format 1 wrote: no env spec, an unbounded observation space
-        m.setattr(formats, "RECORD_FORMAT", 1)
-        m.setattr(formats, "minari_envs", lambda _: formats.MinariEnvs(missing="format 1"))
+        m.setattr(minari_copy, "RECORD_FORMAT", 1)
+        m.setattr(minari_copy, "minari_envs", lambda _: minari_copy.MinariEnvs(missing="format 1"))
         with pytest.warns(UserWarning, match="no env spec"):
-            formats.export_minari(logged)
+            minari_copy.export_minari(logged)
     folder = logged.minari_path
     with pytest.raises(ValueError, match="env_spec is None"):
         minari.load_dataset(logged.minari_id).recover_environment()
-    state, why = formats.copy_state(folder, logged)
+    state, why = minari_copy.copy_state(folder, logged)
     assert state == "incomplete" and "record format 1" in why
-    formats.export_minari(logged)
+    minari_copy.export_minari(logged)
     ds = minari.load_dataset(logged.minari_id)
     assert_same_spaces(ds.recover_environment(), ds)
-    assert formats.copy_state(folder, logged)[0] == "complete"
+    assert minari_copy.copy_state(folder, logged)[0] == "complete"
     written = (folder / "data" / "metadata.json").stat().st_mtime_ns
-    formats.export_minari(logged)
+    minari_copy.export_minari(logged)
     assert (folder / "data" / "metadata.json").stat().st_mtime_ns == written, "a complete copy is not rewritten"
 
 
@@ -171,13 +171,13 @@ def test_a_copy_written_while_its_twin_was_missing_gets_its_spec_once_the_twin_i
     logged = log_dataset(dataclasses.replace(CFG, minari=False))
     elsewhere = dataclasses.replace(logged, meta={**logged.meta, "parent": "nowhere/blueprint"})
     with pytest.warns(UserWarning, match="nowhere/blueprint"):
-        formats.export_minari(elsewhere)
-    rec = json.loads((logged.minari_path / formats.RECORD_FILE).read_text())
+        minari_copy.export_minari(elsewhere)
+    rec = json.loads((logged.minari_path / minari_copy.RECORD_FILE).read_text())
     assert rec["env_spec"] is None and rec["env_retry"] and "nowhere/blueprint" in rec["env_missing"]
-    assert formats.copy_state(logged.minari_path, elsewhere)[0] == "complete"  # still missing: kept
-    state, why = formats.copy_state(logged.minari_path, logged)
+    assert minari_copy.copy_state(logged.minari_path, elsewhere)[0] == "complete"  # still missing: kept
+    state, why = minari_copy.copy_state(logged.minari_path, logged)
     assert state == "incomplete" and "the twin is here now" in why
-    formats.export_minari(logged)
+    minari_copy.export_minari(logged)
     ds = minari.load_dataset(logged.minari_id)
     assert_same_spaces(ds.recover_environment(), ds)
 

@@ -1,0 +1,387 @@
+"""The Minari copy of a logged dataset: written, checked, reused or rewritten, opened, and read back.
+
+What the copy holds and where it lives is in :mod:`dtradar_rl.offline.formats` (Formats, Minari); this module does
+it: :func:`export_minari` stages a copy and renames it into place (whole or absent), records it (``dtradar.json``)
+and checks a stored one before reusing it (:func:`copy_state`); :func:`load_minari` opens it; :func:`from_minari`
+reads a Minari dataset back into our columns.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import shutil
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dtradar_data.core import layout as P
+from dtradar_data.core.errors import MissingDependencyError, SchemaMismatchError
+from dtradar_data.core.files import sha256_file, waiting_lock
+from dtradar_data.store.logged import (
+    MINARI_DIR,
+    MINARI_ENV,
+    TRANSITIONS_FILE,
+    LoggedDataset,
+    LoggedId,
+    minari_root,
+    parse_logged_id,
+    transitions_table,
+)
+from dtradar_data.store.staging import held_stage
+from dtradar_rl.offline.formats import as_logged
+from dtradar_rl.offline.minari_envs import MinariEnvs, env_text, minari_envs
+from dtradar_rl.offline.minari_refs import reference_returns
+from dtradar_rl.task.config import ConfigError
+
+
+# -- Minari --------------------------------------------------------------------------------------------------------
+def _minari():
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):
+            import minari
+    except ImportError as e:
+        raise MissingDependencyError(
+            "Minari is not installed", hint="pip install 'dtradar[offline]' (or: pip install minari)"
+        ) from e
+    return minari
+
+
+def minari_episodes(a: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
+    """Our rows as Minari episodes: ``observations`` ``L + 1`` rows, the rest ``L``."""
+    ends = np.flatnonzero(a["terminated"] | a["truncated"]) + 1
+    starts = np.r_[0, ends[:-1]]
+    out = []
+    for s, e in zip(starts, ends):
+        out.append(
+            {
+                "observations": np.concatenate([a["obs"][s:e], a["next_obs"][e - 1 : e]]),
+                "actions": a["action"][s:e].astype(np.int64),
+                "rewards": a["reward"][s:e].astype(np.float64),
+                "terminations": a["terminated"][s:e].astype(bool),
+                "truncations": a["truncated"][s:e].astype(bool),
+            }
+        )
+    return out
+
+
+#: Minari's record of a namespace (``minari.namespace.NAMESPACE_METADATA_FILENAME``).
+NAMESPACE_FILE = "namespace_metadata.json"
+#: The record of a complete Minari copy, written beside its ``data/`` folder (Minari ignores it) as the copy's last
+#: file before it is renamed into place: what it holds, where from, and the sha256 of every file of ``data/``.
+RECORD_FILE = "dtradar.json"
+#: 2: the copy records the env spec (``recover_environment``) and the env's observation space; 3: and Minari's
+#: ``ref_min_score`` / ``ref_max_score`` (:mod:`dtradar_rl.offline.minari_refs`); an older copy is rewritten once.
+RECORD_FORMAT = 3
+#: Hidden (Minari lists no hidden folder) staging folders in the Minari path, held while written (see
+#: :mod:`dtradar_data.store.logged.staging`).
+STAGE_PREFIX = ".dtradar-stage-"
+
+
+@contextlib.contextmanager
+def _minari_path(path: Path):
+    """Point Minari (which reads ``MINARI_DATASETS_PATH`` on every call) at ``path`` for the block. Not thread-safe:
+    the process's environment is changed meanwhile."""
+    old = os.environ.get(MINARI_ENV)
+    os.environ[MINARI_ENV] = str(path)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(MINARI_ENV, None)
+        else:
+            os.environ[MINARI_ENV] = old
+
+
+def _files(folder: Path) -> dict[str, str]:
+    """``{path relative to folder: sha256}`` of the files of a copy's ``data/`` folder."""
+    data = folder / "data"
+    return {p.relative_to(folder).as_posix(): sha256_file(p) for p in sorted(data.rglob("*")) if p.is_file()}
+
+
+def _record(folder: Path) -> dict[str, Any] | None:
+    """The copy's record, of any format (an older one names its version too: see :func:`copy_state`)."""
+    try:
+        rec = json.loads((folder / RECORD_FILE).read_text())
+        return rec if isinstance(rec, dict) and isinstance(rec.get("format"), int) else None
+    except (OSError, ValueError):
+        return None
+
+
+def _minari_metadata(folder: Path) -> dict[str, Any] | None:
+    try:
+        meta = json.loads((folder / "data" / "metadata.json").read_text())
+        return meta if isinstance(meta, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+def _wanted(logged: LoggedDataset) -> dict[str, Any]:
+    """What the record of ``logged``'s complete copy says (the files' hashes apart)."""
+    return {
+        "format": RECORD_FORMAT,
+        "name": logged.name,
+        "version": logged.version,
+        "tag": logged.tag,
+        "transitions_sha256": ((logged.meta.get("files") or {}).get(TRANSITIONS_FILE) or {}).get("sha256"),
+        "episodes": int((logged.meta.get("stats") or {}).get("episodes", -1)),
+        "steps": len(logged),
+        "data_root": str(P.data_root().absolute()),
+    }
+
+
+def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
+    """``(state, why)`` of the Minari copy in ``folder`` next to ``logged``: ``"absent"``; ``"complete"`` (its
+    record names this version, the same transitions file and episode count, and every file has its recorded
+    sha256); ``"incomplete"`` (a write that was killed, damaged files, an older dtradar's copy without a record or
+    with another record format (format 1: no env spec), or a copy written without an env spec because its twin
+    was not here, which is now: to be rewritten); ``"other"`` (a complete copy of another logged version, by
+    another data root whose tag still points at it: not ours to replace, whatever its format); ``"stale"`` (a copy
+    of another version that no data root claims any more, e.g. this root's before its store was emptied:
+    replaced); ``"foreign"`` (not written by dtradar)."""
+    if not folder.exists():
+        return "absent", ""
+    rec = _record(folder)
+    meta = _minari_metadata(folder)
+    if rec is None:
+        if meta is not None and not str(meta.get("description") or "").startswith("dtradar "):
+            return "foreign", f"{folder} was not written by dtradar ({str(meta.get('description'))[:60]!r})"
+        return "incomplete", f"{folder} has no complete {RECORD_FILE} (a killed write, or an older dtradar's copy)"
+    want = _wanted(logged)
+    same = all(rec.get(k) == want[k] for k in ("name", "version", "transitions_sha256"))
+    if not same:
+        root = Path(str(rec.get("data_root") or ""))
+        held = rec.get("data_root") != want["data_root"] and _claimed(
+            root, rec.get("name"), rec.get("tag"), rec.get("version")
+        )
+        what = f"{rec.get('name')}@{rec.get('tag')} (version {rec.get('version')}) of data root {root}"
+        return ("other" if held else "stale"), what
+    if rec.get("format") != RECORD_FORMAT:
+        return "incomplete", (
+            f"{folder} was written by another dtradar (record format {rec.get('format')}, this one writes "
+            f"{RECORD_FORMAT}: an env spec since format 2, reference scores since 3)"
+        )
+    if rec.get("episodes") != want["episodes"] or rec.get("steps") != want["steps"]:
+        return (
+            "incomplete",
+            f"{folder} records {rec.get('episodes')} episodes, the logged version has {want['episodes']}",
+        )
+    if meta is None or meta.get("total_episodes") != want["episodes"] or meta.get("total_steps") != want["steps"]:
+        return "incomplete", f"{folder}: Minari's metadata does not count {want['episodes']} episodes"
+    if _files(folder) != rec.get("files"):
+        return "incomplete", f"{folder}: a file differs from its recorded sha256 (changed or damaged)"
+    if rec.get("env_spec") is None and rec.get("env_retry") and minari_envs(logged).spec is not None:
+        return "incomplete", f"{folder} has no env spec ({rec.get('env_missing')}); the twin is here now"
+    return "complete", ""
+
+
+def _claimed(root: Path, name: Any, tag: Any, version: Any) -> bool:
+    """Whether data root ``root`` still stores ``name`` with ``tag`` pointing at ``version``."""
+    try:
+        lid = parse_logged_id(str(name))
+        refs = json.loads((root / "logged" / lid.scene / lid.variant / lid.behaviour / "refs.json").read_text())
+        return isinstance(tag, str) and refs.get("tags", {}).get(tag) == version
+    except (OSError, ValueError, KeyError, AttributeError):
+        return False
+
+
+def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset, envs: MinariEnvs | None = None) -> Path:
+    """Write the Minari dataset ``mid`` of ``logged`` into the Minari path ``stage``, with the env specs of
+    ``envs`` (default :func:`minari_envs`; without a spec, an unbounded observation space); returns its folder."""
+    import gymnasium as gym
+    from minari.data_collector import EpisodeBuffer
+
+    envs = envs if envs is not None else minari_envs(logged)
+
+    a = logged.arrays()
+    buffers = [
+        EpisodeBuffer(
+            id=i,
+            observations=ep["observations"],
+            actions=ep["actions"],
+            rewards=list(ep["rewards"]),
+            terminations=list(ep["terminations"]),
+            truncations=list(ep["truncations"]),
+        )
+        for i, ep in enumerate(minari_episodes(a))
+    ]
+    d = a["obs"].shape[1]
+    s = logged.meta.get("stats") or {}
+    if envs.spec is not None:
+        refs = reference_returns(envs.eval_spec)
+        env_args = {
+            "env": envs.env,
+            "eval_env": envs.eval_spec,
+            "ref_min_score": refs["ref_min_score"],
+            "ref_max_score": refs["ref_max_score"],
+        }
+        how = (
+            f"recover_environment(): {env_text(envs.spec)}; recover_environment(eval_env=True): "
+            f"{env_text(envs.eval_spec)} (import path {envs.spec.entry_point}, needs dtradar installed)"
+        )
+    else:
+        env_args = {
+            "observation_space": gym.spaces.Box(-np.inf, np.inf, (d,), np.float32),
+            "action_space": gym.spaces.Discrete(4),
+        }
+        how = f"no env spec: {envs.missing}"
+    with _minari_path(stage), contextlib.redirect_stderr(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # no author e-mail (and without a spec, no env): by design
+        minari.create_dataset_from_buffers(
+            dataset_id=mid,
+            buffer=buffers,
+            **env_args,
+            algorithm_name=str((logged.meta.get("behaviour") or {}).get("kind")),
+            author="dtradar",
+            code_permalink="https://github.com/dtradar/dtradar",
+            description=f"dtradar {logged.name} version {logged.version}; parent {logged.meta.get('parent')}@"
+            f"{logged.meta.get('parent_version')}; behaviour success {s.get('success_rate', 0):.3f}; {how}; see "
+            f"the dtradar card (README.md) at {logged.path}",
+        )
+    return stage / mid
+
+
+def _ensure_namespace(stage: Path, root: Path, mid: str) -> None:
+    """Give ``root`` the namespace record of ``mid`` (``<namespace>/namespace_metadata.json``) when it lacks it."""
+    namespace = mid.rpartition("/")[0]
+    if not namespace:
+        return
+    src = stage / namespace / NAMESPACE_FILE
+    dst = root / namespace / NAMESPACE_FILE
+    if src.is_file() and not dst.is_file():
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
+        shutil.copyfile(src, tmp)
+        os.replace(tmp, dst)
+
+
+def export_minari(
+    data: LoggedDataset | str | LoggedId,
+    *,
+    dataset_id: str | None = None,
+    overwrite: bool = False,
+) -> str:
+    """Write the Minari copy of a logged version into :func:`minari_root` and return its id.
+
+    The copy appears whole or not at all: it is written into a hidden staging folder of the Minari path, recorded
+    (``dtradar.json``: the version, the transitions file's sha256, the episode count, every data file's sha256)
+    and renamed into place, under a lock per id (a second process says what it waits for, then finds the copy). A
+    complete copy of the same version is kept; an incomplete or damaged one (a killed write, an older dtradar's
+    copy) is rewritten; a copy of another version that another data root still holds under this id is refused
+    (:class:`ConfigError`, naming ``MINARI_DATASETS_PATH`` and ``--no-minari``) unless ``overwrite``."""
+    logged = as_logged(data)
+    minari = _minari()
+    mid = dataset_id or logged.minari_id
+    root = minari_root()
+    folder = root / mid
+    root.mkdir(parents=True, exist_ok=True)
+    lock = root / f".dtradar-{mid.replace('/', '--')}.lock"
+    with waiting_lock(lock, f"writing the Minari copy {mid}", then="this process uses that copy if it is whole"):
+        state, why = copy_state(folder, logged)
+        if state == "complete":
+            return mid
+        if state in ("other", "foreign") and not overwrite:
+            raise ConfigError(
+                f"the Minari copy of {logged.name}@{logged.tag} was not written: {folder} holds "
+                f"{why if state == 'other' else 'a dataset dtradar did not write'} (the logged dataset itself is "
+                f"stored in {logged.path})",
+                hint=f"give each data root its own Minari folder: unset {MINARI_ENV} (the copies then go to "
+                f"<data root>/{MINARI_DIR}) or set it to another folder; or remove {folder}; or log without the "
+                "copy (`python -m dtradar_rl log ... --no-minari`)",
+            )
+        envs = minari_envs(logged)
+        if envs.spec is None:
+            warnings.warn(
+                f"the Minari copy {mid} records no env spec (recover_environment() will not work): {envs.missing}",
+                UserWarning,
+                stacklevel=2,
+            )
+        with held_stage(root, STAGE_PREFIX, lockless=lambda _: True) as stage:  # .dtradar-stage-*: only ours
+            staged = _write_copy(minari, stage, mid, logged, envs)
+            refs = reference_returns(envs.eval_spec)["references"] if envs.spec is not None else None
+            rec = {**_wanted(logged), "minari_id": mid, **envs.record(), "ref_scores": refs, "files": _files(staged)}
+            (staged / RECORD_FILE).write_text(json.dumps(rec, indent=2, sort_keys=True) + "\n")
+            _ensure_namespace(stage, root, mid)
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            if folder.exists():  # incomplete, stale or (overwrite) another's: aside into the stage, removed with it
+                os.rename(folder, stage / f"replaced-{folder.name}")
+            os.rename(staged, folder)
+    return mid
+
+
+def load_minari(data: LoggedDataset | str | LoggedId, **export):
+    """The ``MinariDataset`` of a logged version's Minari copy, written first when it is missing or incomplete
+    (:func:`export_minari`); no ``MINARI_DATASETS_PATH`` needed."""
+    mid = export_minari(as_logged(data), **export)
+    from minari.dataset.minari_dataset import MinariDataset
+
+    return MinariDataset(minari_root() / mid / "data")
+
+
+def from_minari(dataset: Any) -> dict[str, np.ndarray]:
+    """Our columns (``episode, step, obs, action, reward, next_obs, terminated, truncated``) from a Minari dataset
+    (a ``MinariDataset`` or its id)."""
+    minari = _minari()
+    if isinstance(dataset, str):
+        ours = minari_root() / dataset / "data"  # a copy of ours, MINARI_DATASETS_PATH set or not
+        if ours.is_dir():
+            from minari.dataset.minari_dataset import MinariDataset
+
+            ds = MinariDataset(ours)
+        else:
+            ds = minari.load_dataset(dataset)
+    else:
+        ds = dataset
+    cols: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("episode", "step", "obs", "action", "reward", "next_obs", "terminated", "truncated")
+    }
+    for i, ep in enumerate(ds.iterate_episodes()):
+        obs = np.asarray(ep.observations, np.float32)
+        n = len(ep.actions)
+        if len(obs) != n + 1:
+            raise SchemaMismatchError(
+                f"Minari episode {ep.id} has {len(obs)} observations for {n} actions (expected actions + 1)",
+                hint="export it again with export_minari",
+            )
+        cols["episode"].append(np.full(n, i, np.int64))
+        cols["step"].append(np.arange(n, dtype=np.int32))
+        cols["obs"].append(obs[:-1])
+        cols["next_obs"].append(obs[1:])
+        cols["action"].append(np.asarray(ep.actions, np.int64))
+        cols["reward"].append(np.asarray(ep.rewards, np.float32))
+        cols["terminated"].append(np.asarray(ep.terminations, bool))
+        cols["truncated"].append(np.asarray(ep.truncations, bool))
+    return {k: np.concatenate(v) for k, v in cols.items()}
+
+
+def table_from_columns(c: dict[str, np.ndarray]):
+    """A checked transition table from :func:`from_minari`'s columns (robot, cell, target, component unknown: -1/0)."""
+    n = len(c["action"])
+    minus = np.full(n, -1, np.int32)
+    return transitions_table(
+        episode=c["episode"],
+        step=c["step"],
+        obs=c["obs"],
+        action=c["action"],
+        reward=c["reward"],
+        next_obs=c["next_obs"],
+        terminated=c["terminated"],
+        truncated=c["truncated"],
+        robot=minus,
+        cell=minus,
+        target=minus,
+    )
+
+
+__all__ = [
+    "copy_state",
+    "export_minari",
+    "from_minari",
+    "load_minari",
+    "minari_episodes",
+    "table_from_columns",
+]
