@@ -1,7 +1,12 @@
 """Shared fixtures: every test that touches the store gets its own empty data root."""
 
 import os
+import queue
+import signal
+import subprocess
 import sys
+import threading
+import time
 
 import pytest
 
@@ -58,6 +63,76 @@ height_m = 0.8
 def tiny_room() -> str:
     """The text of a tiny user's room file (``TINY_ROOM``), for tests that read or trace a scene file."""
     return TINY_ROOM
+
+
+class PausedProcess:
+    """A Python script run in a process of its own (``python -c script args...``), which a test lets run up to a line
+    it prints (:meth:`wait_for`: the script pauses there, e.g. in a ``time.sleep`` it patched in), then acts beside it
+    or SIGKILLs it (:meth:`kill`). stdout is read line by line in a thread, so a wait has a timeout; stderr goes to a
+    file, shown when the script ends early."""
+
+    def __init__(self, script: str, args, stderr_path):
+        self._stderr_path = stderr_path
+        self._stderr = open(stderr_path, "w")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", script, *map(str, args)], stdout=subprocess.PIPE, stderr=self._stderr, text=True
+        )
+        self.lines: queue.Queue[str | None] = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.put(line.rstrip("\n"))
+        self.lines.put(None)
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def stderr(self) -> str:
+        self._stderr.flush()
+        return open(self._stderr_path).read()
+
+    def wait_for(self, line: str, timeout: float = 120.0) -> None:
+        """Return once the script has printed ``line``; fail the test when it ends or takes longer first."""
+        deadline = time.monotonic() + timeout
+        try:
+            while (got := self.lines.get(timeout=max(0.0, deadline - time.monotonic()))) is not None:
+                if got.strip() == line:
+                    return
+        except queue.Empty:
+            raise AssertionError(f"no line {line!r} within {timeout:g} s: {self.stderr()[-3000:]}") from None
+        self.proc.wait(timeout=30)
+        raise AssertionError(f"it ended ({self.proc.returncode}) before printing {line!r}: {self.stderr()[-3000:]}")
+
+    def kill(self) -> None:
+        """SIGKILL it (``kill -9``: nothing of it runs after) and check that the kill is what ended it."""
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(timeout=30)
+        assert self.proc.returncode == -signal.SIGKILL, f"it ended by itself ({self.proc.returncode})"
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.proc.stdout.close()
+        self._stderr.close()
+
+
+@pytest.fixture()
+def paused_process(tmp_path):
+    """``start(script, *args)`` -> a :class:`PausedProcess`; every one still running at the test's end is killed."""
+    if not hasattr(signal, "SIGKILL"):
+        pytest.skip("needs SIGKILL")
+    started: list[PausedProcess] = []
+
+    def start(script: str, *args) -> PausedProcess:
+        started.append(PausedProcess(script, args, tmp_path / f"stderr-{len(started)}.txt"))
+        return started[-1]
+
+    yield start
+    for p in started:
+        p.close()
 
 
 def pytest_sessionfinish(session, exitstatus):

@@ -74,6 +74,11 @@ class RayClusterError(DtradarError, ConnectionError):
     """A Ray cluster (``--ray-address`` or ``$RAY_ADDRESS``) where nothing answers, or not within the time allowed."""
 
 
+class InUseError(DtradarError, RuntimeError):
+    """A folder or dataset version that another live process is writing right now; the message names that process
+    (its pid) and what it is doing, so the user can wait for it or stop it."""
+
+
 def did_you_mean(name: str, choices: Iterable[str], n: int = 3) -> str:
     """A "did you mean ...?" phrase, or an empty string when nothing is close."""
     close = difflib.get_close_matches(name, list(choices), n=n, cutoff=0.5)

@@ -1,4 +1,5 @@
-"""Where runs go: every default output path of a job is built here, so ``runs/`` has one definition.
+"""Where runs go: every default output path of a job is built here, so ``runs/`` has one definition; and how a job
+holds its output folder while it writes it (:func:`held_out_folder`: one writer per folder).
 
 runs/<scene>/dqn/model.pt            make train (config.json, curves.csv, curves.png, last.pt beside it)
 runs/<scene>/eval/                   make eval
@@ -12,6 +13,9 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from dtradar_data.core.errors import InUseError
+from dtradar_data.core.folder_lock import sole_writer
 
 RUNS = Path("runs")
 
@@ -46,3 +50,24 @@ def no_empty_folder_on_failure(path: str | Path) -> Iterator[Path]:
             except OSError:
                 break
         raise
+
+
+@contextmanager
+def held_out_folder(out: str | Path, doing: str, *, what: str, option: str = "--out") -> Iterator[Path]:
+    """The ``--out`` folder of a job, held by this process while the block runs (made if missing, removed again when
+    the block fails and left it empty: :func:`no_empty_folder_on_failure`). A second job into the same folder, in
+    this process or another, is refused at once (:class:`~dtradar_data.core.errors.InUseError`) naming the holder's
+    pid and the folder, before it reads or writes anything there: two jobs (``what``: ``run``, ``benchmark``)
+    writing one folder would interleave their files. A killed holder's lock is freed by the system (see
+    :func:`dtradar_data.core.folder_lock.sole_writer`)."""
+    out = Path(out)
+
+    def refused(holder: str, busy: str) -> InUseError:
+        return InUseError(
+            f"{option} {out} is in use by {holder}, which is {busy or 'writing there'}: a second {what} into the same "
+            f"folder would interleave its files with that one's",
+            hint=f"wait until that one ends (or stop it), or pick another {option}",
+        )
+
+    with no_empty_folder_on_failure(out), sole_writer(out, doing, refused):
+        yield out

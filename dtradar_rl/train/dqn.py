@@ -68,6 +68,7 @@ from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import batched_env
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.pairs import ResolvedPair, training_pair
+from dtradar_rl.task.runs import held_out_folder
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import check_resumed_twin, check_run_folder
@@ -115,10 +116,12 @@ def train(
     stops training by returning True."""
     cfg = config.validate()
     t_start = time.perf_counter()
-    run = _set_up(cfg, dataset, init, normalizer)
-    callback_s = _training_loop(run, callback, t_start)
-    wall = time.perf_counter() - t_start - callback_s
-    return _finish(run, wall)
+    # One run per folder, for the whole run: a second one would interleave its checkpoints and curves with these.
+    with held_out_folder(cfg.out_dir, f"training {cfg.scene}/{cfg.variant} ({cfg.preset})", what="training run"):
+        run = _set_up(cfg, dataset, init, normalizer)
+        callback_s = _training_loop(run, callback, t_start)
+        wall = time.perf_counter() - t_start - callback_s
+        return _finish(run, wall)
 
 
 # -- set-up ----------------------------------------------------------------------------------------------------------
