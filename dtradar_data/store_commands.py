@@ -3,7 +3,9 @@
 Each is a frozen dataclass that :mod:`dtradar_data.cli` makes a subcommand (with tyro: the field docstrings are the
 ``--help`` text), for the ray-traced datasets and the logged ones alike (a logged dataset's name has a third part,
 ``cubicle/blueprint/noisy-shortest``). A damaged version is listed, not fatal; ``verify`` exits with status 1 when a
-version fails and says how to get it back (the build or log command that makes it, or a pull).
+version fails and says how to get it back (the build or log command that makes it, or a pull). A version another
+process is building or logging right now is unfinished, not damaged: ``verify`` names that process (its pid) instead
+(:mod:`dtradar_data.store.writers`).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from dtradar_data.store.logged import (
     resolve_logged,
 )
 from dtradar_data.store.versions import read_refs
+from dtradar_data.store.writers import being_written
 
 __all__ = ["InfoCmd", "ListCmd", "Name", "Revision", "VerifyCmd"]
 
@@ -265,6 +268,10 @@ class VerifyCmd:
             print(f"{version}: {'ok' if not problems else 'FAILED'}")
             for p in problems:
                 print(f"  - {p}")
+        if not (self.revision or "@" in self.name):
+            for version, who in being_written(self.name).items():
+                if version not in results:  # unfinished, neither ok nor failed
+                    print(f"{version}: being written by {who}; not verified, run verify again once it has finished")
         if bad:
             print(f"{len(bad)} of {len(results)} versions failed; {_fix_hint(self.name, bad)}", file=sys.stderr)
         return EXIT_FAILED_CHECK if bad else 0

@@ -4,6 +4,7 @@ waits say what they wait for (:func:`waiting_lock`)."""
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import hashlib
 import json
 import math
@@ -116,6 +117,28 @@ def read_holder(lock: Path) -> dict[str, Any]:
     except (OSError, ValueError):
         return {}
     return info if isinstance(info, dict) else {}
+
+
+def live_holder(lock: Path) -> dict[str, Any] | None:
+    """What the live holder of the :func:`waiting_lock` ``lock`` says about itself, or None when no live process
+    holds it. Asked only where a holder file is present (a holder writes it once it has the lock, and removes it
+    before it lets go; a killed one leaves it behind): the question is a shared lock taken and dropped at once, which
+    would make a process taking the lock at that very moment wait for it, and say so."""
+    if not holder_path(lock).is_file():
+        return None
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return read_holder(lock)
+        fcntl.flock(fd, fcntl.LOCK_UN)  # free: the holder file is a killed holder's
+        return None
+    finally:
+        os.close(fd)
 
 
 def describe_holder(info: dict[str, Any]) -> str:

@@ -5,6 +5,7 @@
 - :mod:`.writing` — atomic writes of one version and installs of a download;
 - :mod:`.staging` — staging folders held by their process; those a killed writer or pull left are removed;
 - :mod:`.listing` — every dataset and version, full verification, history;
+- :mod:`.writers` — which versions a live process is writing right now (for ``verify``: unfinished, not damaged);
 - :mod:`.catalog` — which dataset names exist (built-in scenes and stored ones);
 - :mod:`.card` — the dataset card of a version, a pure function of its metadata;
 - :mod:`.logged` — logged (offline-RL) datasets: transition tables stored, versioned and carded the same way.

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import CorruptDatasetError
+from dtradar_data.core.errors import CorruptDatasetError, DatasetNotFoundError, RevisionNotFoundError
 from dtradar_data.core.ids import DATASET_VARIANTS, DatasetId, LoggedId, is_logged_name
 from dtradar_data.scenes import builtin_names
 from dtradar_data.store.catalog import as_id, builtin_scenes
@@ -23,6 +23,7 @@ from dtradar_data.store.local import (
 )
 from dtradar_data.store.logged import verify_logged
 from dtradar_data.store.versions import read_refs
+from dtradar_data.store.writers import being_written, check_not_being_written
 
 
 @dataclass(frozen=True)
@@ -137,7 +138,27 @@ def list_datasets() -> list[DatasetEntry]:
 
 def verify(name: str | DatasetId | LoggedId, revision: str | None = None) -> dict[str, list[str]]:
     """``{version: problems}`` for one version (``revision`` or ``@rev`` in ``name``) or, without one, all; an RT
-    dataset or a logged one (:func:`~dtradar_data.store.logged.verify_logged`), damaged versions included."""
+    dataset or a logged one (:func:`~dtradar_data.store.logged.verify_logged`), damaged versions included.
+
+    A version a live process is writing (:func:`~dtradar_data.store.writers.being_written`) is unfinished, not
+    damaged: asked for by name, or when it leaves nothing else to verify, it is an
+    :class:`~dtradar_data.core.errors.InUseError` naming that process; otherwise it is left out here (the ``verify``
+    command lists it apart)."""
+    try:
+        results = _verify(name, revision)
+    except (DatasetNotFoundError, RevisionNotFoundError):
+        check_not_being_written(name, revision)  # not there yet: being built or logged right now
+        raise
+    busy = being_written(name) if any(results.values()) else {}  # asked after: a writer may have begun meanwhile
+    unfinished = [v for v, problems in results.items() if problems and v in busy]
+    for version in unfinished:
+        del results[version]
+    if unfinished and (revision or "@" in str(name) or not results):
+        check_not_being_written(name, unfinished[0])
+    return results
+
+
+def _verify(name: str | DatasetId | LoggedId, revision: str | None) -> dict[str, list[str]]:
     if is_logged_name(name):
         return verify_logged(name, revision)
     did = as_id(name)
