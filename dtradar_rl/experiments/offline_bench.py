@@ -34,6 +34,10 @@ scored on the normalised scale (0 = uniformly random moves, 100 = the shortest-p
    normalised-score table per twin, then every metric), ``bench.png`` (score bars with the spread over seeds) and
    ``bench_fqe.png`` (FQE against the true value) go to ``--out`` (:mod:`dtradar_rl.experiments.offline_report`).
 
+One benchmark writes an ``--out`` at a time (a second is refused, naming the first one's pid); each run's row is kept
+in its run folder, so a benchmark that was interrupted, or lost a worker for good, and runs again trains only the
+runs it had not finished (``--no-reuse``: all of them; :mod:`dtradar_rl.experiments.offline_jobs`).
+
 The budget (``--n-steps``, ``--fqe-steps``) was chosen by measurement for 30 min of wall time per twin on this 2-core
 machine: the cubicle took 29 min, a Dallas quadrant 27 min; what each
 reaches is in docs/logged-datasets.md.
@@ -41,6 +45,7 @@ reaches is in docs/logged-datasets.md.
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import threading
@@ -64,10 +69,12 @@ from dtradar_rl.experiments.offline_bench_config import (  # re-exported: the be
 from dtradar_rl.experiments.offline_jobs import (
     BenchJob,
     auto_workers,
+    finished_row,
     parallel_gain,
     run_job,
     run_jobs,
     run_jobs_on_ray,
+    save_row,
 )
 from dtradar_rl.experiments.offline_report import markdown, ope_summary, plot, plot_fqe, summarize
 from dtradar_rl.experiments.offline_tabular import tabular_section
@@ -76,7 +83,7 @@ from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig
 from dtradar_rl.offline.formats import as_logged
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.medium_agent import resolve_spec
-from dtradar_rl.task.runs import dqn_checkpoint
+from dtradar_rl.task.runs import dqn_checkpoint, held_out_folder
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.checkpoints import load_policy
@@ -284,8 +291,15 @@ def _tables(cfg: OfflineBenchConfig, ids, twins, refs, say, *, overlap: bool):
 
 
 def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
-    """Run the benchmark of ``cfg`` and write ``bench.{json,md,png}``; returns the JSON object."""
+    """Run the benchmark of ``cfg`` and write ``bench.{json,md,png}``; returns the JSON object. ``--out`` is held for
+    the whole benchmark: a second one into it is refused at once, naming this one's pid (its runs, rows and tables
+    would interleave with these)."""
     cfg = cfg.validate()
+    with held_out_folder(cfg.out_dir, f"running the offline benchmark of {cfg.scene}", what="benchmark"):
+        return _run_bench(cfg)
+
+
+def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     say = print if cfg.verbose else (lambda *a, **k: None)
     t_start = time.perf_counter()
     out = cfg.out_dir
@@ -331,20 +345,29 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         for seed in cfg.seeds
     ]
 
+    # an interrupted benchmark's finished runs (same settings, data, libraries) are not trained again
+    reused = {i: row for i, job in enumerate(jobs) if cfg.reuse and (row := finished_row(job)) is not None}
+    todo = [job for i, job in enumerate(jobs) if i not in reused]
+    if reused:
+        say(f"reusing {len(reused)} of {len(jobs)} runs finished in {out / 'runs'} (--no-reuse trains them again)")
     if cfg.executor == "ray":
         workers, gain = 0, None
-        layout = {"jobs": len(jobs), "executor": "ray", "ray_address": cfg.ray_address, "torch_threads": 1}
-        say(f"{len(jobs)} trainings of {cfg.n_steps} updates as Ray tasks of 1 CPU, 1 torch thread each")
+        layout = {"jobs": len(todo), "executor": "ray", "ray_address": cfg.ray_address, "torch_threads": 1}
+        say(f"{len(todo)} trainings of {cfg.n_steps} updates as Ray tasks of 1 CPU, 1 torch thread each")
     else:
-        workers, gain = (cfg.workers, None) if cfg.workers else auto_workers(len(jobs))
-        workers = min(workers, max(1, len(jobs)))
-        layout = {"jobs": len(jobs), "workers": workers, "torch_threads": 1, "parallel_gain": gain}
-        say(f"{len(jobs)} trainings of {cfg.n_steps} updates in {workers} process(es), 1 torch thread each")
+        workers, gain = (cfg.workers, None) if cfg.workers else auto_workers(len(todo))
+        workers = min(workers, max(1, len(todo)))
+        layout = {"jobs": len(todo), "workers": workers, "torch_threads": 1, "parallel_gain": gain}
+        say(f"{len(todo)} trainings of {cfg.n_steps} updates in {workers} process(es), 1 torch thread each")
+    layout["reused"] = len(reused)
     # the tables run in this process: beside trainings that run elsewhere (worker processes, Ray), at the same time
-    tables = _tables(cfg, ids, twins, refs, say, overlap=bool(jobs) and (cfg.executor == "ray" or workers >= 2))
+    tables = _tables(cfg, ids, twins, refs, say, overlap=bool(todo) and (cfg.executor == "ray" or workers >= 2))
     runs: list[dict[str, Any]] = []
+    job_of = {(j.behaviour, j.algorithm, j.seed): j for j in jobs}
 
-    def done(run: dict[str, Any]) -> None:
+    def done(run: dict[str, Any], fresh: bool = True) -> None:
+        if fresh:  # its row as the job returned it, before scoring: what a benchmark run again reuses
+            save_row(job_of[run["behaviour"], run["algorithm"], run["seed"]], copy.deepcopy(run))
         for v in cfg.variants:
             if v in run:
                 run[v] = _scores(run[v], refs[v])
@@ -362,10 +385,12 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         )
         _finish(cfg, head, runs, m_start, t_start, plots=False, layout=layout)  # partial results survive
 
-    if cfg.executor == "ray":
-        runs = run_jobs_on_ray(jobs, cfg.ray_address, done) if jobs else []
-    else:
-        runs = run_jobs(jobs, workers, done)
+    for row in reused.values():
+        done(row, fresh=False)
+    if cfg.executor == "ray" and todo:
+        run_jobs_on_ray(todo, cfg.ray_address, done)  # each row handed to done, which gathers them in runs
+    elif todo:
+        run_jobs(todo, workers, done)
     if cfg.tabular:
         head["tabular"], head["tabular_s"] = tables()
     runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))

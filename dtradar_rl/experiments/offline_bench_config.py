@@ -94,7 +94,10 @@ class OfflineBenchConfig(Config):
     """also run the tabular batch learners (CE, VI-LCB, Π_b-SPIBB) and each dataset's ceiling (--no-tabular: skip;
     seconds per dataset, see dtradar_rl.tabular.batch)"""
     out: str = ""
-    """output folder (default results/offline_bench/<scene>)"""
+    """output folder (default results/offline_bench/<scene>); one benchmark at a time writes it"""
+    reuse: bool = True
+    """reuse the runs an interrupted benchmark finished in --out (the same settings, logged data and library
+    versions; each run's row is kept in its folder) and train only the rest (--no-reuse: train them all again)"""
     verbose: bool = True
     """print progress"""
 

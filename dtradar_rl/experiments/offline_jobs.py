@@ -3,23 +3,36 @@ evaluated and (with FQE) off-policy evaluated by :func:`run_job`, in this proces
 one torch thread each (:func:`run_jobs`), as many as the cores measurably work in parallel (:func:`auto_workers`),
 or as Ray tasks of one CPU each (:func:`run_jobs_on_ray`, ``--executor ray``, the executor of sweeps: a local Ray on
 this machine's cores or a cluster at an address). A job is seeded and trains on one torch thread, so its row is the
-same wherever it runs. :mod:`dtradar_rl.experiments.offline_bench` builds the jobs and gathers their rows."""
+same wherever it runs. :mod:`dtradar_rl.experiments.offline_bench` builds the jobs and gathers their rows.
+
+A finished job's row is kept in its run folder (:func:`save_row`, written whole), with everything the row depends
+on (:func:`job_key`): a benchmark that was interrupted and runs again reuses those rows (:func:`finished_row`) and
+trains only the rest. A job starts by removing what an unfinished earlier attempt left in its folder (a worker
+killed mid-write, an interrupted benchmark), so a run folder holds one attempt's files, never a mix. A job whose
+worker dies (``kill -9``, the OOM killer) is retried on Ray; a job whose worker died every time fails the benchmark
+with :class:`TrainingLostError`, naming it, with the unfinished jobs' folders removed."""
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from multiprocessing import get_context
 from typing import Any
 
 import torch
 
+from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.files import write_atomic
+from dtradar_data.store.versions import library_versions
 from dtradar_rl.evaluation.evaluate import METRICS
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.formats import as_logged
@@ -47,6 +60,60 @@ class BenchJob:
     fqe_gamma: float = FQE_GAMMA
 
 
+class TrainingLostError(DtradarError, RuntimeError):
+    """A benchmark training whose worker process died every time it ran it (killed, out of memory, its node lost)."""
+
+
+#: The finished row of a job in its run folder, with what it depends on.
+ROW_FILE = "bench_row.json"
+#: Libraries a row depends on beside the job's settings: another version may train other weights.
+ROW_LIBRARIES = ("dtradar", "d3rlpy", "torch", "numpy")
+
+
+def job_key(job: BenchJob) -> dict[str, Any]:
+    """Everything a job's row depends on: its settings (the training's config included), the logged dataset's
+    version and the libraries' versions, as JSON stores it."""
+    key = {
+        "behaviour": job.behaviour,
+        "algorithm": job.algorithm,
+        "seed": job.seed,
+        "logged": job.logged,
+        "fqe_steps": job.fqe_steps,
+        "fqe_gamma": job.fqe_gamma,
+        "config": job.config.to_dict(),
+        "libraries": library_versions(ROW_LIBRARIES),
+    }
+    return json.loads(json.dumps(key))
+
+
+def finished_row(job: BenchJob) -> dict[str, Any] | None:
+    """The row an earlier run of ``job`` saved in its run folder, when it ran with the same settings, data and
+    libraries; else None (never run, unfinished, or run otherwise: it trains again)."""
+    try:
+        saved = json.loads((job.config.out_dir / ROW_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(saved, dict) or saved.get("job") != job_key(job) or not isinstance(saved.get("row"), dict):
+        return None
+    return saved["row"]
+
+
+def save_row(job: BenchJob, row: dict[str, Any]) -> None:
+    """Keep ``row`` in the job's run folder (whole or not at all), for a benchmark that runs again to reuse."""
+    write_atomic(job.config.out_dir / ROW_FILE, json.dumps({"job": job_key(job), "row": row}, indent=2) + "\n")
+
+
+def remove_unfinished(jobs: list[BenchJob]) -> None:
+    """Remove the run folders of ``jobs`` that hold no finished row: what a dead or stopped attempt left half done."""
+    for job in jobs:
+        if not (job.config.out_dir / ROW_FILE).is_file():
+            shutil.rmtree(job.config.out_dir, ignore_errors=True)
+
+
+def describe(job: BenchJob) -> str:
+    return f"{job.algorithm} on {job.behaviour} (seed {job.seed}, {job.logged}; {job.config.out_dir})"
+
+
 _OPENED: dict[str, Any] = {}  # twins and logged datasets already opened in this process
 
 
@@ -59,6 +126,9 @@ def _opened(key: str, load: Callable[[], Any]) -> Any:
 def run_job(job: BenchJob) -> dict[str, Any]:
     """Train, evaluate and (``job.fqe_steps``) off-policy evaluate one agent; its row of ``bench.json``."""
     cfg = job.config
+    # The benchmark holds its --out: this folder is this job's alone, and what is there is an earlier attempt's
+    # (a killed worker's, an interrupted run's, a row not reused), replaced whole rather than mixed with this one.
+    shutil.rmtree(cfg.out_dir, ignore_errors=True)
     torch.set_num_threads(cfg.threads or 1)
     scene = cfg.scene
     logged = _opened(job.logged, lambda: as_logged(job.logged))
@@ -138,20 +208,39 @@ def run_jobs(
     jobs: list[BenchJob], workers: int, done: Callable[[dict[str, Any]], None] = lambda run: None
 ) -> list[dict[str, Any]]:
     """Every job's row (in the order they finish; ``done`` is called with each): ``workers`` spawned processes at once,
-    or in this process when ``workers`` is 1 or there is a single job."""
+    or in this process when ``workers`` is 1 or there is a single job. When one fails (or the benchmark is
+    interrupted), what the unfinished jobs left in their run folders is removed; a worker process that died is a
+    :class:`TrainingLostError`."""
+    rows: list[dict[str, Any]] = []
     if workers <= 1 or len(jobs) <= 1:
-        rows = []
-        for job in jobs:
-            rows.append(run_job(job))
+        for i, job in enumerate(jobs):
+            try:
+                rows.append(run_job(job))
+            except BaseException:
+                remove_unfinished(jobs[i : i + 1])
+                raise
             done(rows[-1])
         return rows
-    rows = []
     # spawn, not fork: a forked child inherits torch's thread pool state and can deadlock in it
     ctx = get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx, initializer=_init_worker) as pool:
-        for fut in as_completed([pool.submit(run_job, job) for job in jobs]):
-            rows.append(fut.result())
-            done(rows[-1])
+    of: dict[Any, BenchJob] = {}
+    try:
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx, initializer=_init_worker) as pool:
+            of = {pool.submit(run_job, job): job for job in jobs}
+            for fut in as_completed(of):
+                rows.append(fut.result())
+                done(rows[-1])
+    except BaseException as e:
+        ok = [fut for fut in of if fut.done() and not fut.cancelled() and fut.exception() is None]
+        remove_unfinished([job for fut, job in of.items() if fut not in ok])
+        if isinstance(e, BrokenProcessPool):
+            raise TrainingLostError(
+                f"a training process died while the benchmark ran ({e}: killed, or out of memory); the benchmark "
+                "stopped, its finished runs are kept",
+                hint="run the benchmark again: it reuses the finished runs and trains the rest; if a process dies "
+                "every time, run fewer side by side (--workers 1)",
+            ) from e
+        raise
     return rows
 
 
@@ -160,7 +249,9 @@ def run_jobs_on_ray(
 ) -> list[dict[str, Any]]:
     """Every job's row as a Ray task of one CPU (in the order they finish; ``done`` is called with each): a local
     Ray on this machine's cores, or the cluster at ``address`` (whose nodes must hold the same data root: a job
-    opens its twin and its logged dataset there by name). A task whose worker dies is retried twice."""
+    opens its twin and its logged dataset there by name). A task whose worker dies is retried twice
+    (:data:`RAY_RETRIES`); one that fails for good stops the others, removes what the unfinished ones left in their
+    run folders and raises (:func:`_lost`)."""
     from dtradar_data.core.ray_cluster import connect_ray, wait_for_cpus
     from dtradar_rl.experiments.sweep import _import_ray
 
@@ -169,16 +260,50 @@ def run_jobs_on_ray(
     rows: list[dict[str, Any]] = []
     try:
         wait_for_cpus(ray, 1, what="one training (1 CPU)", address=address)
-        task = ray.remote(num_cpus=1, max_retries=2)(_ray_job)
-        pending = [task.remote(job) for job in jobs]
+        task = ray.remote(num_cpus=1, max_retries=RAY_RETRIES)(_ray_job)
+        of = {task.remote(job): job for job in jobs}
+        pending = list(of)
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)
-            rows.append(ray.get(ready[0]))
+            try:
+                rows.append(ray.get(ready[0]))
+            except ray.exceptions.RayError as e:
+                _stop(ray, pending)
+                # their workers are gone: what they left half written goes too
+                remove_unfinished([of[ref] for ref in [ready[0], *pending]])
+                raise _lost(ray, e, of[ready[0]]) from e
             done(rows[-1])
     finally:
         if started:
             ray.shutdown()
     return rows
+
+
+#: How often Ray runs a training again whose worker died (not one that raised: that fails the same way again).
+RAY_RETRIES = 2
+
+
+def _stop(ray, pending: list) -> None:
+    """Cancel the trainings still queued or running (their workers killed) and wait, for a while, until they are."""
+    for ref in pending:
+        ray.cancel(ref, force=True)
+    if pending:
+        ray.wait(pending, num_returns=len(pending), timeout=30.0)
+
+
+def _lost(ray, e: BaseException, job: BenchJob) -> BaseException:
+    """What to raise for a job that failed on Ray: its own typed error as it is (a setting, the data), a dead
+    worker as :class:`TrainingLostError`, anything else (a bug) unchanged."""
+    cause = getattr(e, "cause", None)
+    if isinstance(e, ray.exceptions.RayTaskError):
+        return cause if isinstance(cause, DtradarError) else e
+    return TrainingLostError(
+        f"the training {describe(job)} lost its Ray worker {RAY_RETRIES + 1} times ({type(e).__name__}: the "
+        "worker process died: killed, out of memory, or its node gone); the benchmark stopped, its finished runs "
+        "are kept",
+        hint="run the benchmark again: it reuses the finished runs and trains the rest; if the worker dies every "
+        "time, give the Ray workers more memory, or run it with --executor local",
+    )
 
 
 def _ray_job(job: BenchJob) -> dict[str, Any]:
