@@ -327,6 +327,7 @@ def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
                 seed=seed,
                 n_steps=cfg.n_steps,
                 relabel=cfg.relabel,
+                senses=cfg.senses,
                 pairs=cfg.pairs,
                 eval_variants=tuple(cfg.variants),
                 shield=False,

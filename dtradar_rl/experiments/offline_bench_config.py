@@ -53,6 +53,9 @@ class OfflineBenchConfig(Config):
     relabel: str = "auto"
     """goal relabelling of every run (dtradar_rl.offline.relabel): auto (each algorithm's best measured mix, the
     default), none (the logged targets, the benchmark before relabelling), or any mix --relabel takes"""
+    senses: str = "none"
+    """what the deep learners observe (dtradar_rl.offline.memory_senses): none (the logged, memoryless observation) or
+    memory (the online default agent's memory window, rebuilt from each log; evaluated in the memory env)"""
     shortest_prob: float = 0.5
     """noisy-shortest: probability of the shortest-path move"""
     epsilon: float = 0.3
@@ -117,6 +120,7 @@ class OfflineBenchConfig(Config):
             raise ConfigError("--seeds, --algorithms and --behaviours must each list at least one value")
         for a in self.algorithms:
             OfflineConfig(algorithm=a, relabel=self.relabel).relabel_config()  # a mix that does not parse
+        OfflineConfig(senses=self.senses).validate()  # an unknown --senses
         if self.workers < 0:
             raise ConfigError("--workers must be >= 0 (0 = one per CPU core)")
         if self.executor != "ray" and self.ray_address:

@@ -152,7 +152,8 @@ def run_job(job: BenchJob) -> dict[str, Any]:
     if job.fqe_steps:
         t1 = time.perf_counter()
         settings = logged.meta.get("settings") or {}
-        run["fqe"] = fqe_estimate(r.policy, logged, n_steps=job.fqe_steps, seed=job.seed, gamma=job.fqe_gamma)
+        # FQE replays the log as the agent observed it (with --senses memory, the memory window appended)
+        run["fqe"] = fqe_estimate(r.policy, r.data, n_steps=job.fqe_steps, seed=job.seed, gamma=job.fqe_gamma)
         run["fqe_s"] = time.perf_counter() - t1
         starts = _opened(f"starts:{job.logged}", lambda: episode_starts(logged))
         run["true_value"] = true_value(

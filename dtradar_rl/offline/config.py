@@ -27,6 +27,12 @@ ALGORITHMS: dict[str, str] = {
 }
 
 
+#: The senses an offline agent can train with: ``none`` (what the log holds: the memoryless observation) or
+#: ``memory`` (the default online agent's memory window, rebuilt from the log: dtradar_rl.offline.memory_senses).
+SENSES = ("none", "memory")
+#: The memory window of ``--senses memory``: the default online preset's (``DQNConfig()``), checked by a test.
+MEMORY_SETTINGS = {"memory_radius": 5, "memory_bumps": False, "memory_visits": True, "escape_after": 2}
+
 #: torch threads of one d3rlpy training by default (see :attr:`OfflineConfig.threads`)
 TRAIN_THREADS = 1
 
@@ -93,6 +99,11 @@ class OfflineConfig(BehaviourConfig):
     relabel_resample: str = "batch"
     """relabelling: batch (fresh goals for every minibatch, as OGBench) or run (one goal per logged step, drawn once
     with --seed)"""
+    senses: str = "none"
+    """what the agent observes of each logged step: none (the logged observation, memoryless) or memory (the online
+    default agent's senses: the logged observation followed by the memory window of what it sensed and visited this
+    episode and its earlier stands on its cell, rebuilt exactly from the log; evaluated in the same memory env, with
+    its loop escape: dtradar_rl.offline.memory_senses)"""
     out: str = ""
     """output directory (default runs/<scene>/offline/<algorithm>)"""
 
@@ -113,6 +124,24 @@ class OfflineConfig(BehaviourConfig):
             resample=self.relabel_resample,
         )
 
+    # The memory env's settings (read by Policy.env_for and the loop escape): the default online preset's with
+    # --senses memory, none without.
+    @property
+    def memory_radius(self) -> int:
+        return MEMORY_SETTINGS["memory_radius"] if self.senses == "memory" else 0
+
+    @property
+    def memory_bumps(self) -> bool:
+        return MEMORY_SETTINGS["memory_bumps"] if self.senses == "memory" else False
+
+    @property
+    def memory_visits(self) -> bool:
+        return MEMORY_SETTINGS["memory_visits"] if self.senses == "memory" else False
+
+    @property
+    def escape_after(self) -> int:
+        return MEMORY_SETTINGS["escape_after"] if self.senses == "memory" else 0
+
     @property
     def out_dir(self) -> Path:
         return Path(self.out or run_dir(self.scene, "offline", self.algorithm))
@@ -131,11 +160,18 @@ class OfflineConfig(BehaviourConfig):
     def validate(self) -> OfflineConfig:
         super().validate()
         check_algorithm(self.algorithm)
+        if self.senses not in SENSES:
+            raise unknown_name("senses", self.senses, SENSES)
+        if self.senses == "memory" and self.obs != "neighbors":
+            raise ConfigError(
+                f"--senses memory senses obstacles through the 'neighbors' observation, got --obs {self.obs}",
+                hint="use --obs neighbors (the default) or --senses none",
+            )
         return self
 
 
 #: What a config saved without a field meant by it (:meth:`OfflineConfig.from_dict`): relabelling came later.
-SAVED_DEFAULTS: dict[str, object] = {"relabel": "none"}
+SAVED_DEFAULTS: dict[str, object] = {"relabel": "none", "senses": "none"}
 
 
 def check_algorithm(name: str) -> str:

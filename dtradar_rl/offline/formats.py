@@ -84,10 +84,11 @@ def d3rlpy_arrays(data: LoggedDataset | dict[str, np.ndarray]) -> dict[str, np.n
     }
 
 
-def to_mdp_dataset(data: LoggedDataset | str | LoggedId):
-    """The d3rlpy ``MDPDataset`` of a logged dataset (see the module docstring; discrete, 4 actions)."""
+def to_mdp_dataset(data: LoggedDataset | str | LoggedId | dict[str, np.ndarray]):
+    """The d3rlpy ``MDPDataset`` of a logged dataset, or of its arrays (see the module docstring; discrete, 4
+    actions)."""
     d3rlpy = import_d3rlpy()
-    arr = d3rlpy_arrays(as_logged(data))
+    arr = d3rlpy_arrays(data if isinstance(data, dict) else as_logged(data))
     with quiet_d3rlpy():
         return d3rlpy.dataset.MDPDataset(
             observations=arr["observations"],

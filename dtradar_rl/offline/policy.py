@@ -54,14 +54,22 @@ class OfflinePolicy(Policy):
 
     def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
         """Greedy actions (``algo.predict``); ``shield=True`` replaces a move into a neighbour sensed as occupied
-        with the best allowed move by :class:`ActionScores` (via :meth:`Policy.act`)."""
+        with the best allowed move by :class:`ActionScores` (via :meth:`Policy.act`). An agent trained with
+        ``--senses memory`` leaves a cell it already stood on ``escape_after`` times by a seeded random move, as the
+        online default agent does (:meth:`Policy.act`)."""
         x = obs.detach().reshape(-1, obs.shape[-1]).cpu().numpy()
         a = torch.as_tensor(self.algo.predict(x), dtype=torch.long, device=obs.device).reshape(obs.shape[:-1])
+        allowed, stuck = None, self._stuck(obs)
         if shield:
             flags = obs[..., self.shield_columns()] > 0.5
+            allowed = flags | ~flags.any(-1, keepdim=True)
             vetoed = ~flags.gather(-1, a[..., None]).squeeze(-1) & flags.any(-1)
+            if stuck is not None:  # a robot that escapes moves at random anyway
+                vetoed &= ~stuck
             if bool(vetoed.any()):
                 a[vetoed] = super().act(obs[vetoed], shield=True)
+        if stuck is not None:
+            a = torch.where(stuck, self._escape_moves(obs, allowed), a)
         return a
 
 

@@ -26,14 +26,14 @@ def _sampler_class():
         docstring): indices from numpy's global generator like d3rlpy's (and the trainer's flat sampler), goals from a
         generator of the config's seed."""
 
-        def __init__(self, source, relabeller: Relabeller, cfg: RelabelConfig):
+        def __init__(self, source, relabeller: Relabeller, cfg: RelabelConfig, senses=None):
             self.__dict__.update(source.__dict__)  # shared, not rebuilt: see the trainer's FlatTransitionSampler
             if self.transition_count != len(relabeller):
                 raise SchemaMismatchError(
                     f"the d3rlpy dataset holds {self.transition_count} transitions, the log {len(relabeller)}",
                     hint="relabel the log the d3rlpy dataset was built from",
                 )
-            self.relabeller, self.config = relabeller, cfg
+            self.relabeller, self.config, self.senses = relabeller, cfg, senses
             self.rng = np.random.default_rng(cfg.seed)
             #: how many drawn goals came from each source (and how many fell back), over every minibatch
             self.counts = np.zeros(FALLBACK + 1, np.int64)
@@ -43,7 +43,7 @@ def _sampler_class():
                 t0 = time.perf_counter()
                 idx = np.arange(len(relabeller))
                 goal, src = relabeller.goals(idx, cfg, self.rng)
-                self._fixed = relabeller.transitions(idx, goal)
+                self._fixed = self._sensed(relabeller.transitions(idx, goal), idx)
                 self._fixed_source = src
                 self.draw_s = time.perf_counter() - t0
 
@@ -55,9 +55,14 @@ def _sampler_class():
             else:
                 t0 = time.perf_counter()
                 batch, src = self.relabeller.batch(i, self.config, self.rng)
+                batch = self._sensed(batch, i)
                 self.draw_s += time.perf_counter() - t0
             self.counts += np.bincount(src, minlength=FALLBACK + 1)
             return D.TransitionMiniBatch(**batch, intervals=np.ones((batch_size, 1), np.float32), transitions=[])
+
+        def _sensed(self, batch: dict[str, np.ndarray], idx: np.ndarray) -> dict[str, np.ndarray]:
+            """With memory senses, the memory window of rows ``idx`` appended (the same for any goal)."""
+            return batch if self.senses is None else self.senses.extend(batch, idx)
 
         def summary(self) -> dict[str, Any]:
             return {
@@ -72,10 +77,12 @@ def _sampler_class():
     return RelabelledSampler
 
 
-def relabelled_sampler(source, relabeller: Relabeller, cfg: RelabelConfig):
+def relabelled_sampler(source, relabeller: Relabeller, cfg: RelabelConfig, senses=None):
     """The d3rlpy dataset a trainer fits on: ``source`` (the log's d3rlpy dataset,
-    :func:`~dtradar_rl.offline.formats.to_mdp_dataset`) with relabelled minibatches (:class:`RelabelledSampler`)."""
-    return _sampler_class()(source, relabeller, cfg)
+    :func:`~dtradar_rl.offline.formats.to_mdp_dataset`) with relabelled minibatches (:class:`RelabelledSampler`);
+    with ``senses`` (a :class:`~dtradar_rl.offline.memory_senses.MemorySenses` of the log), each step's memory window
+    appended to its observations, as ``source``'s are."""
+    return _sampler_class()(source, relabeller, cfg, senses)
 
 
 def __getattr__(name: str):

@@ -58,11 +58,13 @@ from dtradar_rl.offline.config import ALGORITHMS, OFFLINE_FORMAT, OfflineConfig,
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, to_mdp_dataset
 from dtradar_rl.offline.log_settings import check_compatible
 from dtradar_rl.offline.logged import LogConfig, log_dataset
+from dtradar_rl.offline.memory_senses import MemorySenses, memory_senses
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
 from dtradar_rl.offline.relabel import RelabelConfig, not_relabellable
 from dtradar_rl.offline.relabelled_sampler import relabelled_sampler
 from dtradar_rl.offline.relabeller import relabeller
 from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runs import no_empty_folder_on_failure
 from dtradar_rl.task.runtime import auto_threads
@@ -124,16 +126,16 @@ _MDP_CACHE: OrderedDict[tuple[str, str, str], Any] = OrderedDict()
 MDP_CACHE_SIZE = 2
 
 
-def mdp_dataset(logged: LoggedDataset):
-    """The d3rlpy dataset of a stored logged version (:func:`~dtradar_rl.offline.formats.to_mdp_dataset`), kept for
-    the next runs in this process (the :data:`MDP_CACHE_SIZE` most recent versions): building one from 100 K rows
-    takes seconds, and the benchmark trains (and FQE-evaluates) eighteen agents on each. Training never writes to
-    it."""
-    key = (str(logged.path), logged.name, logged.version)
+def mdp_dataset(logged: LoggedDataset, senses: MemorySenses | None = None):
+    """The d3rlpy dataset of a stored logged version (:func:`~dtradar_rl.offline.formats.to_mdp_dataset`; with
+    ``senses``, its observations followed by their memory window), kept for the next runs in this process (the
+    :data:`MDP_CACHE_SIZE` most recent): building one from 100 K rows takes seconds, and the benchmark trains (and
+    FQE-evaluates) eighteen agents on each. Training never writes to it."""
+    key = (str(logged.path), logged.name, logged.version, senses is not None)
     if key in _MDP_CACHE:
         _MDP_CACHE.move_to_end(key)
         return _MDP_CACHE[key]
-    data = to_mdp_dataset(logged)
+    data = to_mdp_dataset(logged) if senses is None else to_mdp_dataset(senses.arrays(logged.arrays()))
     _MDP_CACHE[key] = data
     while len(_MDP_CACHE) > MDP_CACHE_SIZE:
         _MDP_CACHE.popitem(last=False)
@@ -254,6 +256,9 @@ class OfflineResult:
     #: evaluation rows (one per twin and shield setting) and their Markdown table
     rows: list[dict[str, Any]] = field(default_factory=list)
     markdown: str = ""
+    #: the d3rlpy dataset of the log as the agent observes it (with ``--senses memory``, the memory window appended;
+    #: what FQE evaluates it on)
+    data: Any = None
 
 
 def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | None = None) -> OfflineResult:
@@ -287,11 +292,12 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
     else:
         store_log = log_dataset(log_config(cfg), ds)
     check_compatible(store_log, cfg, ds)  # parent twin, its version, preset and normaliser
-    logged_data = mdp_dataset(store_log)
+    senses = _memory_senses(cfg, store_log, ds)
+    logged_data = mdp_dataset(store_log, senses)
     source = {"name": store_log.name, "version": store_log.version, "tag": store_log.tag}
     stats = {**store_log.meta["stats"], "source": f"{store_log.name}@{store_log.version}"}
     say(f"training {cfg.algorithm} on {store_log.name}@{store_log.tag} ({store_log.version})")
-    obs_names = list(build_observations(ds, cfg.obs, normalizer).names)
+    obs_names = list(build_observations(ds, cfg.obs, normalizer).names) + list(senses.names if senses else ())
     obs_dim = logged_data.episodes[0].observations.shape[-1]
     if obs_dim != len(obs_names):
         raise ConfigError(
@@ -307,7 +313,7 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         say(f"relabelling goals: auto does not apply ({why}), training on the logged targets")
         relabel = RelabelConfig.parse("none", cfg.algorithm, seed=cfg.seed)
     if not relabel.is_identity:  # goals relabelled in every minibatch (or once): dtradar_rl.offline.relabel
-        train_data = relabelled_sampler(logged_data, relabeller(store_log, ds), relabel)
+        train_data = relabelled_sampler(logged_data, relabeller(store_log, ds), relabel, senses)
         say(f"relabelling goals: {relabel.describe()}, discount {relabel.discount:g}, drawn per {relabel.resample}")
 
     d3rlpy.seed(cfg.seed)
@@ -337,7 +343,7 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         "format": OFFLINE_FORMAT,
         "config": cfg.to_dict(),
         "normalizer": normalizer.to_dict(),
-        "obs": {"preset": cfg.obs, "names": obs_names},
+        "obs": {"preset": cfg.obs, "senses": cfg.senses, "names": obs_names},
         "dataset": {"name": ds.name, "version": ds.version},
         "logged": source,
         "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s, **threads},
@@ -352,7 +358,22 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         rows = evaluate_offline(policy, cfg, datasets={ds.name: ds})
         md = write_results(rows, out, meta)
     wall = time.perf_counter() - t_start
-    return OfflineResult(model, out, policy, stats, cfg.n_steps, train_s, wall, losses, rows, md)
+    return OfflineResult(model, out, policy, stats, cfg.n_steps, train_s, wall, losses, rows, md, logged_data)
+
+
+def _memory_senses(cfg: OfflineConfig, logged: LoggedDataset, ds: Dataset) -> MemorySenses | None:
+    """The memory windows of the log's steps with ``--senses memory`` (None without); a moving twin's log is refused:
+    its cells' moves depend on the snapshot, which the table does not keep."""
+    if cfg.senses != "memory":
+        return None
+    mdp = GridMDP.from_dataset(ds)
+    if isinstance(mdp, MovingGridMDP):
+        raise ConfigError(
+            f"--senses memory rebuilds the memory of each logged episode from its moves, which on the moving twin "
+            f"{ds.name} depend on the snapshot the log does not keep",
+            hint="train on a log of a static twin (blueprint, dynamic), or with --senses none",
+        )
+    return memory_senses(logged, mdp)
 
 
 def _write_losses(losses: list[dict[str, float]], path: Path) -> None:
