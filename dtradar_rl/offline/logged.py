@@ -2,7 +2,7 @@
 
     from dtradar_rl.offline.logged import LogConfig, log_dataset
     from dtradar_rl.offline.formats import to_mdp_dataset
-    from dtradar_rl.offline.minari_copy import export_minari
+    from dtradar_rl.offline.minari_copy import check_minari_free, export_minari
     logged = log_dataset(LogConfig(scene="cubicle", behaviour="noisy-shortest"))   # cubicle/blueprint/noisy-shortest
     logged = dtradar_data.load("cubicle/blueprint/noisy-shortest")                 # the same, from the store
     mdp = to_mdp_dataset(logged)            # d3rlpy MDPDataset, every logged transition kept and aligned
@@ -41,18 +41,23 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import CorruptDatasetError, SchemaMismatchError
 from dtradar_data.store.logged import (
     MINARI_ENV,
+    TRANSITIONS_FILE,
     LoggedDataset,
     clean_logged_stages,
     load_logged,
     local_versions,
+    logged_dir,
     logged_version,
     logging_inputs,
     logging_lock,
     minari_root,
     parse_logged_id,
+    read_meta,
+    refs_path,
     transitions_table,
     write_logged,
 )
+from dtradar_data.store.versions import read_refs
 from dtradar_rl.agents.checkpoints import CHECKPOINT_FORMAT, read_checkpoint
 from dtradar_rl.evaluation.normalized import (
     DEFAULT_PAIRS,
@@ -74,7 +79,7 @@ from dtradar_rl.offline.behaviours import (
 from dtradar_rl.offline.collection import replay, roll
 from dtradar_rl.offline.log_settings import parent_version, settings_of
 from dtradar_rl.offline.medium_agent import medium_agent, resolve_spec
-from dtradar_rl.offline.minari_copy import export_minari
+from dtradar_rl.offline.minari_copy import check_minari_free, export_minari
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runtime import auto_threads
@@ -151,7 +156,28 @@ def log_families(cfg: LogConfig, dataset: Dataset | None = None) -> dict[str, Lo
     use it."""
     cfg = cfg.validate()
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
+    check_minari_copies(cfg.families(), ds)  # all of them before the first family is logged
     return {c.behaviour: log_dataset(c, ds) for c in cfg.families()}
+
+
+def check_minari_copies(cfgs: list[LogConfig], ds: Dataset) -> None:
+    """Refuse, before anything is logged or stored, a log (of those of ``cfgs`` that write a Minari copy) whose copy
+    could not be written: its Minari folder (``dtradar/...-v<N>``, ``N`` the tag the version has or will get) holds
+    another data root's copy or a dataset dtradar did not write. Found only at the copy, the version would be stored
+    and the command fail, half done."""
+    for c in cfgs:
+        if not c.minari:
+            continue
+        version = logged_version(log_inputs(c, ds))
+        lid = parse_logged_id(c.logged_name)
+        refs = read_refs(refs_path(lid))
+        tag, sha = refs.tag_of(version), None
+        if tag is not None:  # stored: its copy must hold this very transitions file
+            try:
+                sha = read_meta(logged_dir(lid) / version)["files"][TRANSITIONS_FILE]["sha256"]
+            except (CorruptDatasetError, KeyError, TypeError):
+                sha = None  # damaged: logged again, its transitions unknown yet
+        check_minari_free(lid.name, version, tag or refs.next_tag(), sha)
 
 
 def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset:
@@ -165,6 +191,7 @@ def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset
     torch.set_num_threads(cfg.threads or auto_threads())
     say = print if cfg.verbose else (lambda *a, **k: None)
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
+    check_minari_copies([cfg], ds)
     inputs = log_inputs(cfg, ds)
     version = logged_version(inputs)
     lid = parse_logged_id(cfg.logged_name)
@@ -288,6 +315,7 @@ def behaviour_score(
 __all__ = [
     "LogConfig",
     "behaviour_score",
+    "check_minari_copies",
     "log_dataset",
     "log_families",
     "log_inputs",

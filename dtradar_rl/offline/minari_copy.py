@@ -28,6 +28,7 @@ from dtradar_data.store.logged import (
     TRANSITIONS_FILE,
     LoggedDataset,
     LoggedId,
+    minari_id,
     minari_root,
     parse_logged_id,
     transitions_table,
@@ -145,21 +146,14 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
     replaced); ``"foreign"`` (not written by dtradar)."""
     if not folder.exists():
         return "absent", ""
+    want = _wanted(logged)
+    claim = minari_claim(folder, logged.name, logged.version, want["transitions_sha256"])
+    if claim[0] != "ours":
+        return claim
     rec = _record(folder)
     meta = _minari_metadata(folder)
     if rec is None:
-        if meta is not None and not str(meta.get("description") or "").startswith("dtradar "):
-            return "foreign", f"{folder} was not written by dtradar ({str(meta.get('description'))[:60]!r})"
         return "incomplete", f"{folder} has no complete {RECORD_FILE} (a killed write, or an older dtradar's copy)"
-    want = _wanted(logged)
-    same = all(rec.get(k) == want[k] for k in ("name", "version", "transitions_sha256"))
-    if not same:
-        root = Path(str(rec.get("data_root") or ""))
-        held = rec.get("data_root") != want["data_root"] and _claimed(
-            root, rec.get("name"), rec.get("tag"), rec.get("version")
-        )
-        what = f"{rec.get('name')}@{rec.get('tag')} (version {rec.get('version')}) of data root {root}"
-        return ("other" if held else "stale"), what
     if rec.get("format") != RECORD_FORMAT:
         return "incomplete", (
             f"{folder} was written by another dtradar (record format {rec.get('format')}, this one writes "
@@ -177,6 +171,52 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
     if rec.get("env_spec") is None and rec.get("env_retry") and minari_envs(logged).spec is not None:
         return "incomplete", f"{folder} has no env spec ({rec.get('env_missing')}); the twin is here now"
     return "complete", ""
+
+
+def minari_claim(folder: Path, name: str, version: str, transitions_sha256: str | None) -> tuple[str, str]:
+    """Who ``folder`` belongs to, for a copy of logged version ``name@version`` (transitions file
+    ``transitions_sha256``; None for a version not logged yet, compared by name and version only): ``("absent",
+    "")``; ``("ours", "")`` (a copy of this version, or a record-less one dtradar left: :func:`copy_state` says
+    whether it is whole); ``("other", why)`` (another version that another data root still holds: not ours to
+    replace); ``("stale", why)`` (another version nobody holds any more); ``("foreign", why)`` (not dtradar's)."""
+    if not folder.exists():
+        return "absent", ""
+    rec = _record(folder)
+    if rec is None:
+        meta = _minari_metadata(folder)
+        if meta is not None and not str(meta.get("description") or "").startswith("dtradar "):
+            return "foreign", f"{folder} was not written by dtradar ({str(meta.get('description'))[:60]!r})"
+        return "ours", ""
+    same = rec.get("name") == name and rec.get("version") == version
+    if same and (transitions_sha256 is None or rec.get("transitions_sha256") == transitions_sha256):
+        return "ours", ""
+    root = Path(str(rec.get("data_root") or ""))
+    here = str(P.data_root().absolute())
+    held = rec.get("data_root") != here and _claimed(root, rec.get("name"), rec.get("tag"), rec.get("version"))
+    what = f"{rec.get('name')}@{rec.get('tag')} (version {rec.get('version')}) of data root {root}"
+    return ("other" if held else "stale"), what
+
+
+def claimed_error(folder: Path, name: str, tag: str | None, state: str, why: str, done: str) -> ConfigError:
+    """The refusal of a Minari copy of ``name@tag`` into ``folder``, which another data root's copy (``state``
+    ``"other"``) or a dataset dtradar did not write (``"foreign"``) holds; ``done`` says what was (not) stored."""
+    held = why if state == "other" else "a dataset dtradar did not write"
+    return ConfigError(
+        f"the Minari copy of {name}@{tag} cannot be written into {folder}: it holds {held}, and this data root "
+        f"is {P.data_root().absolute()} ({done})",
+        hint=f"give each data root its own Minari folder: unset {MINARI_ENV} (the copies then go to "
+        f"<data root>/{MINARI_DIR}) or set it to another folder; or remove {folder}; or log without the copy "
+        f'(`make logged ... ARGS="--no-minari"`, `python -m dtradar_rl log ... --no-minari`)',
+    )
+
+
+def check_minari_free(name: str, version: str, tag: str, transitions_sha256: str | None = None) -> None:
+    """Refuse (:func:`claimed_error`) before anything is logged or stored when the Minari copy of ``name@version``,
+    to be tagged ``tag``, could not be written: its folder holds another data root's copy or a foreign dataset."""
+    folder = minari_root() / minari_id(parse_logged_id(name), tag)
+    state, why = minari_claim(folder, name, version, transitions_sha256)
+    if state in ("other", "foreign"):
+        raise claimed_error(folder, name, tag, state, why, "nothing was logged or stored")
 
 
 def _claimed(root: Path, name: Any, tag: Any, version: Any) -> bool:
@@ -285,13 +325,8 @@ def export_minari(
         if state == "complete":
             return mid
         if state in ("other", "foreign") and not overwrite:
-            raise ConfigError(
-                f"the Minari copy of {logged.name}@{logged.tag} was not written: {folder} holds "
-                f"{why if state == 'other' else 'a dataset dtradar did not write'} (the logged dataset itself is "
-                f"stored in {logged.path})",
-                hint=f"give each data root its own Minari folder: unset {MINARI_ENV} (the copies then go to "
-                f"<data root>/{MINARI_DIR}) or set it to another folder; or remove {folder}; or log without the "
-                "copy (`python -m dtradar_rl log ... --no-minari`)",
+            raise claimed_error(
+                folder, logged.name, logged.tag, state, why, f"the logged dataset itself is stored in {logged.path}"
             )
         envs = minari_envs(logged)
         if envs.spec is None:
@@ -378,10 +413,13 @@ def table_from_columns(c: dict[str, np.ndarray]):
 
 
 __all__ = [
+    "check_minari_free",
+    "claimed_error",
     "copy_state",
     "export_minari",
     "from_minari",
     "load_minari",
+    "minari_claim",
     "minari_episodes",
     "table_from_columns",
 ]
