@@ -9,8 +9,9 @@ from typing import Literal
 
 from dtradar_rl.evaluation.normalized import DEFAULT_SEED
 from dtradar_rl.offline.behaviours import BEHAVIOURS, FAMILIES
-from dtradar_rl.offline.config import OfflineConfig, check_algorithm
+from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.ope import FQE_GAMMA
+from dtradar_rl.offline.relabel import AUTO, RelabelConfig
 from dtradar_rl.task.config import Config, ConfigError
 
 NAMES = {
@@ -107,6 +108,14 @@ class OfflineBenchConfig(Config):
     @property
     def out_dir(self) -> Path:
         return Path(self.out or f"results/offline_bench/{self.scene}")
+
+    def check_ranges(self) -> None:
+        super().check_ranges()
+        # the mix is checked when the config is made, as OfflineConfig's is: a benchmark would otherwise log its
+        # datasets and train the online agent before its first run refused it (an unknown algorithm: validate())
+        for a in dict.fromkeys(self.algorithms):
+            if a in ALGORITHMS or self.relabel.strip() != AUTO:
+                RelabelConfig.parse(self.relabel, a)
 
     def validate(self) -> OfflineBenchConfig:
         for a in self.algorithms:

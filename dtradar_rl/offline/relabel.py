@@ -151,13 +151,15 @@ class RelabelConfig(Config):
         return self.own == 1.0
 
     def check_ranges(self) -> None:
+        # each one alone first: a sum with a NaN, an infinity or a negative part would name none of them
+        mix = ",".join(f"{s}={getattr(self, s)!r}" for s in SOURCES)
         for s in SOURCES:
             v = getattr(self, s)
-            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or v < 0:
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not (math.isfinite(v) and 0 <= v <= 1):
                 raise ConfigError(
-                    f"relabel probability {s!r} must be a finite number >= 0, got {v!r}",
-                    hint=f"give each of {', '.join(SOURCES)} a probability in [0, 1], e.g. --relabel "
-                    "future=0.5,random=0.3,next=0.2",
+                    f"relabel probability {s!r} must be a finite number in [0, 1], got {v!r} (the mix: {mix})",
+                    hint=f"give each of {', '.join(SOURCES)} a probability in [0, 1], together summing to 1, e.g. "
+                    "--relabel future=0.5,random=0.3,next=0.2",
                 )
         total = float(self.probabilities.sum())
         if abs(total - 1.0) > SUM_TOLERANCE:

@@ -159,9 +159,11 @@ def test_the_relabelled_d3rlpy_dataset_holds_one_episode_per_step(store):
     [
         ({"own": 0.5, "future": 0.3}, "sum to 1, got 0.8"),
         ({"own": 0.6, "future": 0.6}, "sum to 1, got 1.2"),
-        ({"own": 1.2, "future": -0.2}, "'future' must be a finite number >= 0"),
-        ({"own": float("nan")}, "'own' must be a finite number >= 0"),
-        ({"own": 0.0, "random": float("inf")}, "'random' must be a finite number >= 0"),
+        ({"own": 1.2, "future": -0.2}, r"'own' must be a finite number in \[0, 1\], got 1.2"),
+        ({"own": 0.5, "future": -0.5, "next": 1.0}, r"'future' must be a finite number in \[0, 1\], got -0.5"),
+        ({"own": float("nan")}, r"'own' must be a finite number in \[0, 1\], got nan"),
+        ({"own": 0.0, "random": float("inf")}, r"'random' must be a finite number in \[0, 1\], got inf"),
+        ({"own": 0.0, "future": 1.0, "next": -float("inf")}, r"'next' must be .* got -inf"),
         ({"discount": 1.0}, "--relabel-discount must be in"),
     ],
 )
@@ -169,6 +171,21 @@ def test_probabilities_that_are_not_a_distribution_are_refused_with_what_to_fix(
     with pytest.raises(InvalidSettingError, match=match) as exc:
         RelabelConfig(**kwargs)
     assert exc.value.hint
+    if "sum to 1" not in match and "discount" not in match:  # a value alone: the whole mix is named with it
+        assert "(the mix: own=" in exc.value.message and "next=" in exc.value.message
+
+
+def test_a_benchmark_refuses_a_relabel_mix_that_is_not_a_distribution_when_it_is_made(root, tmp_path, capsys):
+    from dtradar_rl.experiments.offline_bench_config import OfflineBenchConfig
+
+    for mix, match in (("own=0.2", "sum to 1, got 0.2"), ("own=nan,future=1", "'own' must be a finite number")):
+        with pytest.raises(ConfigError, match=match):
+            OfflineBenchConfig(relabel=mix)  # made, not yet validated: nothing of the benchmark ran
+    assert OfflineBenchConfig(algorithms=("cqll",)).relabel == "auto", "an unknown algorithm is validate()'s to name"
+    out = tmp_path / "bench"
+    assert main(["offline-bench", "--scene", SMALL, "--relabel", "own=0.5,future=inf", "--out", str(out)]) == 2
+    assert "'future' must be a finite number in [0, 1], got inf" in capsys.readouterr().err
+    assert not out.exists() and not root.exists(), "refused before anything was logged or written"
 
 
 def test_a_relabel_mix_on_the_command_line_is_parsed_and_a_bad_one_is_one_error_line(capsys):
@@ -193,7 +210,7 @@ def test_a_relabel_mix_on_the_command_line_is_parsed_and_a_bad_one_is_one_error_
     with pytest.raises(UnknownNameError, match="unknown relabel resampling 'epoch'"):
         OfflineConfig(relabel="future", relabel_resample="epoch")
     assert main(["offline", "--scene", SMALL, "--relabel", "own=0.5,next=-0.5,future=1"]) == 2
-    assert "relabel probability 'next' must be a finite number >= 0" in capsys.readouterr().err
+    assert "relabel probability 'next' must be a finite number in [0, 1], got -0.5" in capsys.readouterr().err
 
 
 def test_a_quick_training_with_relabelling_runs_end_to_end_and_its_config_records_the_mix(store, tmp_path, capsys):
