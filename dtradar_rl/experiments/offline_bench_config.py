@@ -54,9 +54,10 @@ class OfflineBenchConfig(Config):
     relabel: str = "auto"
     """goal relabelling of every run (dtradar_rl.offline.relabel): auto (each algorithm's best measured mix, the
     default), none (the logged targets, the benchmark before relabelling), or any mix --relabel takes"""
-    senses: str = "none"
-    """what the deep learners observe (dtradar_rl.offline.memory_senses): none (the logged, memoryless observation) or
-    memory (the online default agent's memory window, rebuilt from each log; evaluated in the memory env)"""
+    senses: str = "auto"
+    """what the deep learners observe (dtradar_rl.offline.memory_senses): auto (each algorithm's best measured: memory
+    for bcq, dqn, ddqn, nfq, none for bc and cql), none (the logged, memoryless observation: the benchmark before
+    senses) or memory (the online default agent's memory window, rebuilt from each log; evaluated in the memory env)"""
     shortest_prob: float = 0.5
     """noisy-shortest: probability of the shortest-path move"""
     epsilon: float = 0.3

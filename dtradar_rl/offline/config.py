@@ -29,7 +29,19 @@ ALGORITHMS: dict[str, str] = {
 
 #: The senses an offline agent can train with: ``none`` (what the log holds: the memoryless observation) or
 #: ``memory`` (the default online agent's memory window, rebuilt from the log: dtradar_rl.offline.memory_senses).
-SENSES = ("none", "memory")
+SENSES = ("auto", "none", "memory")
+#: ``--senses auto``: each algorithm's best measured (Dallas Q3 expert and medium, 4 000 updates, relabelled; the
+#: cubicle within a few points either way: docs/logged-datasets.md). The imitation-anchored learners (bc; cql, whose
+#: conservative term pulls towards the logged moves) read the logged trail behind them as the next move's cue and fall
+#: to 15-42 with the memory window, the Q-learners gain 5-24 points with it.
+AUTO_SENSES: dict[str, str] = {
+    "bc": "none",
+    "cql": "none",
+    "bcq": "memory",
+    "dqn": "memory",
+    "ddqn": "memory",
+    "nfq": "memory",
+}
 #: The memory window of ``--senses memory``: the default online preset's (``DQNConfig()``), checked by a test.
 MEMORY_SETTINGS = {"memory_radius": 5, "memory_bumps": False, "memory_visits": True, "escape_after": 2}
 
@@ -99,11 +111,12 @@ class OfflineConfig(BehaviourConfig):
     relabel_resample: str = "batch"
     """relabelling: batch (fresh goals for every minibatch, as OGBench) or run (one goal per logged step, drawn once
     with --seed)"""
-    senses: str = "none"
-    """what the agent observes of each logged step: none (the logged observation, memoryless) or memory (the online
-    default agent's senses: the logged observation followed by the memory window of what it sensed and visited this
-    episode and its earlier stands on its cell, rebuilt exactly from the log; evaluated in the same memory env, with
-    its loop escape: dtradar_rl.offline.memory_senses)"""
+    senses: str = "auto"
+    """what the agent observes of each logged step: auto (the algorithm's best measured: memory for bcq, dqn, ddqn,
+    nfq; none for bc and cql), none (the logged observation, memoryless: every run before senses existed) or memory
+    (the online default agent's senses: the logged observation followed by the memory window of what it sensed and
+    visited this episode and its earlier stands on its cell, rebuilt exactly from the log; evaluated in the same memory
+    env, with its loop escape: dtradar_rl.offline.memory_senses)"""
     out: str = ""
     """output directory (default runs/<scene>/offline/<algorithm>)"""
 
@@ -124,23 +137,34 @@ class OfflineConfig(BehaviourConfig):
             resample=self.relabel_resample,
         )
 
+    @property
+    def resolved_senses(self) -> str:
+        """``senses`` with ``auto`` resolved for ``algorithm`` (:data:`AUTO_SENSES`; memoryless for another preset
+        than ``neighbors``, whose flags the memory reads): ``none`` or ``memory``."""
+        if self.senses != "auto":
+            return self.senses
+        return AUTO_SENSES.get(self.algorithm, "none") if self.obs == "neighbors" else "none"
+
     # The memory env's settings (read by Policy.env_for and the loop escape): the default online preset's with
-    # --senses memory, none without.
+    # memory senses, none without.
+    def _memory(self, key: str, off):
+        return MEMORY_SETTINGS[key] if self.resolved_senses == "memory" else off
+
     @property
     def memory_radius(self) -> int:
-        return MEMORY_SETTINGS["memory_radius"] if self.senses == "memory" else 0
+        return self._memory("memory_radius", 0)
 
     @property
     def memory_bumps(self) -> bool:
-        return MEMORY_SETTINGS["memory_bumps"] if self.senses == "memory" else False
+        return self._memory("memory_bumps", False)
 
     @property
     def memory_visits(self) -> bool:
-        return MEMORY_SETTINGS["memory_visits"] if self.senses == "memory" else False
+        return self._memory("memory_visits", False)
 
     @property
     def escape_after(self) -> int:
-        return MEMORY_SETTINGS["escape_after"] if self.senses == "memory" else 0
+        return self._memory("escape_after", 0)
 
     @property
     def out_dir(self) -> Path:
@@ -162,7 +186,7 @@ class OfflineConfig(BehaviourConfig):
         check_algorithm(self.algorithm)
         if self.senses not in SENSES:
             raise unknown_name("senses", self.senses, SENSES)
-        if self.senses == "memory" and self.obs != "neighbors":
+        if self.senses == "memory" and self.obs != "neighbors":  # (auto: memoryless where the log has no flags)
             raise ConfigError(
                 f"--senses memory senses obstacles through the 'neighbors' observation, got --obs {self.obs}",
                 hint="use --obs neighbors (the default) or --senses none",

@@ -292,6 +292,9 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
     else:
         store_log = log_dataset(log_config(cfg), ds)
     check_compatible(store_log, cfg, ds)  # parent twin, its version, preset and normaliser
+    if cfg.senses == "auto" and cfg.resolved_senses == "memory" and ds.is_moving:
+        say(f"senses: auto does not apply to the moving twin {ds.name} (see --senses memory), training memoryless")
+        cfg = dataclasses.replace(cfg, senses="none")
     senses = _memory_senses(cfg, store_log, ds)
     logged_data = mdp_dataset(store_log, senses)
     source = {"name": store_log.name, "version": store_log.version, "tag": store_log.tag}
@@ -343,7 +346,7 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         "format": OFFLINE_FORMAT,
         "config": cfg.to_dict(),
         "normalizer": normalizer.to_dict(),
-        "obs": {"preset": cfg.obs, "senses": cfg.senses, "names": obs_names},
+        "obs": {"preset": cfg.obs, "senses": cfg.resolved_senses, "names": obs_names},
         "dataset": {"name": ds.name, "version": ds.version},
         "logged": source,
         "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s, **threads},
@@ -364,7 +367,7 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
 def _memory_senses(cfg: OfflineConfig, logged: LoggedDataset, ds: Dataset) -> MemorySenses | None:
     """The memory windows of the log's steps with ``--senses memory`` (None without); a moving twin's log is refused:
     its cells' moves depend on the snapshot, which the table does not keep."""
-    if cfg.senses != "memory":
+    if cfg.resolved_senses != "memory":
         return None
     mdp = GridMDP.from_dataset(ds)
     if isinstance(mdp, MovingGridMDP):

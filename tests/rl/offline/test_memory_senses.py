@@ -9,7 +9,7 @@ import pytest
 
 from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.envs.memory import MemoryGymEnv, MemoryNavEnv
-from dtradar_rl.offline.config import MEMORY_SETTINGS, OfflineConfig
+from dtradar_rl.offline.config import ALGORITHMS, AUTO_SENSES, MEMORY_SETTINGS, OfflineConfig
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.memory_senses import MemorySenses, memory_senses
 from dtradar_rl.offline.relabel import RelabelConfig
@@ -123,3 +123,14 @@ def test_unknown_senses_get_did_you_mean_and_memory_needs_the_neighbors_observat
         OfflineConfig(senses="memroy").validate()
     with pytest.raises(ConfigError, match="neighbors"):
         OfflineConfig(senses="memory", obs="goal").validate()
+
+
+def test_auto_senses_give_each_algorithm_its_measured_best_and_memoryless_where_the_memory_cannot_read():
+    assert set(AUTO_SENSES) == set(ALGORITHMS)
+    assert OfflineConfig(algorithm="dqn").resolved_senses == "memory"
+    assert OfflineConfig(algorithm="bc").resolved_senses == "none"
+    assert OfflineConfig(algorithm="dqn", obs="goal").resolved_senses == "none"
+    assert OfflineConfig(algorithm="dqn").escape_after == MEMORY_SETTINGS["escape_after"]
+    assert OfflineConfig(algorithm="dqn", senses="none").memory_radius == 0
+    # a run saved before senses existed keeps its meaning: memoryless
+    assert OfflineConfig.from_dict({"algorithm": "dqn"}).resolved_senses == "none"

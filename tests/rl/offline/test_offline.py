@@ -14,7 +14,7 @@ from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.policy import ActionScores, OfflinePolicy, load_offline_policy
 from dtradar_rl.offline.trainer import train_offline
-from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.twins import load_dataset
 
 SMALL = "synthetic-12x8"
@@ -123,9 +123,8 @@ def test_every_q_learning_algorithm_trains_saves_and_reloads_to_the_same_actions
     assert result.n_steps == 20 and len(result.losses) == 10 and not result.rows
     reloaded = load_offline_policy(result.model)
     free = np.flatnonzero(~np.asarray(small.blocked).ravel())
-    obs = torch.from_numpy(
-        build_observations(small, "neighbors", reloaded.normalizer).observe(free, np.full_like(free, free[0]))
-    )
+    # observed as the policy observes (the Q-learners' default senses add the memory window)
+    obs = reloaded.env_for(small, len(free), seed=0).reset()
     np.testing.assert_array_equal(result.policy.act(obs).numpy(), reloaded.act(obs).numpy())
     assert ActionScores(reloaded.algo, algorithm)(obs).shape == (len(obs), 4)
     shielded = reloaded.act(obs, shield=True)
