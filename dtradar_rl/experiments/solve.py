@@ -26,7 +26,8 @@ from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import sample_eval_pairs
 from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED
 from dtradar_rl.tabular.evaluation import follow, path_metrics
-from dtradar_rl.tabular.solver import GAMMA, Solution, TabularMDP, check_gamma, solve_twin
+from dtradar_rl.tabular.memory import check_memory, solve_parts
+from dtradar_rl.tabular.solver import GAMMA, Solution, TabularMDP, check_gamma, check_size, solve_twin
 from dtradar_rl.task.config import Config, ConfigError
 from dtradar_rl.task.rewards import check_reward
 from dtradar_rl.task.runtime import machine
@@ -122,6 +123,20 @@ def twins(cfg: SolveConfig, say) -> dict[str, Any]:
     return out
 
 
+def check_solve_memory(cfg: SolveConfig, loaded: dict[str, Any], tabs: dict[str, TabularMDP]) -> None:
+    """:class:`~dtradar_rl.tabular.memory.TooLargeError` before the first twin is solved when the largest one's V*
+    for every target, its greedy table and a chunk's working arrays (solved one twin and reward at a time) would
+    not fit this machine's available memory."""
+    variant = max(tabs, key=lambda v: tabs[v].n)
+    n = tabs[variant].n
+    check_size(n, n)
+    check_memory(
+        f"solving {loaded[variant].name} exactly ({n:,} cells, each a target)",
+        solve_parts(n, n, greedy=True),
+        hint=f"solve a twin of coarser cells (build {cfg.scene} again with a larger --cell-m) or another scene",
+    )
+
+
 def solve_scene(cfg: SolveConfig) -> dict[str, Any]:
     """Run ``cfg``; returns (and writes) the result."""
     cfg = cfg.validate()
@@ -129,8 +144,11 @@ def solve_scene(cfg: SolveConfig) -> dict[str, Any]:
     out = cfg.out_dir
     t_start = time.perf_counter()
     rows: list[dict[str, Any]] = []
-    for variant, ds in twins(cfg, say).items():
-        tab = TabularMDP.from_dataset(ds)
+    loaded = twins(cfg, say)
+    tabs = {variant: TabularMDP.from_dataset(ds) for variant, ds in loaded.items()}
+    check_solve_memory(cfg, loaded, tabs)
+    for variant, ds in loaded.items():
+        tab = tabs[variant]
         pairs = sample_eval_pairs(ds, cfg.pairs, DEFAULT_SEED)
         for reward in cfg.rewards:
             t0 = time.perf_counter()
@@ -160,6 +178,7 @@ def solve_scene(cfg: SolveConfig) -> dict[str, Any]:
                 + ("from the cache" if cached else f"in {sol.seconds:.2f} s ({sol.sweeps} sweeps)")
                 + f" -> {folder}; greedy on {len(pairs)} pairs: success {m['success_rate']:.3f}, SPL {m['spl']:.3f}"
             )
+            sol = None  # freed before the next solve: check_solve_memory counts one solution at a time
     result = {
         "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.__dict__.items()},
         "rows": rows,
@@ -190,4 +209,4 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["SolveConfig", "greedy_metrics", "solve_scene"]
+__all__ = ["SolveConfig", "check_solve_memory", "greedy_metrics", "solve_scene"]

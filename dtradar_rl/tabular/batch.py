@@ -36,6 +36,7 @@ from scipy.sparse.csgraph import shortest_path
 
 from dtradar_data.core.errors import CorruptDatasetError, InvalidSettingError, unknown_name
 from dtradar_data.store.logged import LoggedDataset
+from dtradar_rl.tabular.memory import check_memory, chunk_work
 from dtradar_rl.tabular.solver import (
     GAMMA,
     TOL,
@@ -251,6 +252,11 @@ def learn(
     if name not in fns:
         raise unknown_name("tabular batch learner", name, LEARNERS)
     targets = np.asarray(targets, np.int64)
+    k, n = targets.size, model.tab.n
+    table = f"its table ({'float64' if name == 'spibb' else 'int64'}, {k:,} targets x {n:,} cells"
+    parts = {table + (" x 4)" if name == "spibb" else ")"): (32 if name == "spibb" else 8) * k * n}
+    parts[f"one chunk of {min(k, chunk_size(n)):,} targets' working arrays"] = chunk_work(k, n)
+    check_memory(f"the {NAMES[name]} learner", parts, hint="learn for fewer targets (e.g. the evaluation pairs')")
     if forbidden is None:
         return fns[name](model, targets, cfg)
     if name == "spibb":
@@ -281,6 +287,10 @@ def ceiling(model: EmpiricalModel, pairs: np.ndarray, cfg: BatchConfig | None = 
     # reversed logged moves: a search from the target over them is the fewest logged moves from every cell
     graph = csr_matrix((np.ones(s_idx.size), (tab.next[s_idx, a_idx], s_idx)), shape=(tab.n, tab.n))
     targets = np.unique(pairs[:, 1])
+    k, n = targets.size, tab.n
+    parts = {f"its values and logged-move distances (float64, 2 x {k:,} targets x {n:,} cells)": 16 * k * n}
+    parts[f"one chunk of {min(k, chunk_size(n)):,} targets' working arrays"] = chunk_work(k, n)
+    check_memory("the data ceiling", parts, hint="measure it on fewer pairs' targets")
     t_states = tab.states(targets)
     d_logged = shortest_path(graph, method="D", directed=True, unweighted=True, indices=t_states)
     rows = np.searchsorted(targets, pairs[:, 1])

@@ -19,6 +19,7 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidSettingError
+from dtradar_rl.tabular.memory import check_memory, chunk_work
 from dtradar_rl.tabular.solver import TabularMDP, check_gamma, check_size, chunk_size, expectation_sweeps
 
 #: Observations per forward pass of :func:`greedy_table`.
@@ -57,8 +58,14 @@ def policy_values(
     probabilities, rows in ``targets`` order, states in ``tab.cells`` order) for every start state."""
     targets = np.asarray(targets, np.int64)
     gamma = check_gamma(gamma)
-    policy, deterministic = _check_table(policy, targets.size, tab.n)
     check_size(targets.size, tab.n, "evaluation")
+    k, n = targets.size, tab.n
+    parts = {f"the values (float64, {k:,} targets x {n:,} cells)": 8 * k * n}
+    if np.ndim(policy) == 3:  # checking a probability table: one bool per (target, cell, move) at a time
+        parts["checking its move probabilities"] = 4 * k * n
+    parts[f"one chunk of {min(k, chunk_size(n)):,} targets' working arrays"] = chunk_work(k, n)
+    check_memory("the exact evaluation of a table policy", parts, hint="evaluate fewer targets at a time")
+    policy, deterministic = _check_table(policy, targets.size, tab.n)
     t_states = tab.states(targets)
     out = np.empty((targets.size, tab.n))
     k = chunk_size(tab.n)
@@ -74,7 +81,8 @@ def policy_values(
 def uniform_values(tab: TabularMDP, targets: np.ndarray, reward: str = "geodesic", gamma: float = 0.9) -> np.ndarray:
     """The exact value of uniformly random moves (the normalised scores' 0)."""
     targets = np.asarray(targets, np.int64)
-    return policy_values(tab, np.full((targets.size, tab.n, 4), 0.25), targets, reward, gamma)
+    uniform = np.broadcast_to(0.25, (targets.size, tab.n, 4))  # a view: each chunk is made as it is evaluated
+    return policy_values(tab, uniform, targets, reward, gamma)
 
 
 def follow(

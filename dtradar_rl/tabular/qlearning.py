@@ -12,8 +12,9 @@ measurement noise or memory (a table has no room for them).
 
 The table is ``Q[believed cell, target cell, action]`` (float32, every cell of the grid in both axes, so a
 :class:`~dtradar_rl.tabular.table_policy.TablePolicy` reads it with no renumbering); one that would take more than
-``max_table_gib`` is refused before anything is allocated (:class:`~dtradar_rl.tabular.table_policy.
-TooLargeError`). The robot acts from what it senses: its believed cell is the nearest blueprint fingerprint of
+``max_table_gib``, or (with its greedy moves) more than the memory available (:mod:`dtradar_rl.tabular.memory`), is
+refused before anything is allocated (:class:`~dtradar_rl.tabular.table_policy.TooLargeError`). The robot acts
+from what it senses: its believed cell is the nearest blueprint fingerprint of
 the radio features in its observation and its target the cell of the observation's target ``x, y``
 (:class:`~dtradar_rl.tabular.table_policy.Localiser`). The lookup runs on the observation, not on a precomputed map
 ``true cell -> believed cell``: it is the one :class:`TablePolicy` acts with (so training and evaluation localise the
@@ -56,6 +57,7 @@ import torch
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.tabular.memory import check_memory, table_parts
 from dtradar_rl.tabular.table_policy import (
     OBS_PRESET,
     Localiser,
@@ -258,8 +260,12 @@ def run(
     torch.set_num_threads(cfg.threads or auto_threads())
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
     normalizer = normalizer or Normalizer.fit(ds)
-    check_table_size(
-        ds.shape[0] * ds.shape[1], ds.shape[0] * ds.shape[1], cfg.max_table_bytes, f"the Q table of {ds.name}"
+    cells = ds.shape[0] * ds.shape[1]
+    check_table_size(cells, cells, cfg.max_table_bytes, f"the Q table of {ds.name}")
+    check_memory(
+        f"{cfg.learner} on {ds.name}",
+        table_parts(cells, cells),
+        hint="learn on a twin of coarser cells (a scene built with a larger --cell-m)",
     )
     env = make_env(cfg, ds, normalizer)
     locate = Localiser(ds, normalizer)

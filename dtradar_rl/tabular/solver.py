@@ -36,11 +36,10 @@ from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.core.files import open_atomic
 from dtradar_data.core.layout import data_root
 from dtradar_data.store.logged import table_digest
+from dtradar_rl.tabular.memory import CHUNK_BYTES, TooLargeError, check_memory, chunk_size, solve_parts
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.rewards import check_reward, reward_fn
 
-#: Working memory of one chunk of targets (its reward and value-gather arrays, float64 ``K x N x 4`` each).
-CHUNK_BYTES = 64 << 20
 #: The most a solution's values (float64 ``targets x cells``) may take; larger grids are refused up front.
 MAX_SOLUTION_BYTES = 4 << 30
 #: Relative change of the values below which the sweeps stop (module docstring).
@@ -51,11 +50,6 @@ MAX_SWEEPS = 100_000
 #: benchmark's FQE and true values use.
 GAMMA = 0.9
 FORMAT = "dtradar-tabular-solution/1"
-
-
-class TooLargeError(InvalidSettingError):
-    """A tabular problem (a solution, an evaluation, a learner's table) whose arrays would not fit the memory cap,
-    refused before anything is allocated; the message names the size."""
 
 
 @dataclass(frozen=True)
@@ -132,11 +126,6 @@ class TabularMDP:
             diag2=self.mdp.diag2,
         )
         return np.asarray(r, np.float64), reached
-
-
-def chunk_size(n: int) -> int:
-    """Targets per chunk so that one chunk's ``K x N x 4`` float64 arrays stay near :data:`CHUNK_BYTES`."""
-    return max(1, min(n, CHUNK_BYTES // max(1, n * 4 * 8)))
 
 
 def check_size(n_targets: int, n_states: int, what: str = "solution") -> None:
@@ -286,10 +275,10 @@ class Solution:
 
     def greedy(self) -> np.ndarray:
         """``int64[K, N]`` the greedy move of Q* (the first of equal values, in action order)."""
-        k = chunk_size(self.tab.n)
-        return np.concatenate(
-            [self.q(np.arange(i, min(i + k, self.targets.size))).argmax(-1) for i in range(0, self.targets.size, k)]
-        )
+        k, out = chunk_size(self.tab.n), np.empty(self.values.shape, np.int64)  # filled in place: no second copy
+        for i in range(0, self.targets.size, k):
+            out[i : i + k] = self.q(np.arange(i, min(i + k, self.targets.size))).argmax(-1)
+        return out
 
     def meta(self) -> dict[str, Any]:
         return {
@@ -324,6 +313,11 @@ def solve(
     cells = tab.cells if targets is None else np.unique(np.asarray(targets, np.int64))
     t_states = tab.states(cells)
     check_size(cells.size, tab.n)
+    check_memory(
+        f"the exact solution of {name or tab.mdp.name}",
+        solve_parts(cells.size, tab.n),
+        hint="solve for fewer targets (targets=..., e.g. the evaluation pairs' targets) or a twin of coarser cells",
+    )
     t0 = time.perf_counter()
     values = np.empty((cells.size, tab.n))
     sweeps, residual = 0, 0.0
@@ -349,20 +343,16 @@ def cache_dir(ds: Dataset, reward: str, gamma: float) -> Path:
 
 def save(sol: Solution, folder: Path) -> Path:
     """``values.npy`` (V*, float64), ``q.npy`` (Q*, float32, ``K x N x 4``), ``targets.npy``, ``cells.npy`` and
-    ``solution.json``, each written atomically; the JSON last, so a folder with it is complete."""
+    ``solution.json``, each written atomically; the JSON last, so a folder with it is complete. Q* is written chunk
+    by chunk of targets: whole, it would take twice the memory of V* (and its list of chunks as much again)."""
     folder.mkdir(parents=True, exist_ok=True)
-    q = np.concatenate(
-        [
-            sol.q(np.arange(i, min(i + chunk_size(sol.tab.n), sol.targets.size))).astype(np.float32)
-            for i in range(0, sol.targets.size, chunk_size(sol.tab.n))
-        ]
-    )
-    for fname, arr in (
-        ("values.npy", sol.values),
-        ("q.npy", q),
-        ("targets.npy", sol.targets),
-        ("cells.npy", sol.tab.cells),
-    ):
+    k, n_t = chunk_size(sol.tab.n), sol.targets.size
+    with open_atomic(folder / "q.npy", "wb") as f:
+        header = {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)), "fortran_order": False}
+        np.lib.format.write_array_header_1_0(f, {**header, "shape": (n_t, sol.tab.n, 4)})
+        for i in range(0, n_t, k):
+            f.write(np.ascontiguousarray(sol.q(np.arange(i, min(i + k, n_t))), np.float32).tobytes())
+    for fname, arr in (("values.npy", sol.values), ("targets.npy", sol.targets), ("cells.npy", sol.tab.cells)):
         with open_atomic(folder / fname, "wb") as f:
             np.save(f, arr)
     with open_atomic(folder / "solution.json", "w") as f:
@@ -404,6 +394,7 @@ def solve_twin(ds: Dataset, reward: str = "geodesic", gamma: float = GAMMA, *, c
 
 
 __all__ = [
+    "CHUNK_BYTES",
     "GAMMA",
     "Solution",
     "TabularMDP",
@@ -412,6 +403,7 @@ __all__ = [
     "expectation_sweeps",
     "cache_dir",
     "check_size",
+    "chunk_size",
     "load",
     "save",
     "solve",

@@ -196,7 +196,7 @@ class TablePolicy:
                     ),
                     hint="pass q.argmax(-1) of a [cells, targets, 4] value table",
                 )
-            self.table = torch.as_tensor(table.astype(np.int64))
+            self.table = torch.as_tensor(table.astype(np.int64, copy=False))  # shared, not copied
         self._column = np.full(cells, -1, np.int64)
         self._column[self.targets] = np.arange(self.targets.size)
         self.name = name
@@ -312,7 +312,7 @@ class TablePolicy:
 def greedy_actions(q: torch.Tensor | np.ndarray) -> np.ndarray:
     """``int64[cells, targets]``: the greedy move of a ``[cells, targets, 4]`` value table (first of equals)."""
     q = q.detach().cpu() if isinstance(q, torch.Tensor) else torch.as_tensor(q)
-    return q.argmax(-1).numpy().astype(np.int64)
+    return q.argmax(-1).numpy().astype(np.int64, copy=False)  # argmax is int64 already: no second table
 
 
 __all__ = [
