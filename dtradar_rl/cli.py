@@ -134,9 +134,8 @@ def _parse_and_run(argv: list[str]) -> int:
     def log_cmd(cfg: Annotated[LogConfig, tyro.conf.arg(name="")] = LogConfig()) -> None:
         """Log a behaviour policy (random, noisy-shortest, epsilon-greedy, mixture) or a dataset family (D4RL's random,
         expert, medium, medium-replay, mixed; OGBench's navigate, stitch, explore; --behaviour all: the eight) on a
-        twin into the store as versioned,
-        carded offline-RL datasets <scene>/<variant>/<behaviour> (+ their Minari copies), each card with the
-        behaviour's normalised score (0 random, 100 shortest-path expert)."""
+        twin into the store as versioned, carded offline-RL datasets <scene>/<variant>/<behaviour> (+ their Minari
+        copies), each card with the behaviour's normalised score (0 random, 100 shortest-path expert)."""
         from dtradar_rl.offline.logged import log_families
 
         for logged in log_families(cfg.validate()).values():
