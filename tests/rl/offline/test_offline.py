@@ -6,7 +6,6 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
 from dtradar_data.core.errors import SchemaMismatchError, UnknownNameError
 from dtradar_rl.cli import main
