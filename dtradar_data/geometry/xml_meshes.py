@@ -115,7 +115,7 @@ def ground_height(spec: SceneSpec, x, y) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------- footprints
-def _section(mesh: trimesh.Trimesh, z: float):
+def mesh_section(mesh: trimesh.Trimesh, z: float):
     """The horizontal section of a mesh at height ``z`` as a (multi)polygon, filled even-odd over its closed
     rings (a courtyard stays open); None where the section has no closed ring."""
     seg = trimesh.intersections.mesh_plane(mesh, (0.0, 0.0, 1.0), (0.0, 0.0, z))
@@ -131,7 +131,7 @@ def _section(mesh: trimesh.Trimesh, z: float):
     return reduce(shapely.symmetric_difference, rings) if rings else None
 
 
-def _shadow(mesh: trimesh.Trimesh):
+def mesh_shadow(mesh: trimesh.Trimesh):
     """Union of the mesh's triangles projected on the ground (vertical walls add nothing); None if all are."""
     tri = mesh.triangles[:, :, :2]
     area = 0.5 * np.abs(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]))
@@ -155,12 +155,12 @@ def _footprints(path: str, sha256: str, ground: tuple[str, ...], robot_height_m:
         if z0 > g + robot_height_m:  # a roof, canopy or bridge above the robot: it does not stand on the ground
             continue
         # Cut at robot height, or half-way up an object lower than the robot (a low wall still blocks) ...
-        footprint = _section(mesh, z0 + min(robot_height_m, (z1 - z0) / 2))
+        footprint = mesh_section(mesh, z0 + min(robot_height_m, (z1 - z0) / 2))
         if footprint is not None and not footprint.is_empty:
             polygons.append(footprint)
         # ... and add the shape's shadow from above: exported city meshes are rarely closed (Munich's Neues
         # Rathaus: open walls, its roof a separate shape), so their sections miss buildings their roofs do show.
-        shadow = _shadow(mesh)
+        shadow = mesh_shadow(mesh)
         if shadow is not None:
             polygons.append(shadow)
     if not polygons:

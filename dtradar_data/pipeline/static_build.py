@@ -20,6 +20,7 @@ from dtradar_data.core.ids import DatasetId, format_id
 from dtradar_data.core.layout import work_root
 from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.geometry.xml_transmitter import check_transmitter_in_mesh
 from dtradar_data.pipeline import differential
 from dtradar_data.pipeline.batches import batch_dir, batch_layout, load_batch
 from dtradar_data.pipeline.config import BuildConfig, scene_config
@@ -49,6 +50,7 @@ def build_static(config: BuildConfig) -> list[Dataset]:
         _check_parents(specs, config)
     for spec in specs:
         scene_config(config, spec).check_scene(spec)
+        check_transmitter_in_mesh(spec)  # an XML scene's own shapes: read for the occupancy below anyway
         cfg = scene_config(config, spec)
         check_resources(spec.name, int((~occupancy(spec)).sum()), cfg.rt, work_root(), per_path=cfg.per_path)
     if config.executor == "ray" and not (config.differential and all(s.variant == "dynamic" for s in specs)):

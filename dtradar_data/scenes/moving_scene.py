@@ -196,8 +196,17 @@ class MovingScene:
                     "lower height_m below the ceiling",
                 )
             obstacles = _obstacles(self.base, m.height_m)
+            tx = self.base.tx.position_m
             for start, end, i, j in m.segments():
                 swept = m.swept_footprint(start, end)
+                if m.height_m >= tx[2] and swept.covers(Point(tx[0], tx[1])):  # the mover's box would hold it
+                    raise mover_error(
+                        m.name,
+                        f"the path from waypoints[{i}] {point_text(start)} to waypoints[{j}] {point_text(end)} runs "
+                        f"through the transmitter at ({tx[0]:g}, {tx[1]:g}, {tx[2]:g}) m, which its "
+                        f"{m.height_m:g} m box would cover",
+                        "route the mover round the transmitter, or lower height_m below the transmitter",
+                    )
                 for label, poly in obstacles:
                     if not swept.intersects(poly) or swept.intersection(poly).area <= _AREA_EPS:
                         continue

@@ -16,7 +16,8 @@ still says where the array points.
 
 The direction of the move is drawn from ``numpy.random.default_rng(seed)`` after the axis; a direction that would put
 the transmitter outside the room (indoors) or inside an object or building is skipped for the next one (the shapes
-of an XML scene's own mesh, such as Sionna's Munich, are not checked: move its transmitter by less than its clearance).
+of an XML scene's own mesh, such as Sionna's Munich, are checked only when the twin is built, by
+:func:`~dtradar_data.geometry.xml_transmitter.check_transmitter_in_mesh`, which refuses a move into a building).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import numpy as np
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_data.core.ids import TX_POSE_SUFFIX
 from dtradar_data.scenes.model import SceneSpec, TxSpec
+from dtradar_data.scenes.transmitters import object_at
 
 __all__ = [
     "TX_POSE_SUFFIX",
@@ -124,31 +126,11 @@ def _rotate(axis: np.ndarray, angle_rad: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------- free space
-def _inside_objects(spec: SceneSpec, p: np.ndarray) -> str | None:
-    """The name of a box or prism of ``spec`` that contains the point ``p`` (x, y, z), or None."""
-    for b in spec.objects:
-        if b.z_m <= p[2] <= b.top_m:
-            t = math.radians(b.yaw_deg)
-            dx, dy = p[0] - b.x_m, p[1] - b.y_m
-            lx, ly = dx * math.cos(t) + dy * math.sin(t), -dx * math.sin(t) + dy * math.cos(t)
-            if abs(lx) <= b.width_m / 2 and abs(ly) <= b.length_m / 2:
-                return b.name
-    tall = [pr for pr in spec.prisms if pr.z_m <= p[2] <= pr.top_m]
-    if tall:
-        from shapely.geometry import Point, Polygon  # only cities have prisms
-
-        point = Point(p[0], p[1])
-        for pr in tall:
-            if Polygon(pr.exterior, pr.holes).covers(point):
-                return pr.name
-    return None
-
-
 def _why_not(spec: SceneSpec, p: np.ndarray) -> str | None:
     """Why the transmitter cannot stand at ``p``: outside the room, or inside an object; None if it can."""
     if spec.room is not None and not (0 < p[0] < spec.room.width_m and 0 < p[1] < spec.room.length_m):
         return f"outside the room [0, {spec.room.width_m:g}] x [0, {spec.room.length_m:g}] m"
-    inside = _inside_objects(spec, p)
+    inside = object_at(spec, p)
     return f"inside {inside!r}" if inside else None
 
 

@@ -52,6 +52,7 @@ from dtradar_data.scenes.sionna_scenes import (
     sionna_version,
     sionna_xml,
 )
+from dtradar_data.scenes.transmitters import check_one_transmitter
 from dtradar_data.scenes.xml_shapes import mesh_scene
 
 FORMAT = 1
@@ -126,6 +127,7 @@ def is_mesh_scene_file(path: Path) -> bool:
 
 
 def _parse(data: dict[str, Any], origin: str) -> MeshSceneDocument:
+    check_one_transmitter(data, origin)
     try:
         return MeshSceneDocument.model_validate(data)
     except ValidationError as exc:

@@ -43,6 +43,7 @@ from dtradar_data.scenes.fields import (
 )
 from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS
 from dtradar_data.scenes.names import check_user_scene_name
+from dtradar_data.scenes.transmitters import check_one_transmitter
 
 FORMAT = 1
 
@@ -165,6 +166,7 @@ def read_city_file(path: str | Path) -> CityDocument:
 
 
 def parse_city(data: dict[str, Any], *, origin: str = "<city>") -> CityDocument:
+    check_one_transmitter(data, origin)  # the quadrants' tx_m place one array each
     try:
         return CityDocument.model_validate(data)
     except ValidationError as exc:

@@ -39,6 +39,7 @@ from dtradar_data.scenes.indoor.document import (
 from dtradar_data.scenes.model import Box, Room, SceneSpec, TxSpec
 from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MovingScene
 from dtradar_data.scenes.moving_section import moving_scene_from_section
+from dtradar_data.scenes.transmitters import check_one_transmitter, check_transmitter_clear
 
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
 _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
@@ -92,6 +93,7 @@ class _Reader(DocumentErrors):
         fmt = self.data.get("format")
         if "format" in self.data and fmt != FORMAT:
             raise self.fail("format", f"unsupported format {fmt!r}", f"this dtradar reads format = {FORMAT}")
+        check_one_transmitter(self.data, self.origin)  # [[tx]] would read as "must be a table"
         try:
             return RoomDocument.model_validate(self.data)
         except ValidationError as exc:
@@ -162,7 +164,7 @@ class _Reader(DocumentErrors):
         for b in objects:
             self.check_inside(b, room)
         meta = doc.scene
-        return SceneSpec(
+        spec = SceneSpec(
             scene=meta.name,
             variant=variant,
             title=meta.title + (" (dynamic twin)" if variant == "dynamic" else " (blueprint)"),
@@ -177,6 +179,8 @@ class _Reader(DocumentErrors):
             objects=tuple(boxes),
             room=room,
         )
+        check_transmitter_clear(spec, self.origin)
+        return spec
 
     def room(self, r: RoomModel) -> tuple[Room, list[Box]]:
         W, L, H, wt, ft = r.width_m, r.length_m, r.height_m, r.wall_thickness_m, r.floor_thickness_m
