@@ -267,8 +267,9 @@ def push_version(
 # ------------------------------------------------------------------------------------------------------------ pull
 
 
-def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
-    """The only download call; a separate function so tests can replace the network with a local folder."""
+def download(repo_id: str, revision: str, dest: Path, cache: Path, *, files: list[str]) -> Path:
+    """The only download call, for both kinds of dataset: the ``files`` of ``repo_id`` at ``revision`` into
+    ``dest`` (the Hub endpoint and offline mode from the environment)."""
     from huggingface_hub import snapshot_download
 
     return Path(
@@ -280,9 +281,14 @@ def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
             cache_dir=cache,
             endpoint=endpoint(),
             local_files_only=offline(),
-            allow_patterns=[*DATA_FILES, P.CARD_FILE],
+            allow_patterns=list(files),
         )
     )
+
+
+def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
+    """An RT dataset's files; a separate function so tests can replace the network with a local folder."""
+    return download(repo_id, revision, dest, cache, files=[*DATA_FILES, P.CARD_FILE])
 
 
 def _remote_revision(repo_id: str, revision: str | None) -> str:

@@ -76,21 +76,8 @@ def publish(
 
 
 def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
-    """The only download call (tests replace it with a local folder)."""
-    from huggingface_hub import snapshot_download
-
-    return Path(
-        snapshot_download(
-            repo_id,
-            repo_type="dataset",
-            revision=revision,
-            local_dir=dest,
-            cache_dir=cache,
-            endpoint=hub.endpoint(),
-            local_files_only=hub.offline(),
-            allow_patterns=list(FILES),
-        )
-    )
+    """A logged dataset's files (:func:`~dtradar_data.publish.hub.download`; tests replace it with a local folder)."""
+    return hub.download(repo_id, revision, dest, cache, files=list(FILES))
 
 
 def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | None = None) -> Path:

@@ -22,7 +22,6 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import (
     CorruptDatasetError,
     DatasetNotFoundError,
-    RevisionNotFoundError,
     SchemaMismatchError,
 )
 from dtradar_data.core.files import sha256_file
@@ -30,7 +29,7 @@ from dtradar_data.core.ids import HASH_RE, MOVING_VARIANT, DatasetId
 from dtradar_data.core.record import VersionRecord
 from dtradar_data.core.schema import cell_schema, path_schema
 from dtradar_data.store.catalog import as_id
-from dtradar_data.store.versions import Refs, read_refs, resolve_revision
+from dtradar_data.store.versions import Refs, one_revision, read_refs, resolve_revision
 
 # ---------------------------------------------------------------------------------------------------------- schema
 
@@ -168,11 +167,7 @@ def resolve(
     """``(id, version, directory)`` of a stored version; typed errors say how to get a missing one. ``damaged``:
     also versions without ``meta.json`` (see :func:`local_versions`)."""
     did = as_id(name)
-    if revision and did.revision and revision != did.revision:
-        raise RevisionNotFoundError(
-            f"two revisions given: {did.revision!r} in the name and {revision!r}", hint="give the revision once"
-        )
-    revision = revision or did.revision
+    revision = one_revision(did.revision, revision)
     versions = local_versions(did, damaged=damaged)
     if not versions:
         raise DatasetNotFoundError(

@@ -126,6 +126,16 @@ def write_refs(path: Path, refs: Refs) -> None:
     write_atomic(path, refs.to_json())
 
 
+def one_revision(in_name: str | None, given: str | None) -> str | None:
+    """The revision asked for, given once: in the name (``@rev``) or as the argument. Both and different is a
+    :class:`RevisionNotFoundError`; the same for an RT dataset and a logged one."""
+    if given and in_name and given != in_name:
+        raise RevisionNotFoundError(
+            f"two revisions given: {in_name!r} in the name and {given!r}", hint="give the revision once"
+        )
+    return given or in_name
+
+
 def resolve_revision(refs: Refs, versions: list[str], revision: str | None, name: str) -> str:
     """Turn ``revision`` (None = latest, a tag, a full hash or a unique prefix) into a version on disk.
 

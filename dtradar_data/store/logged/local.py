@@ -38,7 +38,7 @@ from dtradar_data.store.logged.hints import relog_hint
 from dtradar_data.store.logged.staging import clean_stale_stages, held_stage
 from dtradar_data.store.logged.table import TRANSITIONS_FILE, TRANSITIONS_FORMAT, check_transitions, episode_stats
 from dtradar_data.store.logged.versions import logged_version
-from dtradar_data.store.versions import Refs, read_refs, resolve_revision, write_refs
+from dtradar_data.store.versions import Refs, one_revision, read_refs, resolve_revision, write_refs
 
 __all__ = [
     "LOGGED_DIR",
@@ -309,11 +309,7 @@ def resolve_logged(
     not in the store is a :class:`DatasetNotFoundError` with the stored name it was probably meant to be, if any,
     and the command that logs it."""
     lid = parse_logged_id(name)
-    if revision and lid.revision and revision != lid.revision:
-        raise RevisionNotFoundError(
-            f"two revisions given: {lid.revision!r} in the name and {revision!r}", hint="give the revision once"
-        )
-    revision = revision or lid.revision
+    revision = one_revision(lid.revision, revision)
     versions = local_versions(lid, damaged=damaged)
     if not versions:
         others = [n for n in logged_names() if n != lid.name]
