@@ -13,12 +13,20 @@ Layers, each importing only those below it (checked by import-linter in ``make t
     geometry                meshes, Mitsuba XML, occupancy, floor plans
     scenes                  the scene model, materials, scene files
     core                    ids, schema, Dataset, Grid, errors, data-root layout
+
+The public surface, the only modules ``dtradar_rl`` (or any user code) needs and imports (checked by
+``tests/test_architecture.py``): this package (``load``, ``list_datasets``, the synthetic twins, ...), every module of
+:mod:`dtradar_data.core`, the store's two packages :mod:`dtradar_data.store` (RT datasets: resolve, meta, refs,
+versions, staging folders) and :mod:`dtradar_data.store.logged` (logged datasets), :mod:`dtradar_data.scenes`,
+:mod:`dtradar_data.rt.settings` (what a dataset's ``rt`` record means; no Sionna) and
+:mod:`dtradar_data.geometry.floorplan` (a twin's floor plan under a plot). Everything else is the builder's own.
 """
 
 from __future__ import annotations
 
 from dtradar_data.core.dataset import Dataset, GridInfo
 from dtradar_data.core.errors import DtradarError, RayTracerUnavailableError
+from dtradar_data.pipeline.synthetic import synthetic_dataset, synthetic_moving_dataset
 from dtradar_data.publish.loading import load
 from dtradar_data.rt import llvm as _llvm
 from dtradar_data.store.listing import list_datasets
@@ -31,4 +39,14 @@ try:
 except RayTracerUnavailableError:
     pass
 
-__all__ = ["Dataset", "GridInfo", "DtradarError", "LoggedDataset", "load", "list_datasets", "list_logged"]
+__all__ = [
+    "Dataset",
+    "GridInfo",
+    "DtradarError",
+    "LoggedDataset",
+    "load",
+    "list_datasets",
+    "list_logged",
+    "synthetic_dataset",
+    "synthetic_moving_dataset",
+]

@@ -12,9 +12,21 @@ import platform
 from pathlib import Path
 from typing import Any
 
-__all__ = ["machine", "describe"]
+__all__ = ["available_memory", "machine", "describe"]
 
 _CPUINFO_KEYS = ("model name", "Model", "Hardware", "Processor", "cpu model", "cpu")
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new process (``MemAvailable`` of ``/proc/meminfo``); None where unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 def _cpu_model() -> str:

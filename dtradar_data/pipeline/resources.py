@@ -14,6 +14,7 @@ import shutil
 from pathlib import Path
 
 from dtradar_data.core.errors import DtradarError
+from dtradar_data.core.machine import available_memory  # here too: a build's check, patched in tests
 from dtradar_data.rt.settings import RTSettings
 
 BASE_BYTES = 600 * 2**20  # interpreter, Dr.Jit/Mitsuba, the scene
@@ -24,18 +25,6 @@ DISK_BYTES_PER_FREE_CELL = 40_000  # work folder + Parquet with the per-path tab
 
 class InsufficientResourcesError(DtradarError, MemoryError):
     """The build would run out of memory or disk; nothing was traced."""
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available to a new process (``MemAvailable`` of ``/proc/meminfo``); None where unknown."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
 
 
 def estimate_memory(settings: RTSettings) -> int:

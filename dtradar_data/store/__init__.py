@@ -27,24 +27,30 @@ from dtradar_data.store.local import (
     resolve,
     version_exists,
 )
+from dtradar_data.store.staging import held_stage
+from dtradar_data.store.versions import library_versions, read_refs, version_id
 from dtradar_data.store.writing import InvalidTableError, install_staged, write_version
 
 __all__ = [
-    "DatasetEntry",
-    "InvalidTableError",
-    "VersionInfo",
     "as_id",
+    "DatasetEntry",
+    "held_stage",
     "history",
     "install_staged",
+    "InvalidTableError",
     "known_names",
     "known_scenes",
+    "library_versions",
     "list_datasets",
     "load",
     "read_meta",
+    "read_refs",
     "read_table",
     "resolve",
     "verify",
     "version_exists",
+    "version_id",
     "version_infos",
+    "VersionInfo",
     "write_version",
 ]

@@ -15,7 +15,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import SchemaMismatchError
-from dtradar_data.store.listing import list_datasets
+from dtradar_data.store import list_datasets
 from dtradar_data.store.logged import table_digest
 
 SYNTHETIC_ENV_ID = "dtradar/synthetic-blueprint-v0"

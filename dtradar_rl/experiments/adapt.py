@@ -38,7 +38,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_data.rt.settings import flag as rt_flag
-from dtradar_data.store import local
+from dtradar_data.store import read_meta, resolve
 from dtradar_rl.agents.checkpoints import WrongTwinError
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.evaluation.evaluate import evaluate
@@ -127,7 +127,7 @@ def check_traced_alike(start: Policy, ds: Dataset, ckpt: Path) -> dict[str, list
     if not isinstance(mine, dict) or is_synthetic(twin["scene"]) or not twin["version"]:
         return {}
     try:
-        theirs = local.read_meta(local.resolve(name, twin["version"])[2]).get("rt")
+        theirs = read_meta(resolve(name, twin["version"])[2]).get("rt")
     except DtradarError:  # a pulled checkpoint whose twin is not stored here: nothing to compare with
         return {}
     if not isinstance(theirs, dict):

@@ -32,7 +32,7 @@ import torch
 
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.files import write_atomic
-from dtradar_data.store.versions import library_versions
+from dtradar_data.store import library_versions
 from dtradar_rl.evaluation.evaluate import METRICS
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.formats import as_logged

@@ -163,7 +163,7 @@ def expected_twins(scene: str) -> list[str]:
 def check_scene_names(scenes, option: str) -> None:
     """Each name is a scene this project knows (built in, stored in the data root, or synthetic), else an
     :class:`~dtradar_data.core.errors.UnknownNameError` with suggestions naming ``--<option>``."""
-    from dtradar_data.store.catalog import known_scenes
+    from dtradar_data.store import known_scenes
 
     known = set(known_scenes())  # a city is reported by quadrant: "dallas" suggests dallas-q1 ... dallas-q4
     for scene in scenes:

@@ -39,6 +39,7 @@ import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import CorruptDatasetError, SchemaMismatchError
+from dtradar_data.store import read_refs
 from dtradar_data.store.logged import (
     MINARI_ENV,
     TRANSITIONS_FILE,
@@ -57,7 +58,6 @@ from dtradar_data.store.logged import (
     transitions_table,
     write_logged,
 )
-from dtradar_data.store.versions import read_refs
 from dtradar_rl.agents.checkpoints import CHECKPOINT_FORMAT, read_checkpoint
 from dtradar_rl.evaluation.normalized import (
     DEFAULT_PAIRS,

@@ -16,9 +16,8 @@ from typing import Any
 from dtradar_data.core import layout as P
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import sha256_file, waiting_lock, write_atomic
+from dtradar_data.store import held_stage, library_versions, version_id
 from dtradar_data.store.logged import LOGGED_LIBRARIES, logged_dir, parse_logged_id
-from dtradar_data.store.staging import held_stage
-from dtradar_data.store.versions import library_versions, version_id
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout, sample_eval_pairs
 from dtradar_rl.evaluation.normalized import normalized, reference_scores

@@ -22,6 +22,7 @@ import numpy as np
 from dtradar_data.core import layout as P
 from dtradar_data.core.errors import MissingDependencyError, SchemaMismatchError
 from dtradar_data.core.files import sha256_file, waiting_lock
+from dtradar_data.store import held_stage
 from dtradar_data.store.logged import (
     MINARI_DIR,
     MINARI_ENV,
@@ -33,7 +34,6 @@ from dtradar_data.store.logged import (
     parse_logged_id,
     transitions_table,
 )
-from dtradar_data.store.staging import held_stage
 from dtradar_rl.offline.formats import as_logged
 from dtradar_rl.offline.minari_envs import MinariEnvs, env_text, minari_envs
 from dtradar_rl.offline.minari_refs import reference_returns

@@ -21,7 +21,7 @@ swap for hours) after minutes of work, with nothing written.
 from __future__ import annotations
 
 from dtradar_data.core.errors import InvalidSettingError
-from dtradar_data.pipeline.resources import available_memory
+from dtradar_data.core.machine import available_memory
 
 #: Working memory of one chunk of targets (its reward and value-gather arrays, float64 ``K x N x 4`` each).
 CHUNK_BYTES = 64 << 20

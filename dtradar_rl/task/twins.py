@@ -20,11 +20,10 @@ import re
 
 import numpy as np
 
+from dtradar_data import load, synthetic_dataset, synthetic_moving_dataset
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DatasetNotFoundError, DtradarError, unknown_name
 from dtradar_data.core.ids import VARIANTS
-from dtradar_data.pipeline.synthetic import synthetic_dataset, synthetic_moving_dataset
-from dtradar_data.publish.loading import load
 
 _SYNTH = re.compile(r"^synthetic(-moving)?(?:-(\d+)x(\d+))?$")
 
@@ -92,7 +91,7 @@ def check_scenes(scenes, option: str, variant: str = "blueprint") -> None:
     store's listing, before a job loads or trains anything. An unknown name is an :class:`UnknownNameError` with
     suggestions, a known but unbuilt twin a :class:`DatasetNotFoundError` saying how to build it; both name
     ``--<option>``."""
-    from dtradar_data.store.listing import list_datasets
+    from dtradar_data.store import list_datasets
 
     stored = [s for s in scenes if not is_synthetic(s)]
     listing = list_datasets() if stored else []
