@@ -32,7 +32,10 @@ jobs they configure). Examples, each with what it does on the line above::
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import functools
+import io
 from pathlib import Path
 from typing import Annotated
 
@@ -63,27 +66,27 @@ def run_train(cfg: DQNConfig) -> None:
     )
 
 
+@dataclasses.dataclass(frozen=True)
+class _PresetChoice:
+    """The two train options that pick the others' defaults (the paper preset's episodes depend on the scene)."""
+
+    preset: str = DEFAULT_PRESET
+    scene: str = DQNConfig.scene
+
+
 def _train_default(argv: list[str]) -> DQNConfig:
-    """The train command's defaults: the config of the ``--preset`` in ``argv`` (and of its ``--scene``, since the
-    paper preset's episodes depend on it), read before tyro parses.
+    """The train command's defaults: the config of its ``--preset`` (and ``--scene``), as tyro parses them.
 
     tyro chooses a set of defaults only by a positional subcommand (``train paper --scene cubicle``), not by an option,
     and fixes every flag's default before it parses; so to keep ``train --scene cubicle --preset paper`` (the option
-    anywhere among the others, ``--help`` showing that preset's defaults), the two options are read here first. tyro
-    then parses ``--preset`` again, as the config's own field, and an unknown name fails its ``validate()``."""
-    preset, scene = _option(argv, "--preset", DEFAULT_PRESET), _option(argv, "--scene", DQNConfig.scene)
-    return config_for(preset if preset in PRESETS else DEFAULT_PRESET, scene=scene)
-
-
-def _option(argv: list[str], name: str, default: str) -> str:
-    """The value of the last ``name VALUE`` or ``name=VALUE`` in ``argv``, else ``default``."""
-    value = default
-    for i, arg in enumerate(argv):
-        if arg == name and i + 1 < len(argv):
-            value = argv[i + 1]
-        elif arg.startswith(name + "="):
-            value = arg.split("=", 1)[1]
-    return value
+    anywhere among the others, ``--help`` showing that preset's defaults), tyro parses the two first, as a small config
+    of their own that leaves every other argument for the full parse. A mistake there (``--scene`` without a value) is
+    left for the full parse to report, and an unknown preset fails the config's ``validate()``."""
+    choice = _PresetChoice()
+    if argv[:1] == ["train"]:
+        with contextlib.suppress(SystemExit), contextlib.redirect_stderr(io.StringIO()):
+            choice, _ = tyro.cli(_PresetChoice, args=argv[1:], return_unknown_args=True, add_help=False)
+    return config_for(choice.preset if choice.preset in PRESETS else DEFAULT_PRESET, scene=choice.scene)
 
 
 def main(argv: list[str] | None = None) -> int:
