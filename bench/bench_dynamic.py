@@ -27,9 +27,9 @@ from dtradar_rl.experiments.adapt import AdaptConfig, adapt, first_time_at
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.plots import plot_adapt_seeds
 
 

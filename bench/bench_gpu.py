@@ -138,9 +138,9 @@ def env_rates(ds, counts, device: str, seconds: float) -> dict[str, float]:
 def train_once(scene: str, device: str, steps: int, out: Path) -> dict:
     from dtradar_rl.evaluation.evaluate import evaluate
     from dtradar_rl.task.twins import load_dataset
-    from dtradar_rl.train.checkpoints import load_policy
     from dtradar_rl.train.config import config_for
     from dtradar_rl.train.dqn import train
+    from dtradar_rl.train.saved_runs import load_policy
 
     cfg = config_for(scene=scene, total_env_steps=steps, device=device, out=str(out), verbose=False)
     t0 = time.perf_counter()

@@ -25,9 +25,9 @@ from dtradar_rl.evaluation.evaluate import LATENCY_DECISIONS, decision_latency_m
 from dtradar_rl.task.runs import dqn_checkpoint
 from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.plots import _save, plt
 
 GOAL_P50_MS, GOAL_P99_MS, PAPER_MS = 0.1, 0.5, 17.0

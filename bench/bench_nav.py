@@ -37,9 +37,9 @@ from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DEFAULT_PRESET, config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.plots import _save, plt
 
 GOALS = {"blueprint": (0.99, 0.95), "dynamic": (0.95, None)}  # success, SPL (issue: cities at the indoor standard)

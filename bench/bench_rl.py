@@ -39,9 +39,9 @@ from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import auto_threads, machine
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DEFAULT_PRESET, config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 
 PAPER_TRAIN_S = 46 * 60.0
 #: Steps of random actions drawn before a batched throughput measurement (more than an episode's 240-step cap on the

@@ -33,7 +33,7 @@ _EXPORTS = {
     "config_for": "dtradar_rl.train.config",
     "PRESETS": "dtradar_rl.train.config",
     "train": "dtradar_rl.train.dqn",
-    "load_policy": "dtradar_rl.train.checkpoints",
+    "load_policy": "dtradar_rl.train.saved_runs",
     "evaluate": "dtradar_rl.evaluation.evaluate",
     "spl": "dtradar_rl.evaluation.evaluate",
     "cross_matrix": "dtradar_rl.evaluation.evaluate",

@@ -20,7 +20,7 @@ from dtradar_rl.task.observations import Normalizer
 
 CHECKPOINT_FORMAT = "dtradar-dqn/1"
 #: ``kind`` of a run's ``last.pt`` (weights plus optimiser, replay and random states, to resume); a ``model.pt`` is
-#: ``"model"``. Checkpoints written before ``kind`` was recorded have none (see ``train.checkpoints``).
+#: ``"model"``. Checkpoints written before ``kind`` was recorded have none (see ``train.saved_runs``).
 TRAINING_STATE = "training-state"
 
 

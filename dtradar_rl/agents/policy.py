@@ -1,7 +1,7 @@
 """A trained greedy policy: the Q-network and :class:`Policy`, which observes any twin the way it was trained.
 
 The online DQN (:mod:`dtradar_rl.train`) writes checkpoints of them (:mod:`dtradar_rl.agents.checkpoints`) and
-loads them back (:func:`dtradar_rl.train.checkpoints.load_policy`); evaluation (:mod:`dtradar_rl.evaluation`) and
+loads them back (:func:`dtradar_rl.train.saved_runs.load_policy`); evaluation (:mod:`dtradar_rl.evaluation`) and
 the offline baselines (:mod:`dtradar_rl.offline`) act with them.
 """
 

@@ -20,7 +20,7 @@ from dtradar_rl.task.config import Config, ConfigError, check_device, check_uniq
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import dqn_checkpoint, run_dir
 from dtradar_rl.task.twins import check_scenes, load_dataset
-from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.figures import plot_bars
 from dtradar_rl.viz.plots import plot_matrix, plot_moving_paths, plot_paths
 

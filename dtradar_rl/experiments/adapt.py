@@ -46,9 +46,9 @@ from dtradar_rl.task.config import ConfigError, JobConfig, flag
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.runs import dqn_checkpoint, run_dir
 from dtradar_rl.task.twins import is_synthetic, load_dataset
-from dtradar_rl.train.checkpoints import check_trained_on_scene, load_policy, trained_twin
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import check_trained_on_scene, load_policy, trained_twin
 from dtradar_rl.viz.plots import plot_adapt_curves
 
 

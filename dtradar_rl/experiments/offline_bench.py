@@ -86,8 +86,8 @@ from dtradar_rl.offline.medium_agent import resolve_spec
 from dtradar_rl.task.runs import dqn_checkpoint, held_out_folder
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
+from dtradar_rl.train.saved_runs import load_policy
 
 
 def _memoryless(path: Path) -> bool:

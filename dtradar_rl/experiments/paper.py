@@ -33,8 +33,8 @@ from dtradar_rl.task.pairs import paper_pair
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import check_scenes, is_synthetic, load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
+from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.figures import plot_bars, plot_seed_curves
 from dtradar_rl.viz.plots import plot_matrix, plot_paths
 

@@ -86,8 +86,8 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
 
     from dtradar_rl.evaluation.fixed_pair import evaluate_pair
     from dtradar_rl.task.twins import load_dataset
-    from dtradar_rl.train.checkpoints import load_policy
     from dtradar_rl.train.config import config_for
+    from dtradar_rl.train.saved_runs import load_policy
 
     twins = {v: load_dataset(f"{job.scene}/{v}") for v in job.variants}
     tcfg = config_for(

@@ -30,9 +30,9 @@ from dtradar_data.core.ray_cluster import connect_ray, wait_for_cpus
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins
 from dtradar_rl.task.config import Config, ConfigError, check_unique, flag
 from dtradar_rl.task.runs import run_dir
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DEFAULT_PRESET, PRESETS, config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,7 @@ from dtradar_rl.offline import walks
 from dtradar_rl.offline.checkpoint_twin import check_logs_on_its_twin
 from dtradar_rl.task.config import ConfigError, TwinConfig
 from dtradar_rl.task.observations import Normalizer
-from dtradar_rl.train.checkpoints import load_policy
+from dtradar_rl.train.saved_runs import load_policy
 
 #: The dataset families (D4RL's names), in the order ``--behaviour all`` logs them.
 FAMILIES: tuple[str, ...] = ("random", "expert", "medium", "medium-replay", "mixed")

@@ -4,7 +4,7 @@
 logged twin's, but a normaliser does not tell the twins apart where a checkpoint carries another twin's: ``make
 adapt`` fine-tunes the blueprint agent on the dynamic twin with the blueprint's normaliser, so its ``model.pt``
 observes the blueprint exactly as a log there does while its moves were learned on the dynamic twin's cells. The
-twin every ``model.pt`` records (:func:`~dtradar_rl.train.checkpoints.trained_twin`) tells them apart.
+twin every ``model.pt`` records (:func:`~dtradar_rl.train.saved_runs.trained_twin`) tells them apart.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.agents.checkpoints import WrongTwinError
 from dtradar_rl.agents.policy import Policy
-from dtradar_rl.train.checkpoints import check_same_twin, trained_twin
+from dtradar_rl.train.saved_runs import check_same_twin, trained_twin
 
 __all__ = ["check_logs_on_its_twin"]
 

@@ -71,10 +71,10 @@ from dtradar_rl.task.pairs import ResolvedPair, training_pair
 from dtradar_rl.task.runs import held_out_folder
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import check_resumed_twin, check_run_folder
 from dtradar_rl.train.config import DQNConfig
 from dtradar_rl.train.replay import ReplayBuffer
 from dtradar_rl.train.run_state import RunState, restore_training_state, save_training_state
+from dtradar_rl.train.saved_runs import check_resumed_twin, check_run_folder
 from dtradar_rl.viz.plots import plot_curves
 
 

@@ -13,9 +13,9 @@ from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.twins import load_dataset, synthetic_blocked
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import PRESETS, config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 

@@ -87,8 +87,8 @@ def test_the_memory_preset_is_robust_plus_a_memory_window_and_needs_neighbour_ob
 
 def test_a_tiny_memory_agent_trains_saves_and_evaluates(tmp_path):
     from dtradar_rl.evaluation.evaluate import evaluate
-    from dtradar_rl.train.checkpoints import load_policy
     from dtradar_rl.train.dqn import train
+    from dtradar_rl.train.saved_runs import load_policy
 
     cfg = config_for(
         "memory",

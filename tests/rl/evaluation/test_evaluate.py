@@ -204,7 +204,7 @@ def test_shield_never_moves_into_a_sensed_obstacle(tmp_path):
     )
     from dtradar_rl.evaluation.evaluate import evaluate
     from dtradar_rl.task.twins import load_dataset
-    from dtradar_rl.train.checkpoints import load_policy
+    from dtradar_rl.train.saved_runs import load_policy
 
     policy = load_policy(tmp_path / "model.pt")
     metrics, _ = evaluate(policy, load_dataset("synthetic-6x5/dynamic"), pairs=50, latency=False, shield=True)
@@ -239,7 +239,7 @@ def test_shield_needs_the_neighbors_preset(tmp_path):
         )
         == 0
     )
-    from dtradar_rl.train.checkpoints import load_policy
+    from dtradar_rl.train.saved_runs import load_policy
 
     with pytest.raises(DtradarError, match="neighbors"):
         load_policy(tmp_path / "model.pt").shield_columns()

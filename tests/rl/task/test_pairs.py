@@ -15,9 +15,9 @@ from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.pairs import CAP_FACTOR, TABLE_VI, PairError, largest_region, resolve, to_grid, training_pair
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 
 
 @pytest.mark.parametrize("scene", ["cubicle", "meeting"])

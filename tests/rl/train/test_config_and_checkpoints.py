@@ -9,8 +9,8 @@ import torch
 from dtradar_rl.agents.checkpoints import CheckpointError, read_checkpoint, save_torch_atomic
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.task.config import ConfigError
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DQNConfig, config_for
+from dtradar_rl.train.saved_runs import load_policy
 
 
 @pytest.mark.parametrize(

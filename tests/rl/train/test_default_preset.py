@@ -8,9 +8,9 @@ import pytest
 import torch
 
 from dtradar_rl import cli
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DEFAULT_PRESET, PRESETS, SAVED_DEFAULTS, DQNConfig, config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 
 SCENES = ("cubicle", "dallas-q3", "synthetic")
 #: What DQNConfig() held while its defaults were the tuned preset's (the fields the default preset changes).

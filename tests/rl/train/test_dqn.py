@@ -10,9 +10,9 @@ from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import DQNConfig, config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 
 TINY = dict(
     scene="synthetic-4x3",

@@ -9,9 +9,9 @@ from dtradar_rl.envs.memory import MemoryNavEnv
 from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import expert_margin_loss, train
+from dtradar_rl.train.saved_runs import load_policy
 
 
 @pytest.fixture(scope="module")

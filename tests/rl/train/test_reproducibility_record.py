@@ -8,9 +8,9 @@ import torch
 from dtradar_rl.cli import main
 from dtradar_rl.offline.config import OfflineConfig
 from dtradar_rl.offline.trainer import train_offline
-from dtradar_rl.train.checkpoints import load_policy
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import load_policy
 
 
 def test_a_dqn_run_records_its_threads_and_eval_shows_them(tmp_path, capsys):

@@ -12,9 +12,9 @@ from dtradar_rl.agents.checkpoints import TRAINING_STATE, WrongTwinError
 from dtradar_rl.cli import main
 from dtradar_rl.experiments.adapt import AdaptConfig, adapt
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import RunFolderError, check_same_twin, load_policy, trained_twin
 from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import RunFolderError, check_same_twin, load_policy, trained_twin
 
 SCENE, OTHER = "synthetic-4x3", "synthetic-5x3"
 TINY = dict(

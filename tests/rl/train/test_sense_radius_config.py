@@ -9,9 +9,9 @@ import pytest
 from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.checkpoints import RunFolderError, load_policy
 from dtradar_rl.train.config import DEFAULT_PRESET, DQNConfig, config_for
 from dtradar_rl.train.dqn import train
+from dtradar_rl.train.saved_runs import RunFolderError, load_policy
 
 SCENE = "synthetic-moving-12x8"
 TINY = dict(
