@@ -1,4 +1,5 @@
-"""What a saved DQN run holds (the checkpoint files themselves are :mod:`dtradar_rl.agents.checkpoints`'s): loading a DQN checkpoint back as a greedy :class:`~dtradar_rl.agents.policy.Policy` with its
+"""What a saved DQN run holds (the checkpoint files themselves are :mod:`dtradar_rl.agents.checkpoints`'s): its
+checkpoint loaded back as a greedy :class:`~dtradar_rl.agents.policy.Policy` with its
 :class:`~dtradar_rl.train.config.DQNConfig`; which twin a checkpoint was trained on; and which run a run folder holds.
 
 A run folder (``--out``) belongs to one scene and one config family: :func:`check_run_folder` refuses, before any
