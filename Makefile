@@ -9,7 +9,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -102,12 +102,18 @@ solve:
 
 BEHAVIOUR ?= noisy-shortest
 # A logged offline-RL dataset <scene>/blueprint/<behaviour> in the store (+ Minari copy), e.g.
-# make logged SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt" (a memoryless agent:
+# make log SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt" (a memoryless agent:
 # make train SCENE=cubicle ARGS="--preset tuned"). Dataset families (D4RL's names, no checkpoint needed): BEHAVIOUR=
 # random, expert, medium, medium-replay or mixed, and OGBench's navigate, stitch or explore; BEHAVIOUR=all logs the
 # eight (docs/logged-datasets.md).
-logged:
+log:
 	$(PY) -m dtradar_rl log --scene $(SCENE) --behaviour $(BEHAVIOUR) $(ARGS)
+
+# The old name of `make log` (the CLI's name): refused, naming the new one.
+logged:
+	@echo "error: make logged is now make log (the CLI's name: python -m dtradar_rl log)" >&2
+	@echo "  how to fix: make log SCENE=$(SCENE) BEHAVIOUR=$(BEHAVIOUR) $(ARGS)" >&2
+	@exit 2
 
 # Offline-RL benchmark: d3rlpy CQL/BCQ/BC/DQN/DoubleDQN/NFQ x behaviour datasets x 3 seeds -> results/offline_bench/
 offline-bench:

@@ -4,7 +4,7 @@
     python bench/bench_relabel.py --scenes cubicle --families expert --algorithms bc --mixes none future --workers 1
     python bench/bench_relabel.py --families mixed --mixes none auto         # auto: the algorithm's own mix
 
-For every scene, dataset family (``<scene>/blueprint/<family>``, already logged: ``make logged SCENE=<scene>
+For every scene, dataset family (``<scene>/blueprint/<family>``, already logged: ``make log SCENE=<scene>
 BEHAVIOUR=all``), algorithm and relabelling mix (``--relabel`` of ``make offline``: ``none`` is the logged targets),
 one :func:`~dtradar_rl.offline.trainer.train_offline` run with the offline defaults (4 000 updates by default, the
 offline benchmark's budget; lr 1e-3, one torch thread), evaluated greedy and unshielded on the 500 seeded pairs

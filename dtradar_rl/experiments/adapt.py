@@ -212,7 +212,7 @@ def adapt(cfg: AdaptConfig) -> AdaptResult:
     ckpt = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
     out = Path(cfg.out or run_dir(cfg.scene, "adapt"))
     start = load_policy(ckpt)
-    twin = check_trained_on_scene(start, cfg.scene)  # another scene's agent knows other cells: refused, as make logged
+    twin = check_trained_on_scene(start, cfg.scene)  # another scene's agent knows other cells: refused, as make log
     if twin["variant"] == cfg.variant and cfg.verbose:
         print(f"note: {ckpt} was trained on {cfg.scene}/{cfg.variant} itself; fine-tuning it there changes little")
     ds = load_dataset(f"{cfg.scene}/{cfg.variant}")

@@ -7,7 +7,7 @@ scored on the normalised scale (0 = uniformly random moves, 100 = the shortest-p
 1. The datasets: every behaviour in ``--behaviours`` (default the five families of D4RL's names, ``random``,
    ``expert``, ``medium``, ``medium-replay``, ``mixed``; :mod:`dtradar_rl.offline.behaviours`) logs ``--steps``
    steps on the blueprint twin into the store (``<scene>/blueprint/<family>``, reused when already logged with the
-   same settings, so ``make logged SCENE=<scene> BEHAVIOUR=all`` beforehand is the same data; the medium agent is
+   same settings, so ``make log SCENE=<scene> BEHAVIOUR=all`` beforehand is the same data; the medium agent is
    trained once and cached). The behaviour itself is rolled out like the trained agents (not ``medium-replay``,
    which is a replay buffer, not one policy) and its logged episodes' score read from its card.
 2. The references: the normalised score's random and expert SPL on the evaluation pairs of every evaluated twin

@@ -206,7 +206,7 @@ def claimed_error(folder: Path, name: str, tag: str | None, state: str, why: str
         f"is {P.data_root().absolute()} ({done})",
         hint=f"give each data root its own Minari folder: unset {MINARI_ENV} (the copies then go to "
         f"<data root>/{MINARI_DIR}) or set it to another folder; or remove {folder}; or log without the copy "
-        f'(`make logged ... ARGS="--no-minari"`, `python -m dtradar_rl log ... --no-minari`)',
+        f'(`make log ... ARGS="--no-minari"`, `python -m dtradar_rl log ... --no-minari`)',
     )
 
 

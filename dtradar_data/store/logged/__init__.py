@@ -19,7 +19,7 @@ import load_logged``); the modules mirror :mod:`dtradar_data.store`:
   (:func:`verify_logged`);
 - :mod:`.staging` — staging folders held by their process (those of killed ones are cleaned), locks that say what
   they wait for;
-- :mod:`.hints` — the ``python -m dtradar_rl log`` / ``make logged`` command that (re)creates a version.
+- :mod:`.hints` — the ``python -m dtradar_rl log`` / ``make log`` command that (re)creates a version.
 """
 
 from dtradar_data.core.ids import LOGGED_GRAMMAR, LoggedId, format_logged_id, is_logged_name, parse_logged_id

@@ -1,5 +1,5 @@
 """The commands that (re)create a logged version, for the hints of its errors: ``python -m dtradar_rl log ...`` and
-``make logged ...``, exact when the version's ``meta.json`` says how it was logged (logging the same inputs again
+``make log ...``, exact when the version's ``meta.json`` says how it was logged (logging the same inputs again
 gives the same version, which then replaces a damaged copy), generic otherwise. ``make dataset`` cannot make one."""
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def _fmt(value: Any) -> str:
 
 
 def log_commands(lid: LoggedId, meta: dict[str, Any] | None = None) -> tuple[str, str]:
-    """``(python -m dtradar_rl log ..., make logged ...)`` for ``lid``; with the version's ``meta`` every setting
+    """``(python -m dtradar_rl log ..., make log ...)`` for ``lid``; with the version's ``meta`` every setting
     that enters its version hash is given, so the command logs that very version again."""
     meta = meta or {}
     inputs = meta.get("inputs") if isinstance(meta.get("inputs"), dict) else {}
@@ -71,7 +71,7 @@ def log_commands(lid: LoggedId, meta: dict[str, Any] | None = None) -> tuple[str
             rest += ["--revision", pv]
     behaviour = kind or "KIND"
     python = f"python -m dtradar_rl log --scene {lid.scene} --behaviour {behaviour} " + " ".join(rest)
-    make = f"make logged SCENE={lid.scene} BEHAVIOUR={behaviour} ARGS={shlex.quote(' '.join(rest))}"
+    make = f"make log SCENE={lid.scene} BEHAVIOUR={behaviour} ARGS={shlex.quote(' '.join(rest))}"
     return python, make
 
 

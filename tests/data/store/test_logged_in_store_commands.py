@@ -131,7 +131,7 @@ def test_the_fix_for_a_damaged_logged_version_is_its_log_command_not_make_datase
     err = capsys.readouterr().err
     assert "make dataset" not in err
     assert "python -m dtradar_rl log --scene tiny --behaviour noisy-shortest --variant blueprint" in err
-    assert "make logged SCENE=tiny BEHAVIOUR=noisy-shortest" in err
+    assert "make log SCENE=tiny BEHAVIOUR=noisy-shortest" in err
     if how not in RECORD_DAMAGE:  # the record is readable: every setting of the version, so it logs that version
         assert "--steps 12 --seed 0 --num-envs 1 --obs goal --reward geodesic --max-steps 4" in err
         assert "--revision 0123456789abcdef" in err and "--shortest-prob 0.5" in err
@@ -143,7 +143,7 @@ def test_the_fix_for_a_damaged_logged_version_is_its_log_command_not_make_datase
 def test_a_log_name_that_is_not_the_behaviour_gets_the_name_flag():
     python, make = T.log_commands(T.parse_logged_id("cubicle/dynamic/my-log"), {"behaviour": {"kind": "random"}})
     assert python.startswith("python -m dtradar_rl log --scene cubicle --behaviour random --variant dynamic")
-    assert "--name my-log" in python and make.startswith("make logged SCENE=cubicle BEHAVIOUR=random ARGS=")
+    assert "--name my-log" in python and make.startswith("make log SCENE=cubicle BEHAVIOUR=random ARGS=")
 
 
 def test_info_takes_a_logged_name_and_says_what_it_holds(root, capsys):

@@ -30,7 +30,7 @@ storing.store_version(DatasetId("cubicle", "blueprint", None), "{V1}", make, pro
 
 LOGGED = "tiny/blueprint/noisy-shortest"
 
-#: The lock ``make logged`` holds while it logs a version again (the rollout, then the write that replaces it).
+#: The lock ``make log`` holds while it logs a version again (the rollout, then the write that replaces it).
 LOGGING = """
 import sys
 import time
@@ -108,7 +108,7 @@ def test_a_damaged_logged_version_being_logged_again_is_reported_as_being_writte
     )
     meta = {"observations": {"preset": "goal", "names": list("abcde")}, "behaviour_text": "test"}
     version, vdir = T.write_logged(LOGGED, inputs, tiny_table(), meta)
-    (vdir / "meta.json").unlink()  # damaged: `make logged` with the same settings logs it again and replaces it
+    (vdir / "meta.json").unlink()  # damaged: `make log` with the same settings logs it again and replaces it
     logger = paused_process(LOGGING, LOGGED, version)
     logger.wait_for("midway")
 
