@@ -101,6 +101,9 @@ class LogConfig(BehaviourConfig):
     """environment steps to log (all robots together; rounded up to whole steps of num-envs robots)"""
     minari: bool = True
     """also write the Minari copy (needs the [offline] extra: pip install minari)"""
+    minari_memory: bool = False
+    """also write a second Minari copy, <id>-memory, whose observations carry the default agent's memory window and
+    whose recover_environment() is the memory env (the neighbors preset; off by default: about 5x the size)"""
 
     @property
     def logged_name(self) -> str:
@@ -122,6 +125,16 @@ class LogConfig(BehaviourConfig):
                 c.validate()
             return self
         super().validate()
+        if self.minari_memory and not self.minari:
+            raise ConfigError(
+                "--minari-memory writes a second Minari copy, and --no-minari writes none", hint="drop one"
+            )
+        if self.minari_memory and self.obs != "neighbors":
+            raise ConfigError(
+                "--minari-memory: the memory window extends the neighbors observation, and this log observes "
+                f"{self.obs}",
+                hint="log with --obs neighbors (the default agent's preset), or drop --minari-memory",
+            )
         if self.behaviour != "medium-replay":  # medium-replay holds what the medium run collected: no --steps
             self.check_at_least(1, "steps")
         parse_logged_id(self.logged_name)  # the name must fit the grammar
@@ -177,7 +190,8 @@ def check_minari_copies(cfgs: list[LogConfig], ds: Dataset) -> None:
                 sha = read_meta(logged_dir(lid) / version)["files"][TRANSITIONS_FILE]["sha256"]
             except (CorruptDatasetError, KeyError, TypeError):
                 sha = None  # damaged: logged again, its transitions unknown yet
-        check_minari_free(lid.name, version, tag or refs.next_tag(), sha)
+        for senses in ("none", "memory") if c.minari_memory else ("none",):
+            check_minari_free(lid.name, version, tag or refs.next_tag(), sha, senses=senses)
 
 
 def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset:
@@ -205,6 +219,9 @@ def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset
     if cfg.minari:
         mid = export_minari(logged)
         say(f"Minari copy: {logged.minari_path} (load: {MINARI_ENV}={minari_root()} minari.load_dataset({mid!r}))")
+    if cfg.minari_memory:
+        mid = export_minari(logged, senses="memory")
+        say(f"Minari copy with the memory window: {minari_root() / mid} (minari.load_dataset({mid!r}))")
     return logged
 
 

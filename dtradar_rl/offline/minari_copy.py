@@ -2,8 +2,8 @@
 
 What the copy holds and where it lives is in :mod:`dtradar_rl.offline.formats` (Formats, Minari); this module does
 it: :func:`export_minari` stages a copy and renames it into place (whole or absent), records it (``dtradar.json``)
-and checks a stored one before reusing it (:func:`copy_state`); :func:`load_minari` opens it; :func:`from_minari`
-reads a Minari dataset back into our columns.
+and checks a stored one before reusing it (:func:`copy_state`); :func:`load_minari` opens it; reading a Minari
+dataset back into our columns is :mod:`dtradar_rl.offline.minari_read`'s (:func:`from_minari`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from dtradar_data.core import layout as P
-from dtradar_data.core.errors import MissingDependencyError, SchemaMismatchError
 from dtradar_data.core.files import sha256_file, waiting_lock
 from dtradar_data.store import held_stage
 from dtradar_data.store.logged import (
@@ -32,26 +31,16 @@ from dtradar_data.store.logged import (
     minari_id,
     minari_root,
     parse_logged_id,
-    transitions_table,
 )
 from dtradar_rl.offline.formats import as_logged
-from dtradar_rl.offline.minari_envs import MinariEnvs, env_text, minari_envs
+from dtradar_rl.offline.minari_envs import MinariEnvs, check_senses, env_text, minari_envs, minari_suffix
+from dtradar_rl.offline.minari_read import from_minari, table_from_columns  # read back: here too, as before
+from dtradar_rl.offline.minari_read import import_minari as _minari
 from dtradar_rl.offline.minari_refs import reference_returns
 from dtradar_rl.task.config import ConfigError
 
 
 # -- Minari --------------------------------------------------------------------------------------------------------
-def _minari():
-    try:
-        with contextlib.redirect_stderr(io.StringIO()):
-            import minari
-    except ImportError as e:
-        raise MissingDependencyError(
-            "Minari is not installed", hint="pip install 'dtradar[offline]' (or: pip install minari)"
-        ) from e
-    return minari
-
-
 def minari_episodes(a: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
     """Our rows as Minari episodes: ``observations`` ``L + 1`` rows, the rest ``L``."""
     ends = np.flatnonzero(a["terminated"] | a["truncated"]) + 1
@@ -121,9 +110,21 @@ def _minari_metadata(folder: Path) -> dict[str, Any] | None:
         return None
 
 
-def _wanted(logged: LoggedDataset) -> dict[str, Any]:
-    """What the record of ``logged``'s complete copy says (the files' hashes apart)."""
+def copy_id(logged: LoggedDataset, senses: str = "none") -> str:
+    """The Minari id of a copy: :attr:`LoggedDataset.minari_id`, and ``dtradar/<...>-memory-v<N>`` for the copy
+    with the default agent's memory observations (``senses="memory"``)."""
+    return _with_senses(logged.minari_id, senses)
+
+
+def _with_senses(mid: str, senses: str) -> str:
+    head, _, n = mid.rpartition("-v")
+    return f"{head}{minari_suffix(senses)}-v{n}"
+
+
+def _wanted(logged: LoggedDataset, senses: str = "none") -> dict[str, Any]:
+    """What the record of ``logged``'s complete copy says (the files' hashes apart); a memory copy says so."""
     return {
+        **({"senses": senses} if senses != "none" else {}),
         "format": RECORD_FORMAT,
         "name": logged.name,
         "version": logged.version,
@@ -135,7 +136,7 @@ def _wanted(logged: LoggedDataset) -> dict[str, Any]:
     }
 
 
-def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
+def copy_state(folder: Path, logged: LoggedDataset, senses: str = "none") -> tuple[str, str]:
     """``(state, why)`` of the Minari copy in ``folder`` next to ``logged``: ``"absent"``; ``"complete"`` (its
     record names this version, the same transitions file and episode count, and every file has its recorded
     sha256); ``"incomplete"`` (a write that was killed, damaged files, an older dtradar's copy without a record or
@@ -146,7 +147,7 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
     replaced); ``"foreign"`` (not written by dtradar)."""
     if not folder.exists():
         return "absent", ""
-    want = _wanted(logged)
+    want = _wanted(logged, senses)
     claim = minari_claim(folder, logged.name, logged.version, want["transitions_sha256"])
     if claim[0] != "ours":
         return claim
@@ -159,6 +160,8 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
             f"{folder} was written by another dtradar (record format {rec.get('format')}, this one writes "
             f"{RECORD_FORMAT}: an env spec since format 2, reference scores since 3)"
         )
+    if rec.get("senses", "none") != senses:
+        return "incomplete", f"{folder} holds observations with senses {rec.get('senses', 'none')!r}, not {senses!r}"
     if rec.get("episodes") != want["episodes"] or rec.get("steps") != want["steps"]:
         return (
             "incomplete",
@@ -168,7 +171,7 @@ def copy_state(folder: Path, logged: LoggedDataset) -> tuple[str, str]:
         return "incomplete", f"{folder}: Minari's metadata does not count {want['episodes']} episodes"
     if _files(folder) != rec.get("files"):
         return "incomplete", f"{folder}: a file differs from its recorded sha256 (changed or damaged)"
-    if rec.get("env_spec") is None and rec.get("env_retry") and minari_envs(logged).spec is not None:
+    if rec.get("env_spec") is None and rec.get("env_retry") and minari_envs(logged, senses).spec is not None:
         return "incomplete", f"{folder} has no env spec ({rec.get('env_missing')}); the twin is here now"
     return "complete", ""
 
@@ -210,10 +213,12 @@ def claimed_error(folder: Path, name: str, tag: str | None, state: str, why: str
     )
 
 
-def check_minari_free(name: str, version: str, tag: str, transitions_sha256: str | None = None) -> None:
+def check_minari_free(
+    name: str, version: str, tag: str, transitions_sha256: str | None = None, *, senses: str = "none"
+) -> None:
     """Refuse (:func:`claimed_error`) before anything is logged or stored when the Minari copy of ``name@version``,
     to be tagged ``tag``, could not be written: its folder holds another data root's copy or a foreign dataset."""
-    folder = minari_root() / minari_id(parse_logged_id(name), tag)
+    folder = minari_root() / _with_senses(minari_id(parse_logged_id(name), tag), senses)
     state, why = minari_claim(folder, name, version, transitions_sha256)
     if state in ("other", "foreign"):
         raise claimed_error(folder, name, tag, state, why, "nothing was logged or stored")
@@ -237,7 +242,7 @@ def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset, envs: Mina
 
     envs = envs if envs is not None else minari_envs(logged)
 
-    a = logged.arrays()
+    a = envs.arrays if envs.arrays is not None else logged.arrays()
     buffers = [
         EpisodeBuffer(
             id=i,
@@ -304,6 +309,7 @@ def export_minari(
     *,
     dataset_id: str | None = None,
     overwrite: bool = False,
+    senses: str = "none",
 ) -> str:
     """Write the Minari copy of a logged version into :func:`minari_root` and return its id.
 
@@ -312,23 +318,26 @@ def export_minari(
     and renamed into place, under a lock per id (a second process says what it waits for, then finds the copy). A
     complete copy of the same version is kept; an incomplete or damaged one (a killed write, an older dtradar's
     copy) is rewritten; a copy of another version that another data root still holds under this id is refused
-    (:class:`ConfigError`, naming ``MINARI_DATASETS_PATH`` and ``--no-minari``) unless ``overwrite``."""
+    (:class:`ConfigError`, naming ``MINARI_DATASETS_PATH`` and ``--no-minari``) unless ``overwrite``.
+    ``senses="memory"`` writes the copy whose observations carry the default agent's memory window and whose
+    ``recover_environment()`` is the memory env (:func:`copy_id`: ``<id>-memory``; see
+    :mod:`dtradar_rl.offline.minari_envs`)."""
     logged = as_logged(data)
     minari = _minari()
-    mid = dataset_id or logged.minari_id
+    mid = dataset_id or copy_id(logged, check_senses(senses))
     root = minari_root()
     folder = root / mid
     root.mkdir(parents=True, exist_ok=True)
     lock = root / f".dtradar-{mid.replace('/', '--')}.lock"
     with waiting_lock(lock, f"writing the Minari copy {mid}", then="this process uses that copy if it is whole"):
-        state, why = copy_state(folder, logged)
+        state, why = copy_state(folder, logged, senses)
         if state == "complete":
             return mid
         if state in ("other", "foreign") and not overwrite:
             raise claimed_error(
                 folder, logged.name, logged.tag, state, why, f"the logged dataset itself is stored in {logged.path}"
             )
-        envs = minari_envs(logged)
+        envs = minari_envs(logged, senses)
         if envs.spec is None:
             warnings.warn(
                 f"the Minari copy {mid} records no env spec (recover_environment() will not work): {envs.missing}",
@@ -338,7 +347,13 @@ def export_minari(
         with held_stage(root, STAGE_PREFIX, lockless=lambda _: True) as stage:  # .dtradar-stage-*: only ours
             staged = _write_copy(minari, stage, mid, logged, envs)
             refs = reference_returns(envs.eval_spec)["references"] if envs.spec is not None else None
-            rec = {**_wanted(logged), "minari_id": mid, **envs.record(), "ref_scores": refs, "files": _files(staged)}
+            rec = {
+                **_wanted(logged, senses),
+                "minari_id": mid,
+                **envs.record(),
+                "ref_scores": refs,
+                "files": _files(staged),
+            }
             (staged / RECORD_FILE).write_text(json.dumps(rec, indent=2, sort_keys=True) + "\n")
             _ensure_namespace(stage, root, mid)
             folder.parent.mkdir(parents=True, exist_ok=True)
@@ -357,63 +372,9 @@ def load_minari(data: LoggedDataset | str | LoggedId, **export):
     return MinariDataset(minari_root() / mid / "data")
 
 
-def from_minari(dataset: Any) -> dict[str, np.ndarray]:
-    """Our columns (``episode, step, obs, action, reward, next_obs, terminated, truncated``) from a Minari dataset
-    (a ``MinariDataset`` or its id)."""
-    minari = _minari()
-    if isinstance(dataset, str):
-        ours = minari_root() / dataset / "data"  # a copy of ours, MINARI_DATASETS_PATH set or not
-        if ours.is_dir():
-            from minari.dataset.minari_dataset import MinariDataset
-
-            ds = MinariDataset(ours)
-        else:
-            ds = minari.load_dataset(dataset)
-    else:
-        ds = dataset
-    cols: dict[str, list[np.ndarray]] = {
-        k: [] for k in ("episode", "step", "obs", "action", "reward", "next_obs", "terminated", "truncated")
-    }
-    for i, ep in enumerate(ds.iterate_episodes()):
-        obs = np.asarray(ep.observations, np.float32)
-        n = len(ep.actions)
-        if len(obs) != n + 1:
-            raise SchemaMismatchError(
-                f"Minari episode {ep.id} has {len(obs)} observations for {n} actions (expected actions + 1)",
-                hint="export it again with export_minari",
-            )
-        cols["episode"].append(np.full(n, i, np.int64))
-        cols["step"].append(np.arange(n, dtype=np.int32))
-        cols["obs"].append(obs[:-1])
-        cols["next_obs"].append(obs[1:])
-        cols["action"].append(np.asarray(ep.actions, np.int64))
-        cols["reward"].append(np.asarray(ep.rewards, np.float32))
-        cols["terminated"].append(np.asarray(ep.terminations, bool))
-        cols["truncated"].append(np.asarray(ep.truncations, bool))
-    return {k: np.concatenate(v) for k, v in cols.items()}
-
-
-def table_from_columns(c: dict[str, np.ndarray]):
-    """A checked transition table from :func:`from_minari`'s columns (robot, cell, target, component unknown: -1/0)."""
-    n = len(c["action"])
-    minus = np.full(n, -1, np.int32)
-    return transitions_table(
-        episode=c["episode"],
-        step=c["step"],
-        obs=c["obs"],
-        action=c["action"],
-        reward=c["reward"],
-        next_obs=c["next_obs"],
-        terminated=c["terminated"],
-        truncated=c["truncated"],
-        robot=minus,
-        cell=minus,
-        target=minus,
-    )
-
-
 __all__ = [
     "check_minari_free",
+    "copy_id",
     "claimed_error",
     "copy_state",
     "export_minari",

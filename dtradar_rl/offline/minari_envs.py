@@ -1,5 +1,10 @@
 """The envs a Minari copy of a logged dataset records, so ``recover_environment()`` gives the logging env and
-``recover_environment(eval_env=True)`` the evaluation env (the dynamic twin of a blueprint log)."""
+``recover_environment(eval_env=True)`` the evaluation env (the dynamic twin of a blueprint log).
+
+A copy with ``senses="memory"`` (``<id>-memory``) holds every step as the default online agent observes it (the
+logged observation with its memory window, rebuilt exactly from the log: :mod:`dtradar_rl.offline.memory_senses`),
+and its envs are the memory env (:class:`~dtradar_rl.envs.memory.MemoryGymEnv`) with the same settings
+(:data:`MINARI_MEMORY`), so an agent trained on it is evaluated with the senses it learned from."""
 
 from __future__ import annotations
 
@@ -11,9 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from dtradar_data.core.errors import DtradarError, SchemaMismatchError
+from dtradar_data.core.errors import DtradarError, SchemaMismatchError, unknown_name
 from dtradar_data.store.logged import LoggedDataset
 from dtradar_rl.envs.registration import twin_env_spec, twin_version
+from dtradar_rl.offline.config import MEMORY_SETTINGS
 from dtradar_rl.task.twins import load_dataset
 
 
@@ -28,6 +34,8 @@ class MinariEnvs:
     eval_spec: Any = None
     missing: str = ""
     retry: bool = False
+    arrays: dict[str, np.ndarray] | None = None
+    """The log's arrays as the copy holds them (``senses="memory"``: the window appended); None: the log's own."""
 
     def record(self) -> dict[str, Any]:
         """Their part of ``dtradar.json``."""
@@ -39,7 +47,24 @@ class MinariEnvs:
         }
 
 
-def minari_env_specs(logged: LoggedDataset):
+#: The memory settings of a ``senses="memory"`` copy: the default agent's window (radius 5, visit counts, no bumps),
+#: as offline training uses it (:data:`~dtradar_rl.offline.config.MEMORY_SETTINGS`, less the policy's loop escape).
+MINARI_MEMORY = {k: v for k, v in MEMORY_SETTINGS.items() if k.startswith("memory_")}
+SENSES = ("none", "memory")
+
+
+def check_senses(senses: str) -> str:
+    if senses not in SENSES:
+        raise unknown_name("Minari copy senses", senses, SENSES)
+    return senses
+
+
+def minari_suffix(senses: str) -> str:
+    """What a copy's Minari id adds before ``-v<N>``: ``-memory`` for a memory copy."""
+    return "" if check_senses(senses) == "none" else f"-{senses}"
+
+
+def minari_env_specs(logged: LoggedDataset, senses: str = "none"):
     """``(spec, eval_spec)``: the gymnasium env specs of ``logged``'s Minari copy, from its ``meta.json`` (and which
     dynamic twin is here).
 
@@ -50,7 +75,8 @@ def minari_env_specs(logged: LoggedDataset):
     twin, the same settings on the scene's ``dynamic`` twin (its newest version here, pinned; the training twin's
     normaliser, as every evaluation of a policy on another twin: the transfer test of DT-RaDaR), when that twin
     is here; otherwise (a log on the dynamic twin, or no dynamic twin here) ``spec`` itself. A meta that lacks
-    what the spec needs is a :class:`SchemaMismatchError`; a missing dynamic twin is no error."""
+    what the spec needs is a :class:`SchemaMismatchError`; a missing dynamic twin is no error. ``senses="memory"``:
+    both are the memory env (:data:`MINARI_MEMORY`)."""
     meta = logged.meta
     settings = meta.get("settings") or {}
     preset = (meta.get("observations") or {}).get("preset")
@@ -77,6 +103,7 @@ def minari_env_specs(logged: LoggedDataset):
         "reward": str(settings["reward"]),
         "max_steps": int(settings["max_steps"]),
         "normalizer": meta["normalizer"],
+        "memory": MINARI_MEMORY if check_senses(senses) == "memory" else None,
     }
     spec = twin_env_spec(str(parent), str(version), **settings_kw)
     eval_spec = spec
@@ -91,20 +118,28 @@ def minari_env_specs(logged: LoggedDataset):
     return spec, eval_spec
 
 
-def minari_envs(logged: LoggedDataset) -> MinariEnvs:
+def minari_envs(logged: LoggedDataset, senses: str = "none") -> MinariEnvs:
     """The specs of :func:`minari_env_specs` with the logging env made from its spec, checked against the data (its
     observation dimension, and every logged observation inside its observation space); :class:`MinariEnvs` with
     ``missing`` when the meta lacks what a spec needs, or the twin at its version is not here or does not fit."""
     import gymnasium as gym
 
     try:
-        spec, eval_spec = minari_env_specs(logged)
+        spec, eval_spec = minari_env_specs(logged, senses)
     except SchemaMismatchError as e:
         return MinariEnvs(missing=e.message)
     try:
         with contextlib.redirect_stderr(io.StringIO()):
             env = gym.make(spec)
         a = logged.arrays()
+        if senses == "memory":
+            from dtradar_rl.offline.memory_senses import MemorySenses
+
+            m = MINARI_MEMORY
+            window = MemorySenses(
+                logged, env.unwrapped.mdp, radius=m["memory_radius"], bumps=m["memory_bumps"], visits=m["memory_visits"]
+            )
+            a = window.arrays(a)
         space = env.observation_space
         if space.shape != a["obs"].shape[1:]:
             raise SchemaMismatchError(f"the env observes {space.shape}, the data holds {a['obs'].shape[1:]}")
@@ -116,7 +151,7 @@ def minari_envs(logged: LoggedDataset) -> MinariEnvs:
             missing=f"twin {spec.kwargs['dataset']}@{spec.kwargs['version']}: {e.message}",
             retry=not isinstance(e, SchemaMismatchError),
         )
-    return MinariEnvs(env, spec, eval_spec)
+    return MinariEnvs(env, spec, eval_spec, arrays=a)
 
 
 def env_text(spec) -> str:
@@ -124,8 +159,17 @@ def env_text(spec) -> str:
     k = spec.kwargs
     return (
         f"{k['dataset']}@{k['version']} (obs {k['obs']}, reward {k['reward']}, max_steps {k['max_steps']}, noise "
-        f"{k['noise']})"
+        f"{k['noise']}" + (f", memory radius {k['memory_radius']}" if k.get("memory_radius") else "") + ")"
     )
 
 
-__all__ = ["MinariEnvs", "env_text", "minari_env_specs", "minari_envs"]
+__all__ = [
+    "MINARI_MEMORY",
+    "SENSES",
+    "MinariEnvs",
+    "check_senses",
+    "env_text",
+    "minari_env_specs",
+    "minari_envs",
+    "minari_suffix",
+]

@@ -150,7 +150,7 @@ def test_a_copy_an_older_dtradar_wrote_without_an_env_spec_is_rewritten_once(sto
     logged = log_dataset(dataclasses.replace(CFG, minari=False))
     with monkeypatch.context() as m:  # what format 1 wrote: no env spec, an unbounded observation space
         m.setattr(minari_copy, "RECORD_FORMAT", 1)
-        m.setattr(minari_copy, "minari_envs", lambda _: minari_copy.MinariEnvs(missing="format 1"))
+        m.setattr(minari_copy, "minari_envs", lambda *_: minari_copy.MinariEnvs(missing="format 1"))
         with pytest.warns(UserWarning, match="no env spec"):
             minari_copy.export_minari(logged)
     folder = logged.minari_path
