@@ -66,6 +66,7 @@ from dtradar_rl.experiments.offline_bench_config import (  # re-exported: the be
     NEED_ONLINE,
     OfflineBenchConfig,
 )
+from dtradar_rl.experiments.offline_figures import plot, plot_fqe
 from dtradar_rl.experiments.offline_jobs import (
     BenchJob,
     auto_workers,
@@ -76,7 +77,7 @@ from dtradar_rl.experiments.offline_jobs import (
     run_jobs_on_ray,
     save_row,
 )
-from dtradar_rl.experiments.offline_report import markdown, ope_summary, plot, plot_fqe, summarize
+from dtradar_rl.experiments.offline_report import markdown, ope_summary, summarize
 from dtradar_rl.experiments.offline_tabular import tabular_section
 from dtradar_rl.offline.behaviours import behaviour_policy
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig

@@ -11,7 +11,6 @@ dataset family, a column per algorithm, the behaviour itself beside them.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -119,7 +118,7 @@ TABULAR_COLUMNS: dict[str, str] = {
 }
 
 
-def _tabular_score(result: dict[str, Any], beh: str, column: str, variant: str, key: str = "normalized"):
+def tabular_score(result: dict[str, Any], beh: str, column: str, variant: str, key: str = "normalized"):
     row = ((result.get("tabular") or {}).get(beh) or {}).get(column) or {}
     return (row.get(variant) or {}).get(key)
 
@@ -145,7 +144,7 @@ def score_table(result: dict[str, Any], variant: str) -> list[str]:
             e = next((e for e in result["summary"] if e["behaviour"] == beh and e["algorithm"] == a), None)
             m = ((e or {}).get(variant) or {}).get("normalized")
             deep.append((_pm(m, "{:.1f}"), None if m is None else m["mean"], e is not None and best.get(beh) is e))
-        tab = [(c, _tabular_score(result, beh, c, variant)) for c in tab_cols]
+        tab = [(c, tabular_score(result, beh, c, variant)) for c in tab_cols]
         top = max([x for _, x in tab[1:] if x is not None] + [x for _, x, _ in deep if x is not None], default=None)
         best_deep = max([x for _, x, _ in deep if x is not None], default=None)
         cells = [f"**{_num(x)}**" if c != "ceiling" and x is not None and x == top else _num(x) for c, x in tab] + [
@@ -163,7 +162,7 @@ def return_table(result: dict[str, Any], variant: str) -> list[str]:
         "|" + "---|" * (2 + len(tab_cols)),
     ]
     for beh, row in (result.get("tabular") or {}).items():
-        cells = [_num(_tabular_score(result, beh, c, variant, "return_normalized")) for c in tab_cols]
+        cells = [_num(tabular_score(result, beh, c, variant, "return_normalized")) for c in tab_cols]
         lines.append(f"| {beh} | " + " | ".join(cells) + f" | {row.get('seconds', 0):.1f} |")
     return lines
 
@@ -171,10 +170,24 @@ def return_table(result: dict[str, Any], variant: str) -> list[str]:
 def markdown(result: dict[str, Any]) -> str:
     """``bench.md``: the normalised score per twin (the table to quote), then every metric per run family."""
     cfg = result["config"]
-    variants = cfg["variants"]
-    ope = result.get("ope")
+    lines = _heading(result)
+    for v in cfg["variants"]:
+        lines += ["", f"**{cfg['scene']} → {v}** (normalised score)", "", *score_table(result, v)]
+    if result.get("tabular"):
+        lines += _tabular_section(result)
+    lines += _online_line(result)
+    lines += _metrics_table(result)
+    if result.get("ope"):
+        lines += _ope_lines(result["ope"])
+    lines += ["", _machine_line(result)]
+    return "\n".join(lines) + "\n"
+
+
+def _heading(result: dict[str, Any]) -> list[str]:
+    """What was trained and evaluated, and what the normalised score means (with the references)."""
+    cfg = result["config"]
     refs = result.get("references") or {}
-    lines = [
+    return [
         f"Offline RL on `{cfg['scene']}`: d3rlpy algorithms trained on logged datasets of the blueprint twin, "
         f"{cfg['n_steps']} updates per run, goals relabelled: {cfg.get('relabel', 'none')}, "
         f"{len(cfg['seeds'])} seed(s) ({', '.join(map(str, cfg['seeds']))}), "
@@ -191,62 +204,59 @@ def markdown(result: dict[str, Any]) -> str:
             else ""
         ),
     ]
-    for v in variants:
-        lines += ["", f"**{cfg['scene']} → {v}** (normalised score)", "", *score_table(result, v)]
-    if result.get("tabular"):
+
+
+def _tabular_section(result: dict[str, Any]) -> list[str]:
+    """The tabular learners' explanation and their return-based table per twin."""
+    cfg = result["config"]
+    lines = [
+        "",
+        "Tabular columns (dtradar_rl.tabular.batch): the data ceiling is the best SPL of any policy using only "
+        "logged (cell, action) pairs, on the blueprint with the true cell; CE, VI-LCB and Π_b-SPIBB are tables "
+        "learnt from the logged moves for every evaluation target (the reward function known, so every logged "
+        "move teaches every target), acting by fingerprint localisation like a robot.",
+    ]
+    for v in cfg["variants"]:
+        ref = next(iter(result["tabular"].values()))["return_references"].get(v) or {}
         lines += [
             "",
-            "Tabular columns (dtradar_rl.tabular.batch): the data ceiling is the best SPL of any policy using only "
-            "logged (cell, action) pairs, on the blueprint with the true cell; CE, VI-LCB and Π_b-SPIBB are tables "
-            "learnt from the logged moves for every evaluation target (the reward function known, so every logged "
-            "move teaches every target), acting by fingerprint localisation like a robot.",
+            f"**{cfg['scene']} → {v}** (return-based normalised score, exact: 100 · (J − J_random) / (J* − "
+            f"J_random), J the mean discounted return (γ = {ref.get('gamma')}, reward {ref.get('reward')}) over "
+            f"the evaluation pairs; J_random {ref.get('random', float('nan')):.3f}, J* "
+            f"{ref.get('optimal', float('nan')):.3f})",
+            "",
+            *return_table(result, v),
         ]
-        for v in variants:
-            ref = next(iter(result["tabular"].values()))["return_references"].get(v) or {}
-            lines += [
-                "",
-                f"**{cfg['scene']} → {v}** (return-based normalised score, exact: 100 · (J − J_random) / (J* − "
-                f"J_random), J the mean discounted return (γ = {ref.get('gamma')}, reward {ref.get('reward')}) over "
-                f"the evaluation pairs; J_random {ref.get('random', float('nan')):.3f}, J* "
-                f"{ref.get('optimal', float('nan')):.3f})",
-                "",
-                *return_table(result, v),
-            ]
+    return lines
+
+
+def _online_line(result: dict[str, Any]) -> list[str]:
+    """The online agent the benchmark compares with, if it ran one."""
     online = result.get("online_dqn") or {}
-    if online:
-        scores = ", ".join(
-            f"{v} {_num((online.get(v) or {}).get('normalized'))} (success {online[v]['success_rate']:.3f})"
-            for v in variants
-            if v in online
-        )
-        lines += ["", f"Online reference: {online.get('label', 'DQN')} (`{online['checkpoint']}`): {scores}."]
+    if not online:
+        return []
+    scores = ", ".join(
+        f"{v} {_num((online.get(v) or {}).get('normalized'))} (success {online[v]['success_rate']:.3f})"
+        for v in result["config"]["variants"]
+        if v in online
+    )
+    return ["", f"Online reference: {online.get('label', 'DQN')} (`{online['checkpoint']}`): {scores}."]
+
+
+def _metrics_table(result: dict[str, Any]) -> list[str]:
+    """Every metric of every run family, each dataset's behaviour first."""
+    variants = result["config"]["variants"]
+    ope = result.get("ope")
     head = (
         "| dataset | policy | "
         + " | ".join(f"{v}: score | {v}: success | {v}: SPL | {v}: collisions/ep" for v in variants)
         + (" | FQE | true value" if ope else "")
         + " | train (s) |"
     )
-    no_ope = " | - | -" if ope else ""
-    lines += ["", "Every metric (score = normalised score):", "", head]
+    lines = ["", "Every metric (score = normalised score):", "", head]
     lines.append("|" + "---|" * (3 + 4 * len(variants) + (2 if ope else 0)))
     for beh, d in result["datasets"].items():
-        ev = d.get("eval") or {}
-        blank = " | ".join(
-            f"{_num(ev[v].get('normalized'))} | {ev[v]['success_rate']:.3f} | {ev[v]['spl']:.3f} | "
-            f"{ev[v]['collisions']:.2f}"
-            if v in ev
-            else "- | - | - | -"
-            for v in variants
-        )
-        logged_score = d.get("logged_score")
-        lines.append(
-            f"| `{d['name']}`@{d['tag']} | behaviour itself ({'rolled out; ' if ev else 'no single policy; '}its "
-            f"logged episodes on the blueprint: success {d['success_rate']:.3f} of finished episodes, "
-            f"{d.get('reached_of_all', 0):.3f} of all; "
-            + (f"normalised score {logged_score:.1f}; " if logged_score is not None else "")
-            + f"mean return {d['mean_return']:.2f}, {d['episodes']} episodes, "
-            f"{d.get('cut_by_end_of_log', 0)} cut by the end of logging) | {blank}{no_ope} | - |"
-        )
+        lines.append(_behaviour_row(d, variants, bool(ope)))
         for e in (e for e in result["summary"] if e["behaviour"] == beh):
             cells = []
             for v in variants:
@@ -264,21 +274,49 @@ def markdown(result: dict[str, Any]) -> str:
                 + " | ".join(cells)
                 + f" | {e['train_s']['mean']:.1f} |"
             )
-    if ope:
-        rho = "-" if ope["spearman"] is None else f"{ope['spearman']:.2f}"
-        per = ", ".join(
-            f"{b} {'-' if d['spearman'] is None else format(d['spearman'], '.2f')} ({d['n']})"
-            for b, d in ope["per_dataset"].items()
-        )
-        lines += [
-            "",
-            f"FQE against the true value: Spearman rank correlation {rho} over {ope['n']} agents (per dataset: "
-            f"{per}). Value = {ope['value']}; γ = {ope['gamma']}, {ope['fqe_steps']} FQE updates per agent.",
-        ]
+    return lines
+
+
+def _behaviour_row(d: dict[str, Any], variants: list[str], ope: bool) -> str:
+    """A dataset's own row: its behaviour rolled out (when it is one policy) and its logged episodes."""
+    ev = d.get("eval") or {}
+    blank = " | ".join(
+        f"{_num(ev[v].get('normalized'))} | {ev[v]['success_rate']:.3f} | {ev[v]['spl']:.3f} | "
+        f"{ev[v]['collisions']:.2f}"
+        if v in ev
+        else "- | - | - | -"
+        for v in variants
+    )
+    logged_score = d.get("logged_score")
+    return (
+        f"| `{d['name']}`@{d['tag']} | behaviour itself ({'rolled out; ' if ev else 'no single policy; '}its "
+        f"logged episodes on the blueprint: success {d['success_rate']:.3f} of finished episodes, "
+        f"{d.get('reached_of_all', 0):.3f} of all; "
+        + (f"normalised score {logged_score:.1f}; " if logged_score is not None else "")
+        + f"mean return {d['mean_return']:.2f}, {d['episodes']} episodes, "
+        f"{d.get('cut_by_end_of_log', 0)} cut by the end of logging) | {blank}{' | - | -' if ope else ''} | - |"
+    )
+
+
+def _ope_lines(ope: dict[str, Any]) -> list[str]:
+    """How well FQE ranks the agents against their true values."""
+    rho = "-" if ope["spearman"] is None else f"{ope['spearman']:.2f}"
+    per = ", ".join(
+        f"{b} {'-' if d['spearman'] is None else format(d['spearman'], '.2f')} ({d['n']})"
+        for b, d in ope["per_dataset"].items()
+    )
+    return [
+        "",
+        f"FQE against the true value: Spearman rank correlation {rho} over {ope['n']} agents (per dataset: "
+        f"{per}). Value = {ope['value']}; γ = {ope['gamma']}, {ope['fqe_steps']} FQE updates per agent.",
+    ]
+
+
+def _machine_line(result: dict[str, Any]) -> str:
+    """Where and how the benchmark ran: machine, load, wall time, how the trainings were laid out."""
     mach = result["machine"]
     layout = result.get("layout") or {}
-    lines += [
-        "",
+    return (
         f"Machine: {describe(mach['start'])}; load average (1/5/15 min) at start "
         f"{_load(mach['start'])}, at end {_load(mach['end'])}; total wall time {result['wall_s']:.0f} s"
         + (
@@ -298,9 +336,8 @@ def markdown(result: dict[str, Any]) -> str:
             + ")."
             if layout
             else "."
-        ),
-    ]
-    return "\n".join(lines) + "\n"
+        )
+    )
 
 
 def _gain(g: float | None) -> str:
@@ -312,117 +349,16 @@ def _load(m: dict[str, Any]) -> str:
     return "/".join(f"{x:.1f}" for x in la) if la else "-"
 
 
-def plot(result: dict[str, Any], path: Path) -> Path:
-    """Normalised-score bars per dataset and algorithm, one panel per twin, error bars = std over seeds; the
-    behaviour itself as a cross, the best tabular learner as a star and the data's ceiling as a bar across the
-    group (when the benchmark ran them), the expert's 100 dotted, the online agent dashed."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    variants = result["config"]["variants"]
-    behs = list(result["datasets"])
-    algos = list(result["algorithms"])
-    fig, axes = plt.subplots(1, len(variants), figsize=(6.0 * len(variants), 4.4), squeeze=False)
-    width = 0.8 / max(1, len(algos))
-    for ax, v in zip(axes[0], variants):
-        x = np.arange(len(behs))
-        for k, a in enumerate(algos):
-            means, stds = [], []
-            for b in behs:
-                e = next((e for e in result["summary"] if e["behaviour"] == b and e["algorithm"] == a), {})
-                m = (e.get(v) or {}).get("normalized") or {"mean": np.nan, "std": 0.0}
-                means.append(m["mean"])
-                stds.append(m["std"])
-            ax.bar(
-                x + (k - (len(algos) - 1) / 2) * width,
-                means,
-                width,
-                yerr=stds,
-                capsize=2,
-                label=result["algorithms"][a],
-            )
-        own = [((result["datasets"][b].get("eval") or {}).get(v) or {}).get("normalized", np.nan) for b in behs]
-        ax.scatter(x, own, marker="x", color="k", zorder=3, label="behaviour itself")
-        if result.get("tabular"):  # the best tabular learner as a star, the data's ceiling as a bar across the group
-            best = [
-                max((_tabular_score(result, b, c, v) for c in TABULAR_COLUMNS if c != "ceiling"), default=np.nan)
-                for b in behs
-            ]
-            ax.scatter(x, best, marker="*", s=80, color="gold", edgecolor="k", zorder=4, label="best tabular")
-            ceil = [_tabular_score(result, b, "ceiling", v) for b in behs]
-            ceil = [np.nan if c is None else c for c in ceil]
-            ax.hlines(ceil, x - 0.42, x + 0.42, colors="k", lw=1.5, zorder=3, label="data ceiling")
-        ax.axhline(100, color="0.5", ls=":", lw=1, label="expert (100)")
-        online = (result.get("online_dqn") or {}).get(v) or {}
-        if "normalized" in online:
-            ax.axhline(online["normalized"], color="k", ls="--", lw=1, label="online agent")
-        ax.axhline(0, color="0.5", lw=0.8)
-        ax.set_xticks(x, behs, rotation=15)
-        ax.set_ylim(min(-10.0, np.nanmin([*own, 0.0]) - 5), 125)
-        ax.set_ylabel("normalised score (0 random, 100 expert)")
-        ax.set_title(f"{result['config']['scene']} → {v}")
-    axes[0][-1].legend(fontsize=7, loc="upper right", ncol=3)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
-def plot_fqe(result: dict[str, Any], path: Path) -> Path:
-    """FQE's estimate against the true value, one point per trained agent (colour: algorithm, marker: dataset),
-    the diagonal, and the Spearman rank correlation in the title."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    runs = [r for r in result["runs"] if "fqe" in r and "true_value" in r]
-    algos, behs = list(result["algorithms"]), list(result["datasets"])
-    markers = "osD^vP*X"
-    fig, ax = plt.subplots(figsize=(5.6, 4.8))
-    for r in runs:
-        k = algos.index(r["algorithm"])
-        ax.scatter(
-            r["true_value"], r["fqe"], color=f"C{k}", marker=markers[behs.index(r["behaviour"]) % len(markers)], s=28
-        )
-    if runs:
-        vals = [r["true_value"] for r in runs] + [r["fqe"] for r in runs]
-        lo, hi = min(vals), max(vals)
-        pad = 0.05 * (hi - lo or 1.0)
-        ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], color="0.6", lw=1, ls="--", label="FQE = true")
-    for k, a in enumerate(algos):
-        ax.scatter([], [], color=f"C{k}", marker="o", label=result["algorithms"][a])
-    for j, b in enumerate(behs):
-        ax.scatter([], [], color="k", marker=markers[j % len(markers)], label=b)
-    ope = result.get("ope") or {}
-    rho = ope.get("spearman")
-    ax.set_title(
-        f"{result['config']['scene']}: FQE vs true value, Spearman ρ = {'-' if rho is None else f'{rho:.2f}'} "
-        f"({len(runs)} agents)",
-        fontsize=10,
-    )
-    ax.set_xlabel(f"true value (rollouts on the twin, γ = {ope.get('gamma', '-')})")
-    ax.set_ylabel("FQE estimate (logged data only)")
-    ax.legend(fontsize=7, loc="lower right", ncol=2)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
 __all__ = [
     "SCORES",
+    "TABULAR_COLUMNS",
     "aggregate",
     "best_per_dataset",
     "markdown",
     "ope_summary",
-    "plot",
-    "plot_fqe",
+    "return_table",
     "score_table",
     "spearman",
     "summarize",
+    "tabular_score",
 ]
