@@ -103,7 +103,7 @@ class LogConfig(BehaviourConfig):
     """also write the Minari copy (needs the [offline] extra: pip install minari)"""
     minari_memory: bool = False
     """also write a second Minari copy, <id>-memory, whose observations carry the default agent's memory window and
-    whose recover_environment() is the memory env (the neighbors preset; off by default: about 5x the size)"""
+    whose recover_environment() is the memory env (the neighbors preset; off by default: 3x the size)"""
 
     @property
     def logged_name(self) -> str:
