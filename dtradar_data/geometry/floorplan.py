@@ -43,10 +43,32 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
     above the robot (a wall-mounted TV) are hatched. ``with_grid`` shades the cells :func:`occupancy` marks blocked
     and draws the cell lines; ``label`` writes object names. Legend entries: one per material, plus "TX".
     """
-    from matplotlib.patches import Polygon
+    seen: set[str] = set()  # materials with a legend entry already
+    _draw_base(ax, spec)
+    _draw_prisms(ax, spec, seen)
+    _draw_boxes(ax, spec, seen, label=label)
+    xmin, ymin, xmax, ymax = _extent(spec)
+    if with_grid:
+        _draw_grid(ax, spec)
+    _draw_tx(ax, spec, label="TX")
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    return ax
 
-    seen: set[str] = set()
-    for i, polygon in enumerate(base_footprints(spec)):  # an XML scene's buildings: their sections at robot height
+
+def _legend_entry(material: str, seen: set[str]) -> str:
+    """The legend label of a patch of ``material``: the material the first time, hidden after (``seen`` updated)."""
+    entry = material if material not in seen else "_nolegend_"
+    seen.add(material)
+    return entry
+
+
+def _draw_base(ax, spec: SceneSpec) -> None:
+    """An XML scene's buildings, as their sections at robot height, in one colour under one legend entry."""
+    for i, polygon in enumerate(base_footprints(spec)):
         ax.add_patch(
             _shapely_patch(
                 polygon,
@@ -58,9 +80,12 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
                 zorder=2,
             )
         )
-    for prism in sorted(spec.prisms, key=lambda p: (p.top_m, p.name)):  # lots and roads under buildings
-        entry = prism.material if prism.material not in seen else "_nolegend_"
-        seen.add(prism.material)
+
+
+def _draw_prisms(ax, spec: SceneSpec, seen: set[str]) -> None:
+    """A city's prisms, lowest first; those under the robot (lots, roads) faint and beneath the buildings."""
+    for prism in sorted(spec.prisms, key=lambda p: (p.top_m, p.name)):
+        entry = _legend_entry(prism.material, seen)
         flat = prism.top_m < spec.robot_height_m
         ax.add_patch(
             _polygon_patch(
@@ -73,10 +98,15 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
                 zorder=1.2 if flat else 2,
             )
         )
+
+
+def _draw_boxes(ax, spec: SceneSpec, seen: set[str], *, label: bool) -> None:
+    """The box objects, stacked by height; those above the robot hatched; names written when ``label``."""
+    from matplotlib.patches import Polygon
+
     for box, corners in footprints(spec):
         above = box.z_m >= spec.robot_height_m
-        entry = box.material if box.material not in seen else "_nolegend_"
-        seen.add(box.material)
+        entry = _legend_entry(box.material, seen)
         ax.add_patch(
             Polygon(
                 corners,
@@ -93,27 +123,31 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
         if label and box.kind != "wall":
             ax.annotate(box.name, (box.x_m, box.y_m), ha="center", va="center", fontsize=5, zorder=10)
 
-    xmin, ymin, xmax, ymax = _extent(spec)
-    if with_grid:
-        g = spec.grid
-        gx0, gy0, gx1, gy1 = g.bounds()
-        blocked = occupancy(spec)
-        ax.imshow(
-            np.where(blocked, 1.0, np.nan),
-            origin="lower",
-            extent=(gx0, gx1, gy0, gy1),
-            cmap="Reds",
-            vmin=0,
-            vmax=2,
-            alpha=0.5,
-            interpolation="nearest",
-            zorder=1.5,
-        )
-        for x in np.linspace(gx0, gx1, g.nx + 1):
-            ax.plot([x, x], [gy0, gy1], color="0.8", linewidth=0.3, zorder=1)
-        for y in np.linspace(gy0, gy1, g.ny + 1):
-            ax.plot([gx0, gx1], [y, y], color="0.8", linewidth=0.3, zorder=1)
 
+def _draw_grid(ax, spec: SceneSpec) -> None:
+    """The cells :func:`occupancy` marks blocked, shaded, and the grid's cell lines."""
+    g = spec.grid
+    gx0, gy0, gx1, gy1 = g.bounds()
+    blocked = occupancy(spec)
+    ax.imshow(
+        np.where(blocked, 1.0, np.nan),
+        origin="lower",
+        extent=(gx0, gx1, gy0, gy1),
+        cmap="Reds",
+        vmin=0,
+        vmax=2,
+        alpha=0.5,
+        interpolation="nearest",
+        zorder=1.5,
+    )
+    for x in np.linspace(gx0, gx1, g.nx + 1):
+        ax.plot([x, x], [gy0, gy1], color="0.8", linewidth=0.3, zorder=1)
+    for y in np.linspace(gy0, gy1, g.ny + 1):
+        ax.plot([gx0, gx1], [y, y], color="0.8", linewidth=0.3, zorder=1)
+
+
+def _draw_tx(ax, spec: SceneSpec, *, label: str) -> None:
+    """The transmitter of ``spec`` as a gold star above everything else."""
     tx = spec.tx.position_m
     ax.plot(
         [tx[0]],
@@ -123,15 +157,9 @@ def draw_floorplan(ax, spec: SceneSpec, *, with_grid: bool = False, label: bool 
         color="gold",
         markeredgecolor="black",
         linestyle="none",
-        label="TX",
+        label=label,
         zorder=20,
     )
-    ax.set_xlim(xmin, xmax)
-    ax.set_ylim(ymin, ymax)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    return ax
 
 
 def _polygon_patch(prism: Prism, **kwargs):
@@ -182,11 +210,7 @@ def save_floorplan_png(
         f"{int(blocked.sum())} blocked cells",
         fontsize=9,
     )
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=dpi)
-    return path
+    return _save(fig, ax, path, dpi)
 
 
 def save_city_overview_png(
@@ -195,7 +219,6 @@ def save_city_overview_png(
     """One city's overview: every building, lot and road, each quadrant's grid outline and transmitter (paper
     Fig. 6). ``specs`` are the quadrants' specs (they share the city geometry); ``highlight`` names one to emphasise."""
     from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
 
     first = specs[0]
     ground = next(b for b in first.objects if b.kind == "floor")
@@ -203,10 +226,23 @@ def save_city_overview_png(
     width = 8.0
     fig = Figure(figsize=(width + 2.2, width * hy / hx + 0.8))
     ax = fig.add_subplot()
+    _draw_city_prisms(ax, first)
+    for spec in specs:
+        _draw_quadrant(ax, spec, mine=spec.scene == highlight)
+        _draw_tx(ax, spec, label="TX" if spec is specs[0] else "_nolegend_")
+    ax.set_xlim(-hx, hx)
+    ax.set_ylim(-hy, hy)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m] (east)")
+    ax.set_ylabel("y [m] (north)")
+    ax.set_title(_city_title(first), fontsize=9)
+    return _save(fig, ax, path, dpi)
+
+
+def _draw_city_prisms(ax, spec: SceneSpec) -> None:
+    """Every building, lot and road of the city, lowest first, one legend entry per material."""
     seen: set[str] = set()
-    for prism in sorted(first.prisms, key=lambda p: (p.top_m, p.name)):
-        entry = prism.material if prism.material not in seen else "_nolegend_"
-        seen.add(prism.material)
+    for prism in sorted(spec.prisms, key=lambda p: (p.top_m, p.name)):
         ax.add_patch(
             _polygon_patch(
                 prism,
@@ -214,58 +250,52 @@ def save_city_overview_png(
                 edgecolor="black",
                 linewidth=0.3,
                 alpha=0.9,
-                label=entry,
+                label=_legend_entry(prism.material, seen),
             )
         )
-    for spec in specs:
-        x0, y0, x1, y1 = spec.grid.bounds()
-        mine = spec.scene == highlight
-        ax.add_patch(
-            Rectangle(
-                (x0, y0),
-                x1 - x0,
-                y1 - y0,
-                fill=False,
-                edgecolor="red" if mine else "black",
-                linewidth=2.0 if mine else 0.8,
-                linestyle="-" if mine else "--",
-                zorder=5,
-            )
+
+
+def _draw_quadrant(ax, spec: SceneSpec, *, mine: bool) -> None:
+    """A quadrant's grid outline and its name (``q1`` ... in capitals), in red when ``mine``."""
+    from matplotlib.patches import Rectangle
+
+    x0, y0, x1, y1 = spec.grid.bounds()
+    ax.add_patch(
+        Rectangle(
+            (x0, y0),
+            x1 - x0,
+            y1 - y0,
+            fill=False,
+            edgecolor="red" if mine else "black",
+            linewidth=2.0 if mine else 0.8,
+            linestyle="-" if mine else "--",
+            zorder=5,
         )
-        ax.annotate(
-            spec.scene.rpartition("-")[2].upper(),
-            ((x0 + x1) / 2, (y0 + y1) / 2),
-            ha="center",
-            va="center",
-            fontsize=18,
-            color="red" if mine else "black",
-            alpha=0.6,
-            zorder=6,
-        )
-        tx = spec.tx.position_m
-        ax.plot(
-            [tx[0]],
-            [tx[1]],
-            marker="*",
-            markersize=14,
-            color="gold",
-            markeredgecolor="black",
-            linestyle="none",
-            zorder=20,
-            label="TX" if spec is specs[0] else "_nolegend_",
-        )
-    ax.set_xlim(-hx, hx)
-    ax.set_ylim(-hy, hy)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m] (east)")
-    ax.set_ylabel("y [m] (north)")
-    counts = first.count_by_kind()
-    city = first.provenance.get("city", first.scene)
-    ax.set_title(
-        f"{city}: {counts.get('building', 0)} buildings, {counts.get('parking', 0)} parking lots, "
-        f"{counts.get('road', 0)} road surfaces; quadrants and transmitters",
-        fontsize=9,
     )
+    ax.annotate(
+        spec.scene.rpartition("-")[2].upper(),
+        ((x0 + x1) / 2, (y0 + y1) / 2),
+        ha="center",
+        va="center",
+        fontsize=18,
+        color="red" if mine else "black",
+        alpha=0.6,
+        zorder=6,
+    )
+
+
+def _city_title(spec: SceneSpec) -> str:
+    """The overview's title: the city and how many buildings, lots and road surfaces it has."""
+    counts = spec.count_by_kind()
+    city = spec.provenance.get("city", spec.scene)
+    return (
+        f"{city}: {counts.get('building', 0)} buildings, {counts.get('parking', 0)} parking lots, "
+        f"{counts.get('road', 0)} road surfaces; quadrants and transmitters"
+    )
+
+
+def _save(fig, ax, path: str | Path, dpi: int) -> Path:
+    """Put the legend right of ``ax``, lay ``fig`` out and write it to ``path``; returns the path."""
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, frameon=False)
     fig.tight_layout()
     path = Path(path)

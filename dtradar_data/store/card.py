@@ -193,12 +193,27 @@ def render_card(
     """The card text for one version. ``history`` holds :func:`history_entry` dicts, oldest first."""
     rec = VersionRecord.from_meta(meta)
     hub_repo = hub_repo or default_hub_repo(rec.name)
-    grid, rt, stats, libs = rec.grid, rec.rt, rec.stats, rec.library_versions
-    n = rec.num_rows
-    freq = rt.get("frequency_hz")
     moving = _moving_section(rec)
+    card = DatasetCard.from_template(
+        card_data(rec, tag=tag, hub_repo=hub_repo),
+        template_path=str(resources.files("dtradar_data.store") / "templates" / "dataset_card.md"),
+        summary=_summary(rec, moving),
+        moving=moving,
+        hub_repo=hub_repo,
+        history=_history_rows(history),
+        **_version_values(rec, tag),
+        **_scene_values(rec),
+        **_tracing_values(rec),
+        **_table_values(rec, moving),
+    )
+    return str(card).rstrip("\n") + "\n"
+
+
+def _summary(rec: VersionRecord, moving: dict[str, Any] | None) -> str:
+    """The card's opening paragraph: what the table holds, over which twin, traced how."""
+    grid, freq = rec.grid, rec.rt.get("frequency_hz")
     over_time = f", in {moving['snapshots']} snapshots {moving['dt_s']} s apart," if moving else ","
-    summary = (
+    return (
         f"Radio features of every cell of a {grid.get('nx')} × {grid.get('ny')} grid over the "
         f"**{rec.title or rec.scene}** digital twin ({rec.variant}){over_time} ray-traced with Sionna RT"
         + (f" at {freq / 1e9:g} GHz" if isinstance(freq, (int, float)) else "")
@@ -206,78 +221,91 @@ def render_card(
         "total path gain and delay spread. Built for radio-only robot navigation with reinforcement "
         "learning, after DT-RaDaR (arXiv 2411.12284)."
     )
+
+
+def _history_rows(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The history table: each entry with its date (or a dash) and what changed since the one before."""
+    return [
+        {**h, "created_utc": h.get("created_utc") or "—", "changes": _changes(history[i - 1] if i else None, h)}
+        for i, h in enumerate(history)
+    ]
+
+
+def _version_values(rec: VersionRecord, tag: str | None) -> dict[str, Any]:
+    """The template's values naming the version: name, tag, schema, date, its files and pictures."""
+    return {
+        "pretty_name": _pretty_name(rec),
+        "name": rec.name,
+        "version": rec.version,
+        "tag": tag,
+        "schema_version": rec.schema_version,
+        "created_utc": rec.created_utc or "—",
+        "files": [
+            {"name": k, "size": human_size(f.bytes), "sha256": f.sha256[:16]} for k, f in sorted(rec.files.items())
+        ],
+        "coverage": P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None,
+        "city_png": CITY_FILE if CITY_FILE in rec.files else None,
+    }
+
+
+def _scene_values(rec: VersionRecord) -> dict[str, Any]:
+    """The template's values describing the twin: grid, heights, variant, transmitter, objects and provenance."""
+    grid = rec.grid
     objects = [*(rec.scene_spec.get("objects") or []), *(rec.scene_spec.get("prisms") or [])]
     counts = Counter((o.get("kind", "?"), o.get("material", "?")) for o in objects)
+    return {
+        "nx": grid.get("nx"),
+        "ny": grid.get("ny"),
+        "cell_m": grid.get("cell_m"),
+        "x0_m": grid.get("x0_m"),
+        "y0_m": grid.get("y0_m"),
+        "rx_height_m": _fmt(rec.rx_height_m),
+        "robot_height_m": rec.robot_height_m,
+        "description": rec.description or "(no scene description recorded)",
+        "variant": rec.variant,
+        "variant_text": VARIANT_TEXT.get(rec.variant, ""),
+        "transmitter_rows": [(k, _fmt(v)) for k, v in _flatten(rec.transmitter)],
+        "object_rows": [(k, m, c) for (k, m), c in sorted(counts.items())],
+        "num_objects": len(objects),
+        "source": rec.source or "not recorded",
+        "licence": rec.licence or "not recorded",
+        "attribution": rec.attribution or "not recorded",
+        "odbl": _is_odbl(rec),
+        "city": _city_section(rec),
+        "differential": (rec.model_extra or {}).get("differential"),
+        "tx_pose": _tx_pose_section(rec),
+    }
+
+
+def _tracing_values(rec: VersionRecord) -> dict[str, Any]:
+    """The template's values on how the twin was traced: Sionna's version, the RT settings, the libraries."""
+    libs = rec.library_versions
+    return {
+        "sionna_version": f"sionna-rt {libs['sionna-rt']}" if "sionna-rt" in libs else "version not recorded",
+        "rt_rows": [(k, _fmt(v)) for k, v in _flatten(rec.rt)] or [("(none recorded)", "—")],
+        "library_text": ", ".join(f"{k} {v}" for k, v in sorted(libs.items())) or "not recorded",
+    }
+
+
+def _table_values(rec: VersionRecord, moving: dict[str, Any] | None) -> dict[str, Any]:
+    """The template's values on the tables: their columns, row counts and each column's range."""
+    n, stats = rec.num_rows, rec.stats
+    cells = (MOVING_CELL_SCHEMA, MOVING_COLUMN_DESCRIPTIONS) if moving else (CELL_SCHEMA, COLUMN_DESCRIPTIONS)
+    paths = (MOVING_PATH_SCHEMA, MOVING_PATH_COLUMN_DESCRIPTIONS) if moving else (PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS)
     ranges = stats.get("columns") or {}
-    hist = []
-    for i, h in enumerate(history):
-        hist.append(
-            {**h, "created_utc": h.get("created_utc") or "—", "changes": _changes(history[i - 1] if i else None, h)}
-        )
-    card = DatasetCard.from_template(
-        card_data(rec, tag=tag, hub_repo=hub_repo),
-        template_path=str(resources.files("dtradar_data.store") / "templates" / "dataset_card.md"),
-        pretty_name=_pretty_name(rec),
-        summary=summary,
-        name=rec.name,
-        version=rec.version,
-        tag=tag,
-        schema_version=rec.schema_version,
-        created_utc=rec.created_utc or "—",
-        num_rows=n,
-        nx=grid.get("nx"),
-        ny=grid.get("ny"),
-        cell_m=grid.get("cell_m"),
-        x0_m=grid.get("x0_m"),
-        y0_m=grid.get("y0_m"),
-        rx_height_m=_fmt(rec.rx_height_m),
-        robot_height_m=rec.robot_height_m,
-        description=rec.description or "(no scene description recorded)",
-        variant=rec.variant,
-        variant_text=VARIANT_TEXT.get(rec.variant, ""),
-        transmitter_rows=[(k, _fmt(v)) for k, v in _flatten(rec.transmitter)],
-        object_rows=[(k, m, c) for (k, m), c in sorted(counts.items())],
-        num_objects=len(objects),
-        source=rec.source or "not recorded",
-        licence=rec.licence or "not recorded",
-        attribution=rec.attribution or "not recorded",
-        odbl=_is_odbl(rec),
-        sionna_version=f"sionna-rt {libs['sionna-rt']}" if "sionna-rt" in libs else "version not recorded",
-        rt_rows=[(k, _fmt(v)) for k, v in _flatten(rt)] or [("(none recorded)", "—")],
-        library_text=", ".join(f"{k} {v}" for k, v in sorted(libs.items())) or "not recorded",
-        columns=(
-            _columns(MOVING_CELL_SCHEMA, MOVING_COLUMN_DESCRIPTIONS)
-            if moving
-            else _columns(CELL_SCHEMA, COLUMN_DESCRIPTIONS)
-        ),
-        path_columns=(
-            (
-                _columns(MOVING_PATH_SCHEMA, MOVING_PATH_COLUMN_DESCRIPTIONS)
-                if moving
-                else _columns(PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS)
-            )
-            if P.PATHS_FILE in rec.files
-            else []
-        ),
-        moving=moving,
-        num_free=stats.get("num_free", "—"),
-        num_with_paths=stats.get("num_with_paths", "—"),
-        num_blocked=(n - stats["num_free"]) if "num_free" in stats else "—",
-        files=[{"name": k, "size": human_size(f.bytes), "sha256": f.sha256[:16]} for k, f in sorted(rec.files.items())],
-        range_rows=[
+    return {
+        "num_rows": n,
+        "columns": _columns(*cells),
+        "path_columns": _columns(*paths) if P.PATHS_FILE in rec.files else [],
+        "num_free": stats.get("num_free", "—"),
+        "num_with_paths": stats.get("num_with_paths", "—"),
+        "num_blocked": (n - stats["num_free"]) if "num_free" in stats else "—",
+        "range_rows": [
             {"name": c, "min": _fmt(r.get("min")), "max": _fmt(r.get("max")), "nulls": r.get("nulls", "—")}
             for c, r in ranges.items()
             if isinstance(r, dict)
         ],
-        coverage=P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None,
-        hub_repo=hub_repo,
-        history=hist,
-        city=_city_section(rec),
-        city_png=CITY_FILE if CITY_FILE in rec.files else None,
-        differential=(rec.model_extra or {}).get("differential"),
-        tx_pose=_tx_pose_section(rec),
-    )
-    return str(card).rstrip("\n") + "\n"
+    }
 
 
 CITY_FILE = P.CITY_FILE

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -140,101 +140,161 @@ def footprints_from_geojson(
     raw_features = _feature_list(doc, origin)
     _check_geojson_crs(doc, origin)
     hx, hy = local_extent(box, crs)
-    to_local = local_transform(box, crs)
+    project = _projector(box, crs)
     clip = shapely_box(-hx, -hy, hx, hy)
     report = _new_report()
     report["input_features"] = len(raw_features)
     report["clip_half_extent_m"] = [hx, hy]
 
+    out, lonlat_bounds = _processed(raw_features, project, clip, report)
+    if not any(out.values()):
+        raise _empty_error(origin, box, report, lonlat_bounds)
+    return CityFootprints(
+        features=tuple(_named_features(out, report)),
+        box=box,
+        crs=crs,
+        source=source,
+        licence=licence,
+        attribution=attribution,
+        retrieved_utc=retrieved_utc,
+        report=report,
+    )
+
+
+def _processed(
+    raw_features: list, project: Callable, clip: Polygon, report: dict
+) -> tuple[dict[str, list[tuple]], list[tuple[float, float, float, float]]]:
+    """Each kind's kept parts as ``(source id, subtype, label, polygon, properties)``, and the lon/lat bounds read."""
+    lonlat_bounds: list[tuple[float, float, float, float]] = []
+    out: dict[str, list[tuple]] = {k: [] for k in KINDS}
+    for sid, feature, props in _ordered_records(raw_features):
+        kind, subtype, reason = classify(props)
+        if kind is None:
+            _skip(report, reason, sid)
+            continue
+        geom = _lonlat_geometry(feature, sid, report)
+        if geom is None:
+            continue
+        lonlat_bounds.append(geom.bounds)  # kept for the error message when nothing lands inside the box
+        local = _local_geometry(geom, kind, props, project, sid, report)
+        if local is None:
+            continue
+        local = _clipped(local, clip, kind, report)
+        if local is None:
+            continue
+        label = tag_text(props.get("name")) or ""
+        out[kind] += [(sid, subtype, label, part, props) for part in _kept_parts(local, sid, report)]
+    return out, lonlat_bounds
+
+
+def _projector(box: LonLatBox, crs: str) -> Callable[[np.ndarray], np.ndarray]:
+    """A ``shapely.transform`` function taking lon/lat coordinates to the box's local metres."""
+    to_local = local_transform(box, crs)
+
     def project(coords: np.ndarray) -> np.ndarray:
         x, y = to_local(coords[:, 0], coords[:, 1])
         return np.column_stack([x, y])
 
+    return project
+
+
+def _ordered_records(raw_features: list) -> list[tuple[str, Any, Mapping[str, Any]]]:
+    """``(source id, feature, properties)`` of every feature, in order of source id, then position in the file."""
     records = []
     for index, feature in enumerate(raw_features):
         props = feature.get("properties") if isinstance(feature, Mapping) else None
         props = props if isinstance(props, Mapping) else {}
         sid = _source_id(feature if isinstance(feature, Mapping) else {}, props, index)
         records.append((_source_key(sid), index, sid, feature, props))
+    # Sorted so that the output (names, report order) does not depend on the order the source wrote its features in.
     records.sort(key=lambda r: (r[0], r[1]))
+    return [(sid, feature, props) for _, _, sid, feature, props in records]
 
-    lonlat_bounds: list[tuple[float, float, float, float]] = []
-    out: dict[str, list[tuple]] = {k: [] for k in KINDS}
-    for _, _, sid, feature, props in records:
-        kind, subtype, reason = classify(props)
-        if kind is None:
-            _skip(report, reason, sid)
-            continue
-        geom_dict = feature.get("geometry") if isinstance(feature, Mapping) else None
-        if not geom_dict:
-            _skip(report, "no_geometry", sid)
-            continue
-        try:
-            geom = shapely_shape(geom_dict)
-        except (GEOSException, ValueError, TypeError, KeyError, AttributeError, IndexError):
-            _skip(report, "unreadable_geometry", sid)
-            continue
-        coords = shapely.get_coordinates(geom)
-        if geom.is_empty or len(coords) == 0:
-            _skip(report, "empty_geometry", sid)
-            continue
-        if not np.isfinite(coords).all():
-            _skip(report, "non_finite_coordinates", sid)
-            continue
-        if (np.abs(coords[:, 0]) > 180).any() or (np.abs(coords[:, 1]) > 90).any():
-            _skip(report, "not_lonlat", sid)
-            continue
-        lonlat_bounds.append(geom.bounds)
-        polygonal = _polygons(geom) if isinstance(geom, (Polygon, MultiPolygon, GeometryCollection)) else []
-        lines = isinstance(geom, (LineString, MultiLineString))
-        if kind == "road" and lines:
-            width, width_source = road_width(props)
-            _bump(report["road_width_sources"], width_source)
-            local = shapely.transform(geom, project).buffer(width / 2.0, quad_segs=ROAD_QUAD_SEGS)
-        elif polygonal:
-            local = shapely.transform(geom, project)
-        elif lines:
-            _skip(report, "line_not_a_road", sid)  # e.g. a building drawn as an open way
-            continue
-        else:
-            _skip(report, "point_geometry", sid)
-            continue
-        if not local.is_valid:
-            local = shapely.make_valid(local, method="structure", keep_collapsed=False)
-            report["repaired"] += 1
-        if not local.intersects(clip):
-            report["dropped_outside"][kind] += 1
-            continue
-        if not clip.contains(local):
-            local = local.intersection(clip)
-            report["clipped"][kind] += 1
-        local = shapely.set_precision(local, COORD_PRECISION_M)
-        parts = sorted(_polygons(local), key=lambda p: (-round(p.area, 6), p.centroid.x, p.centroid.y))
-        kept = [p for p in parts if p.area >= MIN_AREA_M2]
-        if not kept:
-            _skip(report, "sliver", sid)
-            continue
-        report["dropped_parts"] += len(parts) - len(kept)
-        report["split"] += len(kept) > 1
-        for part in kept:
-            holes = [h for h in part.interiors if Polygon(h).area >= MIN_AREA_M2]
-            report["holes_filled"] += len(part.interiors) - len(holes)
-            part = orient(Polygon(part.exterior, holes), sign=1.0)
-            out[kind].append((sid, subtype, tag_text(props.get("name")) or "", part, props))
 
-    if not any(out.values()):
-        raise _empty_error(origin, box, report, lonlat_bounds)
+def _lonlat_geometry(feature: Any, sid: str, report: dict) -> Any:
+    """A feature's geometry when it is readable, non-empty and in lon/lat degrees, else None (skip counted)."""
+    geom_dict = feature.get("geometry") if isinstance(feature, Mapping) else None
+    if not geom_dict:
+        _skip(report, "no_geometry", sid)
+        return None
+    try:
+        geom = shapely_shape(geom_dict)
+    except (GEOSException, ValueError, TypeError, KeyError, AttributeError, IndexError):
+        _skip(report, "unreadable_geometry", sid)
+        return None
+    coords = shapely.get_coordinates(geom)
+    if geom.is_empty or len(coords) == 0:
+        _skip(report, "empty_geometry", sid)
+        return None
+    if not np.isfinite(coords).all():
+        _skip(report, "non_finite_coordinates", sid)
+        return None
+    if (np.abs(coords[:, 0]) > 180).any() or (np.abs(coords[:, 1]) > 90).any():
+        _skip(report, "not_lonlat", sid)
+        return None
+    return geom
+
+
+def _local_geometry(geom: Any, kind: str, props: Mapping[str, Any], project: Callable, sid: str, report: dict) -> Any:
+    """The geometry as a valid area in local metres (a road line buffered to its width), or None (skip counted)."""
+    polygonal = _polygons(geom) if isinstance(geom, (Polygon, MultiPolygon, GeometryCollection)) else []
+    lines = isinstance(geom, (LineString, MultiLineString))
+    if kind == "road" and lines:
+        width, width_source = road_width(props)
+        _bump(report["road_width_sources"], width_source)
+        local = shapely.transform(geom, project).buffer(width / 2.0, quad_segs=ROAD_QUAD_SEGS)
+    elif polygonal:
+        local = shapely.transform(geom, project)
+    elif lines:
+        _skip(report, "line_not_a_road", sid)  # e.g. a building drawn as an open way
+        return None
+    else:
+        _skip(report, "point_geometry", sid)
+        return None
+    if not local.is_valid:
+        local = shapely.make_valid(local, method="structure", keep_collapsed=False)
+        report["repaired"] += 1
+    return local
+
+
+def _clipped(local: Any, clip: Polygon, kind: str, report: dict) -> Any:
+    """``local`` cut to the clip rectangle, or None when it lies wholly outside (both counted per kind)."""
+    if not local.intersects(clip):
+        report["dropped_outside"][kind] += 1
+        return None
+    if not clip.contains(local):
+        local = local.intersection(clip)
+        report["clipped"][kind] += 1
+    return local
+
+
+def _kept_parts(local: Any, sid: str, report: dict) -> list[Polygon]:
+    """The snapped, oriented polygons of ``local`` of at least the minimum area, largest first; none for a sliver."""
+    local = shapely.set_precision(local, COORD_PRECISION_M)
+    # Rounded area first, then the centroid: a stable order of parts whatever order the geometry library gives them.
+    parts = sorted(_polygons(local), key=lambda p: (-round(p.area, 6), p.centroid.x, p.centroid.y))
+    kept = [p for p in parts if p.area >= MIN_AREA_M2]
+    if not kept:
+        _skip(report, "sliver", sid)
+        return []
+    report["dropped_parts"] += len(parts) - len(kept)
+    report["split"] += len(kept) > 1
+    oriented = []
+    for part in kept:
+        holes = [h for h in part.interiors if Polygon(h).area >= MIN_AREA_M2]
+        report["holes_filled"] += len(part.interiors) - len(holes)
+        oriented.append(orient(Polygon(part.exterior, holes), sign=1.0))
+    return oriented
+
+
+def _named_features(out: dict[str, list[tuple]], report: dict) -> list[Feature]:
+    """The output features, kind by kind, numbered ``<kind>_<NNN>``; buildings get their height and material."""
     features = []
     for kind in KINDS:
+        # Zero-padded to the widest number of the kind, so that names sort in numeric order.
         width = max(3, len(str(len(out[kind]) - 1)))
         for number, (sid, subtype, label, part, props) in enumerate(out[kind]):
-            height, height_source, material, material_source = 0.0, "", "concrete", "rule"
-            if kind == "building":
-                height, height_source = building_height(props, report)
-                material, material_source = building_material(props, height, report)
-                _bump(report["height_sources"], height_source)
-                _bump(report["material_sources"], material_source)
-                _bump(report["materials"], material)
+            height, height_source, material, material_source = _surface(kind, props, report)
             features.append(
                 Feature(
                     kind=kind,
@@ -251,16 +311,19 @@ def footprints_from_geojson(
                 )
             )
         report["kept"][kind] = len(out[kind])
-    return CityFootprints(
-        features=tuple(features),
-        box=box,
-        crs=crs,
-        source=source,
-        licence=licence,
-        attribution=attribution,
-        retrieved_utc=retrieved_utc,
-        report=report,
-    )
+    return features
+
+
+def _surface(kind: str, props: Mapping[str, Any], report: dict) -> tuple[float, str, str, str]:
+    """``(height, its source, material, its source)`` of one output feature, counted in the report for a building."""
+    if kind != "building":
+        return 0.0, "", "concrete", "rule"  # lots and roads are flat ground
+    height, height_source = building_height(props, report)
+    material, material_source = building_material(props, height, report)
+    _bump(report["height_sources"], height_source)
+    _bump(report["material_sources"], material_source)
+    _bump(report["materials"], material)
+    return height, height_source, material, material_source
 
 
 def _feature_list(doc: Any, origin: str) -> list:
