@@ -255,6 +255,30 @@ def write_version(
     ``extra_files`` maps a file name in the version directory (e.g. ``coverage.png``) to a source path.
     """
     did = as_id(dataset_id, check_known=False)
+    _check_name_and_version(did, version)
+    final = P.version_dir(did.scene, did.variant, version)
+    if version_exists(did, version):
+        log.info("%s: version %s exists, reusing it", did.name, version)
+        return final
+    check_can_store(did, version)
+
+    is_moving = _check_schema_versions(meta)
+    cells, paths = _conformed_tables(did, cells, paths, meta, is_moving)
+    extra_files = _checked_extra_files(extra_files)
+    meta = _stored_meta(did, version, cells, meta, is_moving)
+    # The Parquet copy of the metadata is the content description only: file hashes cannot include themselves.
+    meta_json = json.dumps(meta, sort_keys=True, ensure_ascii=False, allow_nan=False).encode()
+
+    clean_stages()
+    # held: a kill leaves the stage to the next write; whatever is left of it on the way out is removed
+    with held_stage(P.work_root(), stage_prefix(did, version)) as stage:
+        _write_stage(stage, cells, paths, extra_files, meta_json)
+        meta["files"] = _file_sums(stage)
+        return _install(did, version, stage, meta)
+
+
+def _check_name_and_version(did: DatasetId, version: str) -> None:
+    """Refuse a dataset name with a revision, or a version that is not a lowercase hex content hash."""
     if did.revision:
         raise InvalidTableError(
             f"write_version takes a dataset name without a revision, got {did}",
@@ -265,12 +289,10 @@ def write_version(
             f"version {version!r} is not a lowercase hex content hash",
             hint="compute it with dtradar_data.store.versions.version_id(inputs)",
         )
-    final = P.version_dir(did.scene, did.variant, version)
-    if version_exists(did, version):
-        log.info("%s: version %s exists, reusing it", did.name, version)
-        return final
-    check_can_store(did, version)
 
+
+def _check_schema_versions(meta: dict[str, Any]) -> bool:
+    """Refuse metadata of another schema version (static, or moving for a moving twin); returns whether it is moving."""
     if int(meta.get("schema_version", SCHEMA_VERSION)) != SCHEMA_VERSION:
         raise SchemaMismatchError(
             f"meta says schema_version {meta['schema_version']}, this library writes v{SCHEMA_VERSION}",
@@ -283,12 +305,24 @@ def write_version(
             f"v{MOVING_SCHEMA_VERSION}",
             hint="rebuild the moving twin with this library version",
         )
+    return is_moving
+
+
+def _conformed_tables(
+    did: DatasetId, cells: pa.Table, paths: pa.Table | None, meta: dict[str, Any], is_moving: bool
+) -> tuple[pa.Table, pa.Table | None]:
+    """The cells checked to be the grid and the paths (if any), both in their schema and sorted as stored."""
     cells = _check_grid(conform(cells, cell_schema(is_moving), f"cells table of {did.name}"), meta)
     if paths is not None:
         keys = [("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")]
         paths = conform(paths, path_schema(is_moving), f"paths table of {did.name}").sort_by(
             [("t", "ascending"), *keys] if is_moving else keys
         )
+    return cells, paths
+
+
+def _checked_extra_files(extra_files: dict[str, Path] | None) -> dict[str, Path]:
+    """A copy of ``extra_files``, each a plain, unreserved name whose source file exists."""
     extra_files = dict(extra_files or {})
     for fname, src in extra_files.items():
         if fname in RESERVED_FILES or Path(fname).name != fname or fname.startswith("."):
@@ -298,7 +332,13 @@ def write_version(
             )
         if not Path(src).is_file():
             raise InvalidTableError(f"extra file {fname!r}: {src} does not exist", hint="write it before storing")
+    return extra_files
 
+
+def _stored_meta(
+    did: DatasetId, version: str, cells: pa.Table, meta: dict[str, Any], is_moving: bool
+) -> dict[str, Any]:
+    """A JSON-safe copy of ``meta`` with the stats, the version's names and schema versions, and no ``files``."""
     meta = json_safe(copy.deepcopy(meta))
     meta["stats"] = {**table_stats(cells), **(meta.get("stats") or {})}
     meta.update(
@@ -313,23 +353,25 @@ def write_version(
         meta["moving_schema_version"] = MOVING_SCHEMA_VERSION
     meta.setdefault("created_utc", datetime.now(timezone.utc).isoformat(timespec="seconds"))
     meta.pop("files", None)
-    # The Parquet copy of the metadata is the content description only: file hashes cannot include themselves.
-    meta_json = json.dumps(meta, sort_keys=True, ensure_ascii=False, allow_nan=False).encode()
+    return meta
 
-    clean_stages()
-    # held: a kill leaves the stage to the next write; whatever is left of it on the way out is removed
-    with held_stage(P.work_root(), stage_prefix(did, version)) as stage:
-        _write_parquet(cells, stage / P.CELLS_FILE, meta_json)
-        if paths is not None:
-            _write_parquet(paths, stage / P.PATHS_FILE, meta_json)
-        for fname, src in sorted(extra_files.items()):
-            shutil.copyfile(src, stage / fname)
-        meta["files"] = {
-            f.name: {"sha256": sha256_file(f), "bytes": f.stat().st_size}
-            for f in sorted(stage.iterdir())
-            if f.is_file()
-        }
-        return _install(did, version, stage, meta)
+
+def _write_stage(
+    stage: Path, cells: pa.Table, paths: pa.Table | None, extra_files: dict[str, Path], meta_json: bytes
+) -> None:
+    """Write the Parquet tables and copy the extra files into ``stage``."""
+    _write_parquet(cells, stage / P.CELLS_FILE, meta_json)
+    if paths is not None:
+        _write_parquet(paths, stage / P.PATHS_FILE, meta_json)
+    for fname, src in sorted(extra_files.items()):
+        shutil.copyfile(src, stage / fname)
+
+
+def _file_sums(stage: Path) -> dict[str, dict[str, Any]]:
+    """``{name: {sha256, bytes}}`` of every file in ``stage``, by name (meta.json's ``files``)."""
+    return {
+        f.name: {"sha256": sha256_file(f), "bytes": f.stat().st_size} for f in sorted(stage.iterdir()) if f.is_file()
+    }
 
 
 def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], preferred_tag: str | None = None) -> Path:
