@@ -260,6 +260,37 @@ def run(
     torch.set_num_threads(cfg.threads or auto_threads())
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
     normalizer = normalizer or Normalizer.fit(ds)
+    loop = _start(cfg, make_learner, ds, normalizer)
+    callback_s = _train(cfg, loop, callback, t_start)
+    wall = time.perf_counter() - t_start - callback_s
+    return _result(cfg, loop, ds, normalizer, wall)
+
+
+_MakeLearner = Callable[[QLearningConfig, BatchedNavEnv, torch.Generator], QLearner]
+_Callback = Callable[[torch.Tensor, int, float], bool]
+
+
+@dataclass
+class _Loop:
+    """What the online loop carries from one batch of steps to the next."""
+
+    env: BatchedNavEnv
+    locate: Localiser
+    gen: torch.Generator
+    learner: QLearner
+    next_cell: torch.Tensor  # the training twin's map (cell, action) -> cell, for moves that end without radio
+    q: torch.Tensor
+    b: torch.Tensor  # believed cell of every robot
+    g: torch.Tensor  # target cell of every robot
+    heard: torch.Tensor  # whether the robot senses radio features where it stands
+    ep_collisions: torch.Tensor
+    env_steps: int = 0
+    episodes: list[tuple[int, int, int, bool]] = field(default_factory=list)  # (env_step, steps, collisions, success)
+
+
+def _start(cfg: QLearningConfig, make_learner: _MakeLearner, ds: Dataset, normalizer: Normalizer) -> _Loop:
+    """The env, the learner and the robots' first observations (:class:`TooLargeError` first if the table won't fit)."""
+    # refused before the env is made: a run that cannot hold its table should not first spend the time to build one
     cells = ds.shape[0] * ds.shape[1]
     check_table_size(cells, cells, cfg.max_table_bytes, f"the Q table of {ds.name}")
     check_memory(
@@ -269,81 +300,92 @@ def run(
     )
     env = make_env(cfg, ds, normalizer)
     locate = Localiser(ds, normalizer)
+    # the learner's generator, seeded apart from the env's (which takes cfg.seed)
     gen = torch.Generator()
     gen.manual_seed(cfg.seed + 1)
     learner = make_learner(cfg, env, gen)
     next_cell = torch.as_tensor(env.mdp.next_cell)
-    q, n = learner.q, cfg.num_envs
-
-    env_steps, callback_s = 0, 0.0
-    episodes: list[tuple[int, int, int, bool]] = []  # (env_step, steps, collisions, success)
-    ep_collisions = torch.zeros(n, dtype=torch.long)
+    ep_collisions = torch.zeros(cfg.num_envs, dtype=torch.long)
     env.reset()
     obs = env.observe()
     b, g = (torch.from_numpy(x) for x in locate(obs))
     heard = torch.from_numpy(locate.hears(obs))
+    return _Loop(env, locate, gen, learner, next_cell, learner.q, b, g, heard, ep_collisions)
+
+
+def _train(cfg: QLearningConfig, loop: _Loop, callback: _Callback | None, t_start: float) -> float:
+    """Step all robots until the budget is spent or ``callback`` stops the run; returns the seconds spent in the
+    callback (not counted as training time)."""
+    callback_s = 0.0
     t_loop = time.perf_counter()
     next_log = cfg.total_env_steps // 10
-    while env_steps < cfg.total_env_steps:
-        # 1. act epsilon-greedily on what the robots believe
-        eps = epsilon(cfg, env_steps)
-        a = epsilon_greedy(q[b, g], eps, gen)
-        # 2. step, localise where the robots got to
-        next_obs, reward, terminated, truncated, info = env.step(a)
-        b_next = torch.from_numpy(locate.believed(next_obs))
-        heard_next = torch.from_numpy(locate.hears(next_obs))
-        env_steps += n
-        # 3. learn from the steps that begin where the robot senses radio features (one that ends where it senses
-        # none learns the cell its move led to on the training twin's map)
-        ok, c = heard, info["collision"]
-        landed = torch.where(heard_next, b_next, next_cell[b, a])
-        learner.observe(b[ok], g[ok], a[ok], reward[ok], landed[ok], c[ok], terminated[ok], env_steps)
-        # 4. book-keeping, reset the finished robots
-        ep_collisions += info["collision"].long()
-        done = terminated | truncated
-        b, heard = b_next, heard_next
-        if bool(done.any()):
-            idx = torch.nonzero(done, as_tuple=True)[0]
-            episodes += [
-                (env_steps, int(info["steps"][i]), int(ep_collisions[i]), bool(terminated[i])) for i in idx.tolist()
-            ]
-            ep_collisions[idx] = 0
-            env.reset_where(done)
-            fresh = env.observe()[idx]
-            b_new, g_new = locate(fresh)
-            b[idx], g[idx] = torch.from_numpy(b_new), torch.from_numpy(g_new)
-            heard[idx] = torch.from_numpy(locate.hears(fresh))
+    while loop.env_steps < cfg.total_env_steps:
+        eps = epsilon(cfg, loop.env_steps)
+        _step(cfg, loop, eps)
         if callback is not None:
             t_cb = time.perf_counter()
-            stop = callback(q, env_steps, t_cb - t_loop - callback_s)
+            stop = callback(loop.q, loop.env_steps, t_cb - t_loop - callback_s)
             callback_s += time.perf_counter() - t_cb
             if stop:
                 break
-        if cfg.verbose and env_steps >= next_log:
-            s = summary(episodes)
+        if cfg.verbose and loop.env_steps >= next_log:
+            s = summary(loop.episodes)
             print(
-                f"[{time.perf_counter() - t_start:6.1f}s] {cfg.learner} steps {env_steps:>8d}  episodes "
-                f"{len(episodes):>6d}  eps {eps:.3f}  success {s.get('success_rate', 0):.3f}  "
-                f"updates {learner.updates}",
+                f"[{time.perf_counter() - t_start:6.1f}s] {cfg.learner} steps {loop.env_steps:>8d}  episodes "
+                f"{len(loop.episodes):>6d}  eps {eps:.3f}  success {s.get('success_rate', 0):.3f}  "
+                f"updates {loop.learner.updates}",
                 flush=True,
             )
             next_log += cfg.total_env_steps // 10
+    return callback_s
 
-    wall = time.perf_counter() - t_start - callback_s
-    policy = TablePolicy(ds, greedy_actions(q), normalizer, name=cfg.learner)
-    stats = {"env_steps": env_steps, "episodes": len(episodes), "wall_s": wall, **learner.stats()}
+
+def _step(cfg: QLearningConfig, loop: _Loop, eps: float) -> None:
+    """One step of all robots (module docstring, steps 1-4)."""
+    b, g = loop.b, loop.g
+    # 1. act epsilon-greedily on what the robots believe
+    a = epsilon_greedy(loop.q[b, g], eps, loop.gen)
+    # 2. step, localise where the robots got to
+    next_obs, reward, terminated, truncated, info = loop.env.step(a)
+    b_next = torch.from_numpy(loop.locate.believed(next_obs))
+    heard_next = torch.from_numpy(loop.locate.hears(next_obs))
+    loop.env_steps += cfg.num_envs
+    # 3. learn from the steps that begin where the robot senses radio features (one that ends where it senses
+    # none learns the cell its move led to on the training twin's map)
+    ok, c = loop.heard, info["collision"]
+    landed = torch.where(heard_next, b_next, loop.next_cell[b, a])
+    loop.learner.observe(b[ok], g[ok], a[ok], reward[ok], landed[ok], c[ok], terminated[ok], loop.env_steps)
+    # 4. book-keeping, reset the finished robots
+    loop.ep_collisions += info["collision"].long()
+    loop.b, loop.heard = b_next, heard_next
+    done = terminated | truncated
+    if bool(done.any()):
+        _reset_finished(loop, done, terminated, info)
+
+
+def _reset_finished(loop: _Loop, done: torch.Tensor, terminated: torch.Tensor, info: dict[str, Any]) -> None:
+    """Record the robots' finished episodes, reset them and localise their new observations."""
+    idx = torch.nonzero(done, as_tuple=True)[0]
+    loop.episodes += [
+        (loop.env_steps, int(info["steps"][i]), int(loop.ep_collisions[i]), bool(terminated[i])) for i in idx.tolist()
+    ]
+    loop.ep_collisions[idx] = 0
+    loop.env.reset_where(done)
+    fresh = loop.env.observe()[idx]
+    b_new, g_new = loop.locate(fresh)
+    loop.b[idx], loop.g[idx] = torch.from_numpy(b_new), torch.from_numpy(g_new)
+    loop.heard[idx] = torch.from_numpy(loop.locate.hears(fresh))
+
+
+def _result(cfg: QLearningConfig, loop: _Loop, ds: Dataset, normalizer: Normalizer, wall: float) -> TabularResult:
+    """The table's greedy policy and how the run went, written to the output directory when ``cfg.save``."""
+    policy = TablePolicy(ds, greedy_actions(loop.q), normalizer, name=cfg.learner)
+    n_episodes = len(loop.episodes)
+    stats = {"env_steps": loop.env_steps, "episodes": n_episodes, "wall_s": wall, **loop.learner.stats()}
     stats["threads"] = torch.get_num_threads()
-    result = TabularResult(
-        q,
-        policy,
-        cfg.out_dir if cfg.save else None,
-        env_steps,
-        learner.updates,
-        len(episodes),
-        wall,
-        summary(episodes),
-        stats,
-    )
+    out = cfg.out_dir if cfg.save else None
+    final = summary(loop.episodes)
+    result = TabularResult(loop.q, policy, out, loop.env_steps, loop.learner.updates, n_episodes, wall, final, stats)
     if cfg.save:
         write_result(cfg, result, ds)
     return result

@@ -32,7 +32,7 @@ twin's, so an episode's discounted return is exact (cut at the step limit like a
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -104,9 +104,63 @@ def follow_sensing(
     moves (:class:`~dtradar_rl.tabular.fingerprints.Tracker`) instead of reading ``loc`` afresh at every step."""
     cfg = (cfg or BatchConfig()).validate()
     plan_cfg = replace(cfg, tol=max(cfg.tol, REPLAN_TOL))
-    bp = model.tab
     max_steps = int(max_steps or twin.mdp.max_steps)
     starts, targets = np.asarray(starts, np.int64), np.asarray(targets, np.int64)
+    ep = _start(model, table, rows, twin, loc, starts, targets, tracker)
+    for _ in range(max_steps):
+        live = np.flatnonzero(~ep.done)
+        if not live.size:
+            break
+        # 1. localise (the module docstring's steps)
+        cell = twin.cells[ep.s[live]]
+        b_cell = ep.belief[live] if tracker is not None else loc[cell]
+        b = model.tab.state_of[b_cell]
+        # 2. sense, 3. re-plan, then move
+        _sense(ep, live, cell, b_cell, b, sensed, expected)
+        _replan(ep, live, name, model, plan_cfg)
+        a, st, nxt = _move(ep, live, b, twin, cfg.gamma)
+        if tracker is not None:
+            _track(ep, live, tracker, twin, b_cell, a, st, nxt)
+    return _paths(ep, twin, starts)
+
+
+@dataclass
+class _Episodes:
+    """What the lockstep episodes carry from one step to the next (one entry per episode unless said)."""
+
+    s: np.ndarray  # the twin's state the robot stands on
+    t: np.ndarray  # the twin's state of its target
+    targets: np.ndarray  # the grid cell of its target
+    plan: np.ndarray  # int64[n_ep, N] the move it makes from every believed blueprint state
+    forbid: np.ndarray  # bool[n_ep, N, 4] the moves it believes blocked, in believed coordinates
+    dirty: np.ndarray  # its forbidden set grew since its plan was made
+    nb: np.ndarray  # the blueprint's neighbour_cells
+    utargets: np.ndarray  # the distinct targets
+    r_twin: np.ndarray  # [U, N_twin, 4] the twin's reward towards each distinct target
+    urow: np.ndarray  # the row of its target in utargets and r_twin
+    done: np.ndarray
+    steps: np.ndarray
+    travelled: np.ndarray
+    collisions: np.ndarray
+    replans: np.ndarray
+    returns: np.ndarray
+    disc: np.ndarray  # gamma ** steps, the discount of its next reward
+    belief: np.ndarray  # its believed blueprint cell (read with a tracker only)
+
+
+def _start(
+    model: EmpiricalModel,
+    table: np.ndarray,
+    rows: np.ndarray,
+    twin: TabularMDP,
+    loc: np.ndarray,
+    starts: np.ndarray,
+    targets: np.ndarray,
+    tracker: Tracker | None,
+) -> _Episodes:
+    """Every episode on its start, following its row of ``table``, nothing forbidden yet, believing where the nearest
+    fingerprint (or the tracker's start) puts it."""
+    bp = model.tab
     n_ep = starts.size
     s, t = twin.states(starts).copy(), twin.states(targets)
     plan = np.asarray(table)[np.asarray(rows)].copy()
@@ -124,54 +178,91 @@ def follow_sensing(
     returns = np.zeros(n_ep)
     disc = np.ones(n_ep)
     belief = (tracker.start if tracker is not None else loc.__getitem__)(twin.cells[s])
-    for _ in range(max_steps):
-        live = np.flatnonzero(~done)
-        if not live.size:
-            break
-        cell = twin.cells[s[live]]
-        b_cell = belief[live] if tracker is not None else loc[cell]
-        b = bp.state_of[b_cell]
-        # what the robot senses next to it, against what the blueprint says is next to where it believes it is
-        true_nb, believed_nb = nb[cell], nb[b_cell]
-        flag = np.where(true_nb >= 0, sensed[true_nb.clip(0)], False)
-        expect = np.where(believed_nb >= 0, expected[believed_nb.clip(0)], False)
-        new = ~flag & expect & (believed_nb != targets[live, None]) & ~forbid[live, b]
-        li, la = np.nonzero(new)
-        forbid[live[li], b[li], la] = True
-        dirty[live[li]] = True
-        again = live[dirty[live]]
-        if again.size:
-            plan[again] = learn(name, model, targets[again], plan_cfg, forbidden=forbid[again])
-            dirty[again] = False
-            replans[again] += 1
-        a = plan[live, b]
-        st = s[live]
-        nxt = twin.next[st, a]
-        bump = twin.collides[st, a]
-        returns[live] += disc[live] * r_twin[urow[live], st, a]
-        disc[live] *= cfg.gamma
-        travelled[live] += nxt != st
-        collisions[live] += bump
-        steps[live] += 1
-        # a bump is a move the robot now knows is blocked: forbidden, and a new plan before the next move
-        forbid[live[bump], b[bump], a[bump]] = True
-        dirty[live[bump]] = True
-        s[live] = nxt
-        done[live] = nxt == t[live]
-        if tracker is not None:
-            b_new = tracker.step(b_cell, a, nxt != st, twin.cells[nxt])
-            # believing to stand on the target while the episode goes on: the belief is wrong, start it afresh
-            lost = (b_new == targets[live]) & ~done[live]
-            belief[live] = np.where(lost, tracker.start(twin.cells[nxt]), b_new)
-    shortest = twin.mdp.bfs_distances_many(utargets)[urow, starts]
+    return _Episodes(
+        s, t, targets, plan, forbid, dirty, nb, utargets, r_twin, urow, done, steps, travelled, collisions, replans,
+        returns, disc, belief,
+    )  # fmt: skip
+
+
+def _sense(
+    ep: _Episodes,
+    live: np.ndarray,
+    cell: np.ndarray,
+    b_cell: np.ndarray,
+    b: np.ndarray,
+    sensed: np.ndarray,
+    expected: np.ndarray,
+) -> None:
+    """Forbid the moves towards a neighbour the blueprint says has radio but that senses none (not the target)."""
+    # what the robot senses next to it, against what the blueprint says is next to where it believes it is
+    true_nb, believed_nb = ep.nb[cell], ep.nb[b_cell]
+    flag = np.where(true_nb >= 0, sensed[true_nb.clip(0)], False)
+    expect = np.where(believed_nb >= 0, expected[believed_nb.clip(0)], False)
+    new = ~flag & expect & (believed_nb != ep.targets[live, None]) & ~ep.forbid[live, b]
+    li, la = np.nonzero(new)
+    ep.forbid[live[li], b[li], la] = True
+    ep.dirty[live[li]] = True
+
+
+def _replan(ep: _Episodes, live: np.ndarray, name: str, model: EmpiricalModel, plan_cfg: BatchConfig) -> None:
+    """Solve the learner again, all together, for the robots whose forbidden set grew."""
+    again = live[ep.dirty[live]]
+    if again.size:
+        ep.plan[again] = learn(name, model, ep.targets[again], plan_cfg, forbidden=ep.forbid[again])
+        ep.dirty[again] = False
+        ep.replans[again] += 1
+
+
+def _move(
+    ep: _Episodes, live: np.ndarray, b: np.ndarray, twin: TabularMDP, gamma: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Make each live robot's planned move on the twin and tally it; returns the moves, the states they started
+    from and the states they led to."""
+    a = ep.plan[live, b]
+    st = ep.s[live]
+    nxt = twin.next[st, a]
+    bump = twin.collides[st, a]
+    ep.returns[live] += ep.disc[live] * ep.r_twin[ep.urow[live], st, a]
+    ep.disc[live] *= gamma
+    ep.travelled[live] += nxt != st
+    ep.collisions[live] += bump
+    ep.steps[live] += 1
+    # a bump is a move the robot now knows is blocked: forbidden, and a new plan before the next move
+    ep.forbid[live[bump], b[bump], a[bump]] = True
+    ep.dirty[live[bump]] = True
+    ep.s[live] = nxt
+    ep.done[live] = nxt == ep.t[live]
+    return a, st, nxt
+
+
+def _track(
+    ep: _Episodes,
+    live: np.ndarray,
+    tracker: Tracker,
+    twin: TabularMDP,
+    b_cell: np.ndarray,
+    a: np.ndarray,
+    st: np.ndarray,
+    nxt: np.ndarray,
+) -> None:
+    """Carry each live robot's belief along the move it made."""
+    b_new = tracker.step(b_cell, a, nxt != st, twin.cells[nxt])
+    # believing to stand on the target while the episode goes on: the belief is wrong, start it afresh
+    lost = (b_new == ep.targets[live]) & ~ep.done[live]
+    ep.belief[live] = np.where(lost, tracker.start(twin.cells[nxt]), b_new)
+
+
+def _paths(ep: _Episodes, twin: TabularMDP, starts: np.ndarray) -> dict[str, np.ndarray]:
+    """What :func:`follow_sensing` returns: the episodes' outcomes and the shortest path of each."""
+    shortest = twin.mdp.bfs_distances_many(ep.utargets)[ep.urow, starts]
     return {
-        "success": done,
-        "steps": steps,
-        "travelled": travelled,
+        "success": ep.done,
+        "steps": ep.steps,
+        "travelled": ep.travelled,
         "shortest": shortest,
-        "collisions": collisions,
-        "returns": returns,
-        "replans": replans,
+        "collisions": ep.collisions,
+        "returns": ep.returns,
+        "replans": ep.replans,
     }
 
 
