@@ -66,10 +66,30 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
         noise: str | NoiseModel = "none",
         fast_path: bool = True,
     ):
+        self._check_arguments(mdp, num_envs, aug_obstacles, aug_obstacle_size, aug_potential)
+        self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
+        self._init_snapshots(mdp, obs_table)
+        self._init_settings(reward, max_steps, device, seed)
+        self._init_tables(mdp, obs_table)
+        cells = self._init_components(mdp)
+        self._init_pool(mdp, cells, target_pool, seed)
+        self._init_episodes(mdp)
+        self._init_augmentation(aug_obstacles, aug_obstacle_size, aug_potential)
+        self._init_noise(noise, obs_table, seed)
+        #: the fast path where it applies (dtradar_rl.envs.batched_fast); False keeps the general one (tests, bench)
+        self.fast_path = bool(fast_path)
+        self._build_fast()
+
+    def _check_arguments(
+        self, mdp: GridMDP, num_envs: int, aug_obstacles: int, aug_obstacle_size: int, aug_potential: str
+    ) -> None:
+        """Refuse a batch of no robots and an augmentation the grid cannot take, before anything is built."""
         if num_envs < 1:
             raise InvalidCoordinatesError(f"num_envs must be >= 1, got {num_envs}")
         self._check_augmentation(mdp, num_envs, aug_obstacles, aug_obstacle_size, aug_potential)
-        self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
+
+    def _init_snapshots(self, mdp: GridMDP, obs_table: ObservationTable) -> None:
+        """Whether the twin moves and its snapshot count, which the observation table must share."""
         #: a moving twin (snapshots in time); decided here, once: a static twin's step is unchanged
         self.moving = isinstance(mdp, MovingGridMDP)
         self.snapshots = mdp.snapshots if self.moving else 1
@@ -78,22 +98,28 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
                 f"the observation table has {obs_table.snapshots} snapshot(s), the MDP {self.snapshots}",
                 hint="build both from the same dataset",
             )
+
+    def _init_settings(self, reward: str, max_steps: int | None, device: str | torch.device, seed: int) -> None:
+        """The reward, its shaping potential, the step limit, the device and the episodes' seeded generator."""
         self.reward_name = check_reward(reward)
         self.potential = potential_kind(reward)
-        self.max_steps = check_max_steps(max_steps) or mdp.max_steps
+        self.max_steps = check_max_steps(max_steps) or self.mdp.max_steps
         self.device = torch.device(device)
         self.gen = torch.Generator(device=self.device)
         self.gen.manual_seed(int(seed))
-        dev = self.device
-        t = lambda a, dt: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=dev)  # noqa: E731
-        self.next_cell = t(mdp.next_cell, torch.long)
-        self.collides = t(mdp.collides, torch.bool)
-        self.cell_part = t(obs_table.cell_part, torch.float32)
-        self.target_part = t(obs_table.target_part, torch.float32)
-        iy, ix = np.divmod(np.arange(mdp.num_cells), mdp.nx)
-        self.ix, self.iy = t(ix, torch.float32), t(iy, torch.float32)
 
-        # Pair sampling: target uniform over the pool, start uniform over the rest of the target's component.
+    def _init_tables(self, mdp: GridMDP, obs_table: ObservationTable) -> None:
+        """The moves, collisions, observation parts and cell coordinates as tensors on the device."""
+        self.next_cell = self._tensor(mdp.next_cell, torch.long)
+        self.collides = self._tensor(mdp.collides, torch.bool)
+        self.cell_part = self._tensor(obs_table.cell_part, torch.float32)
+        self.target_part = self._tensor(obs_table.target_part, torch.float32)
+        iy, ix = np.divmod(np.arange(mdp.num_cells), mdp.nx)
+        self.ix, self.iy = self._tensor(ix, torch.float32), self._tensor(iy, torch.float32)
+
+    def _init_components(self, mdp: GridMDP) -> np.ndarray:
+        """The cells of connected pairs grouped by component, so a reset draws a start uniform over the rest of its
+        target's component with one random number; returns those cells."""
         cells = mdp.pair_cells()
         if cells.size == 0:
             raise NoConnectedPairError(f"{mdp.name}: no two free cells are connected")
@@ -105,10 +131,14 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
         first = np.concatenate([[0], np.cumsum(size)[:-1]])
         rank = np.zeros(mdp.num_cells, np.int64)
         rank[members] = np.arange(members.size) - first[comp]
-        self.members, self.comp_first = t(members, torch.long), t(first, torch.long)
-        self.comp_size = t(size, torch.long)
-        self.component, self.rank = t(mdp.component, torch.long), t(rank, torch.long)
+        self.members, self.comp_first = self._tensor(members, torch.long), self._tensor(first, torch.long)
+        self.comp_size = self._tensor(size, torch.long)
+        self.component, self.rank = self._tensor(mdp.component, torch.long), self._tensor(rank, torch.long)
+        return cells
 
+    def _init_pool(self, mdp: GridMDP, cells: np.ndarray, target_pool: int | None, seed: int) -> None:
+        """The targets random resets draw from and their distance tables; a large geodesic grid gets a sample of
+        them, so the tables stay within :data:`MAX_DISTANCE_TABLE` entries."""
         rng = np.random.default_rng(seed)
         if target_pool is None and cells.size * mdp.num_cells > MAX_DISTANCE_TABLE and self.potential == "geodesic":
             target_pool = max(1, MAX_DISTANCE_TABLE // mdp.num_cells)
@@ -117,15 +147,17 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
             if not target_pool or target_pool >= cells.size
             else np.sort(rng.choice(cells, target_pool, replace=False))
         )
-        self.pool = t(pool, torch.long)
+        self.pool = self._tensor(pool, torch.long)
         self._pool_pos = {int(c): k for k, c in enumerate(pool)}
         self.dist = (
-            t(mdp.bfs_distances_many(pool), torch.int32)
+            self._tensor(mdp.bfs_distances_many(pool), torch.int32)
             if self.potential == "geodesic"
-            else torch.zeros((pool.size, 0), dtype=torch.int32, device=dev)
+            else torch.zeros((pool.size, 0), dtype=torch.int32, device=self.device)
         )
 
-        n = self.num_envs
+    def _init_episodes(self, mdp: GridMDP) -> None:
+        """The episodes' state, empty until the first reset, and on a moving twin the snapshots' blocked masks."""
+        n, dev = self.num_envs, self.device
         self.cell = torch.zeros(n, dtype=torch.long, device=dev)
         self.target = torch.zeros(n, dtype=torch.long, device=dev)
         self.tpool = torch.zeros(n, dtype=torch.long, device=dev)
@@ -134,22 +166,22 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
             #: ``long[num_envs]``: each robot's snapshot
             self.t = torch.zeros(n, dtype=torch.long, device=dev)
             #: ``bool[T * cells]``: blocked at snapshot t (static obstacle or mover), row ``t * cells + cell``
-            self.covered = t(mdp.covered.ravel(), torch.bool)
-            self.t_next = t((np.arange(self.snapshots) + 1) % self.snapshots, torch.long)
+            self.covered = self._tensor(mdp.covered.ravel(), torch.bool)
+            self.t_next = self._tensor((np.arange(self.snapshots) + 1) % self.snapshots, torch.long)
 
-        self._init_augmentation(aug_obstacles, aug_obstacle_size, aug_potential)
-
-        # Measurement noise (see dtradar_rl.task.noise): its own generator, so "none" leaves every draw unchanged.
+    def _init_noise(self, noise: str | NoiseModel, obs_table: ObservationTable, seed: int) -> None:
+        """Measurement noise (see dtradar_rl.task.noise): its own generator, so "none" leaves every draw unchanged."""
         model = noise_model(noise)
+        dev = self.device
         self.noise = None if model.is_zero else RadioNoise(model, obs_table, obs_table.normalizer, dev)
         self.noise_gen = torch.Generator(device=dev)
         self.noise_gen.manual_seed(int(seed) + NOISE_SEED_OFFSET)
         if self.noise is not None:  # drawn at every reset and step; nothing is observed before the first reset
-            self.errors = torch.zeros((n, self.noise.groups, len(ERRORS)), dtype=torch.float64, device=dev)
+            self.errors = torch.zeros((self.num_envs, self.noise.groups, len(ERRORS)), dtype=torch.float64, device=dev)
 
-        #: the fast path where it applies (dtradar_rl.envs.batched_fast); False keeps the general one (tests, bench)
-        self.fast_path = bool(fast_path)
-        self._build_fast()
+    def _tensor(self, a, dtype: torch.dtype) -> torch.Tensor:
+        """``a`` as a contiguous tensor of ``dtype`` on the env's device."""
+        return torch.as_tensor(np.ascontiguousarray(a), dtype=dtype, device=self.device)
 
     def _draw_errors(self, idx: torch.Tensor | None = None) -> None:
         """A new measurement for robots ``idx`` (default all): fresh noise errors."""

@@ -13,6 +13,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from dtradar_data.core import layout as P
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import sha256_file, waiting_lock, write_atomic
@@ -108,16 +110,13 @@ def _train_medium(cfg: BehaviourConfig, ds: Dataset, inputs: dict[str, Any], key
     on the normalised score's pairs, and stop at the first evaluation at or above the target."""
     import torch
 
-    from dtradar_rl.train.config import config_for
     from dtradar_rl.train.dqn import train
 
-    recipe, settings = inputs["medium"], inputs["settings"]
+    recipe = inputs["medium"]
     refs = reference_scores(ds, pairs=recipe["pairs"], seed=recipe["eval_seed"], device=cfg.device)
     normalizer = Normalizer.fit(ds)
     pairs = sample_eval_pairs(ds, recipe["pairs"], recipe["eval_seed"])
-    eval_spec = BehaviourSpec("epsilon-greedy", epsilon=recipe["epsilon"])
     history: list[list[float]] = []
-    next_eval = [recipe["eval_every"]]
     say(
         f"training the medium agent {key} on {ds.name} ({recipe['preset']} DQN, seed {cfg.seed}, up to "
         f"{recipe['budget']} env steps, until its normalised score reaches {recipe['target']:g})"
@@ -125,84 +124,134 @@ def _train_medium(cfg: BehaviourConfig, ds: Dataset, inputs: dict[str, Any], key
     threads = torch.get_num_threads()
     with held_stage(P.work_root(), _AGENT_STAGE) as stage:
         out = stage / "run"
-        dqn_cfg = config_for(
-            recipe["preset"],
-            scene=cfg.scene,
-            variant=cfg.variant,
-            revision=cfg.revision,
-            obs=cfg.obs,
-            reward=cfg.reward,
-            max_steps=settings["max_steps"],
-            num_envs=cfg.num_envs,
-            hidden=tuple(recipe["hidden"]),
-            device=cfg.device,
-            seed=cfg.seed,
-            threads=recipe["threads"],
-            total_env_steps=recipe["budget"],
-            buffer_size=recipe["budget"] + cfg.num_envs,  # never wraps: the replay buffer keeps every transition
-            checkpoint_every=0,
-            save_replay=True,
-            out=str(out),
-            verbose=False,
-        )
-
-        def callback(q, env_steps: int, train_s: float) -> bool:
-            if env_steps < next_eval[0]:
-                return False
-            while next_eval[0] <= env_steps:
-                next_eval[0] += recipe["eval_every"]
-            greedy = Policy(q, dqn_cfg, normalizer, cfg.obs, {})
-            bp = BehaviourPolicy(
-                q=None, config=None, normalizer=normalizer, obs_preset=cfg.obs, meta={}, spec=eval_spec,
-                seed=recipe["eval_seed"], greedy=greedy,
-            )  # fmt: skip
-            spl = metrics_from_rollouts(rollout(bp, ds, pairs, device=cfg.device)).spl
-            score = normalized(spl, refs)
-            history.append([int(env_steps), round(float(train_s), 3), spl, score])
-            if cfg.verbose:
-                say(f"  medium agent: {env_steps:>7d} env steps, {train_s:6.1f} s, normalised score {score:6.1f}")
-            return score >= recipe["target"]
-
+        dqn_cfg = _dqn_config(cfg, recipe, inputs["settings"], out)
+        callback = _evaluate_until_target(cfg, ds, recipe, dqn_cfg, normalizer, refs, pairs, history, say)
         try:
             result = train(dqn_cfg, ds, normalizer=normalizer, callback=callback)
         finally:
             torch.set_num_threads(threads)
-        if not history or history[-1][3] < recipe["target"]:
-            best = max((h[3] for h in history), default=float("nan"))
-            raise ConfigError(
-                f"the medium agent reached a normalised score of {best:.1f} at most in {result.env_steps} env steps "
-                f"on {ds.name}, short of the target {recipe['target']:g}",
-                hint="raise --medium-budget, or lower --medium-target",
-            )
-        steps, _, spl, score = history[-1]
-        record = {
-            "key": key,
-            "inputs": inputs,
-            "stopped_at_env_steps": int(result.env_steps),
-            "updates": int(result.updates),
-            "episodes": int(result.episodes),
-            "train_s": float(result.wall_s),
-            "spl": float(spl),
-            "score": float(score),
-            "target": float(recipe["target"]),
-            "tolerance": MEDIUM_TOLERANCE,
-            "within_tolerance": bool(score - recipe["target"] <= MEDIUM_TOLERANCE),
-            "references": refs,
-            "evaluations": len(history),
-            "history": [{"env_steps": h[0], "train_s": h[1], "spl": h[2], "score": h[3]} for h in history],
-            "checkpoint_sha256": sha256_file(out / "model.pt"),
-        }
-        write_atomic(out / MEDIUM_RECORD, json.dumps(record, indent=2, sort_keys=True) + "\n")
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        if dest.exists():  # damaged: moved into the stage, removed with it
-            os.rename(dest, stage / "damaged")
-        shutil.move(str(out), dest)
+        _check_reached(ds, recipe, history, result)
+        record = _medium_record(key, inputs, result, refs, history, out / "model.pt")
+        _install(record, out, dest, stage)
+    _say_stopped(key, record, say)
+    return MediumAgent(dest, record)
+
+
+def _dqn_config(cfg: BehaviourConfig, recipe: dict[str, Any], settings: dict[str, Any], out: Path):
+    """The DQN run of the recipe on the logging settings, written to ``out``, with a replay buffer large enough
+    never to wrap: the medium-replay family logs every transition it collected."""
+    from dtradar_rl.train.config import config_for
+
+    return config_for(
+        recipe["preset"],
+        scene=cfg.scene,
+        variant=cfg.variant,
+        revision=cfg.revision,
+        obs=cfg.obs,
+        reward=cfg.reward,
+        max_steps=settings["max_steps"],
+        num_envs=cfg.num_envs,
+        hidden=tuple(recipe["hidden"]),
+        device=cfg.device,
+        seed=cfg.seed,
+        threads=recipe["threads"],
+        total_env_steps=recipe["budget"],
+        buffer_size=recipe["budget"] + cfg.num_envs,  # never wraps: the replay buffer keeps every transition
+        checkpoint_every=0,
+        save_replay=True,
+        out=str(out),
+        verbose=False,
+    )
+
+
+def _evaluate_until_target(
+    cfg: BehaviourConfig,
+    ds: Dataset,
+    recipe: dict[str, Any],
+    dqn_cfg,
+    normalizer: Normalizer,
+    refs: dict[str, float],
+    pairs: np.ndarray,
+    history: list[list[float]],
+    say,
+):
+    """The training callback: every ``eval_every`` env steps, the normalised score of the epsilon-greedy agent
+    (appended to ``history``); true, so training stops, once it reaches the recipe's target."""
+    eval_spec = BehaviourSpec("epsilon-greedy", epsilon=recipe["epsilon"])
+    next_eval = [recipe["eval_every"]]
+
+    def callback(q, env_steps: int, train_s: float) -> bool:
+        if env_steps < next_eval[0]:
+            return False
+        while next_eval[0] <= env_steps:
+            next_eval[0] += recipe["eval_every"]
+        greedy = Policy(q, dqn_cfg, normalizer, cfg.obs, {})
+        bp = BehaviourPolicy(
+            q=None, config=None, normalizer=normalizer, obs_preset=cfg.obs, meta={}, spec=eval_spec,
+            seed=recipe["eval_seed"], greedy=greedy,
+        )  # fmt: skip
+        spl = metrics_from_rollouts(rollout(bp, ds, pairs, device=cfg.device)).spl
+        score = normalized(spl, refs)
+        history.append([int(env_steps), round(float(train_s), 3), spl, score])
+        if cfg.verbose:
+            say(f"  medium agent: {env_steps:>7d} env steps, {train_s:6.1f} s, normalised score {score:6.1f}")
+        return score >= recipe["target"]
+
+    return callback
+
+
+def _check_reached(ds: Dataset, recipe: dict[str, Any], history: list[list[float]], result) -> None:
+    """Refuse an agent whose budget ran out before an evaluation reached the target: it is not the recipe's agent."""
+    if not history or history[-1][3] < recipe["target"]:
+        best = max((h[3] for h in history), default=float("nan"))
+        raise ConfigError(
+            f"the medium agent reached a normalised score of {best:.1f} at most in {result.env_steps} env steps "
+            f"on {ds.name}, short of the target {recipe['target']:g}",
+            hint="raise --medium-budget, or lower --medium-target",
+        )
+
+
+def _medium_record(
+    key: str, inputs: dict[str, Any], result, refs: dict[str, float], history: list[list[float]], checkpoint: Path
+) -> dict[str, Any]:
+    """``medium.json``: the stop (the last evaluation), the training's totals and every evaluation."""
+    recipe = inputs["medium"]
+    _, _, spl, score = history[-1]
+    return {
+        "key": key,
+        "inputs": inputs,
+        "stopped_at_env_steps": int(result.env_steps),
+        "updates": int(result.updates),
+        "episodes": int(result.episodes),
+        "train_s": float(result.wall_s),
+        "spl": float(spl),
+        "score": float(score),
+        "target": float(recipe["target"]),
+        "tolerance": MEDIUM_TOLERANCE,
+        "within_tolerance": bool(score - recipe["target"] <= MEDIUM_TOLERANCE),
+        "references": refs,
+        "evaluations": len(history),
+        "history": [{"env_steps": h[0], "train_s": h[1], "spl": h[2], "score": h[3]} for h in history],
+        "checkpoint_sha256": sha256_file(checkpoint),
+    }
+
+
+def _install(record: dict[str, Any], out: Path, dest: Path, stage: Path) -> None:
+    """Write the record and move the whole run into the cache folder, so a reader finds it whole or not at all."""
+    write_atomic(out / MEDIUM_RECORD, json.dumps(record, indent=2, sort_keys=True) + "\n")
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    if dest.exists():  # damaged: moved into the stage, removed with it
+        os.rename(dest, stage / "damaged")
+    shutil.move(str(out), dest)
+
+
+def _say_stopped(key: str, record: dict[str, Any], say) -> None:
+    """Where training stopped, and whether the agent overshot the target by more than the tolerance."""
     note = "" if record["within_tolerance"] else f" (more than {MEDIUM_TOLERANCE:g} past the target)"
     say(
         f"medium agent {key}: stopped at {record['stopped_at_env_steps']} env steps ({record['train_s']:.1f} s), "
-        f"normalised score {score:.1f}{note}"
+        f"normalised score {record['score']:.1f}{note}"
     )
-    return MediumAgent(dest, record)
 
 
 def resolve_spec(cfg: BehaviourConfig, ds: Dataset, *, agent: MediumAgent | None = None, say=print) -> BehaviourSpec:

@@ -277,71 +277,33 @@ def train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | N
 
 
 def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | None) -> OfflineResult:
+    """:func:`train_offline` inside its folder guard: data, training, the saved run, evaluation."""
     d3rlpy = import_d3rlpy()
     t_start = time.perf_counter()
-    torch.set_num_threads(cfg.threads or auto_threads())
-    torch.set_flush_denormal(True)
-    threads = {"threads": torch.get_num_threads(), "threads_setting": cfg.threads}  # the reproducibility record
+    threads = _torch_threads(cfg)
     out = cfg.out_dir
     say = print if cfg.verbose else (lambda *a, **k: None)
 
-    ds = dataset if isinstance(dataset, Dataset) else load_dataset(cfg.dataset_name)
-    normalizer = Normalizer.fit(ds)
-    if isinstance(dataset, (str, LoggedDataset)) or cfg.logged:
-        store_log = as_logged(dataset if isinstance(dataset, (str, LoggedDataset)) else cfg.logged)
-    else:
-        store_log = log_dataset(log_config(cfg), ds)
-    check_compatible(store_log, cfg, ds)  # parent twin, its version, preset and normaliser
-    if cfg.senses == "auto" and cfg.resolved_senses == "memory" and ds.is_moving:
-        say(f"senses: auto does not apply to the moving twin {ds.name} (see --senses memory), training memoryless")
-        cfg = dataclasses.replace(cfg, senses="none")
+    ds, normalizer, store_log = _twin_and_log(cfg, dataset)
+    cfg = _auto_senses(cfg, ds, say)
     senses = _memory_senses(cfg, store_log, ds)
     logged_data = mdp_dataset(store_log, senses)
     source = {"name": store_log.name, "version": store_log.version, "tag": store_log.tag}
     stats = {**store_log.meta["stats"], "source": f"{store_log.name}@{store_log.version}"}
     say(f"training {cfg.algorithm} on {store_log.name}@{store_log.tag} ({store_log.version})")
-    obs_names = list(build_observations(ds, cfg.obs, normalizer).names) + list(senses.names if senses else ())
-    obs_dim = logged_data.episodes[0].observations.shape[-1]
-    if obs_dim != len(obs_names):
-        raise ConfigError(
-            f"the logged observations have {obs_dim} features, the {cfg.obs!r} preset {len(obs_names)}",
-            hint="pass the --obs preset the data was logged with",
-        )
+    obs_names = _obs_names(cfg, ds, normalizer, senses, logged_data)
     stats["transitions"] = int(logged_data.transition_count)
-
-    relabel = cfg.relabel_config()
-    train_data = logged_data
-    why = not_relabellable(ds, cfg.obs) if cfg.relabel.strip() == "auto" and not relabel.is_identity else None
-    if why:  # the default meets a log it cannot relabel: train on the logged targets, and say so
-        say(f"relabelling goals: auto does not apply ({why}), training on the logged targets")
-        relabel = RelabelConfig.parse("none", cfg.algorithm, seed=cfg.seed)
-    if not relabel.is_identity:  # goals relabelled in every minibatch (or once): dtradar_rl.offline.relabel
-        train_data = relabelled_sampler(logged_data, relabeller(store_log, ds), relabel, senses)
-        say(f"relabelling goals: {relabel.describe()}, discount {relabel.discount:g}, drawn per {relabel.resample}")
+    relabel, train_data = _training_data(cfg, ds, store_log, logged_data, senses, say)
 
     d3rlpy.seed(cfg.seed)
     algo = make_algorithm(cfg)
     if algo.need_returns_to_go and train_data is not logged_data:  # pragma: no cover - none of ALGORITHMS does
         raise ConfigError(f"{cfg.algorithm} reads returns-to-go, which relabelled steps do not have")
-    epochs = _epochs(cfg.n_steps)
-
-    def progress(row: dict[str, float]) -> None:
-        say(
-            f"[{time.perf_counter() - t_start:6.1f}s] {cfg.algorithm} epoch {row['epoch']}/{epochs} "
-            f"step {row['step']}  " + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step"))
-        )
-
-    t_fit = time.perf_counter()
-    losses = fit(algo, train_data, cfg.n_steps, epochs=epochs, on_epoch=progress)
-    train_s = time.perf_counter() - t_fit
+    losses, train_s = _fit_timed(cfg, algo, train_data, t_start, say)
     if train_data is not logged_data:
         stats["relabel"] = train_data.summary()
 
-    model = out / "model.d3"
-    tmp_model = out / ".model.d3.tmp"
-    out.mkdir(parents=True, exist_ok=True)  # only now is there something to write
-    algo.save(str(tmp_model))
-    os.replace(tmp_model, model)  # a kill mid-save leaves the previous model, never half of one
+    model = _save_model(algo, out)
     meta = {
         "format": OFFLINE_FORMAT,
         "config": cfg.to_dict(),
@@ -362,6 +324,90 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         md = write_results(rows, out, meta)
     wall = time.perf_counter() - t_start
     return OfflineResult(model, out, policy, stats, cfg.n_steps, train_s, wall, losses, rows, md, logged_data)
+
+
+def _torch_threads(cfg: OfflineConfig) -> dict[str, Any]:
+    """Set torch's threads (and flush denormals, whose arithmetic is slow on CPU); the reproducibility record's
+    thread count and its setting."""
+    torch.set_num_threads(cfg.threads or auto_threads())
+    torch.set_flush_denormal(True)
+    return {"threads": torch.get_num_threads(), "threads_setting": cfg.threads}
+
+
+def _twin_and_log(
+    cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | None
+) -> tuple[Dataset, Normalizer, LoggedDataset]:
+    """The twin, its feature normaliser and the stored log to train on (named, or logged now), checked to have been
+    logged on this twin with this preset and normaliser."""
+    ds = dataset if isinstance(dataset, Dataset) else load_dataset(cfg.dataset_name)
+    normalizer = Normalizer.fit(ds)
+    if isinstance(dataset, (str, LoggedDataset)) or cfg.logged:
+        store_log = as_logged(dataset if isinstance(dataset, (str, LoggedDataset)) else cfg.logged)
+    else:
+        store_log = log_dataset(log_config(cfg), ds)
+    check_compatible(store_log, cfg, ds)  # parent twin, its version, preset and normaliser
+    return ds, normalizer, store_log
+
+
+def _auto_senses(cfg: OfflineConfig, ds: Dataset, say) -> OfflineConfig:
+    """``cfg`` trained memoryless where ``--senses auto`` would pick the memory a moving twin's log cannot rebuild."""
+    if cfg.senses == "auto" and cfg.resolved_senses == "memory" and ds.is_moving:
+        say(f"senses: auto does not apply to the moving twin {ds.name} (see --senses memory), training memoryless")
+        cfg = dataclasses.replace(cfg, senses="none")
+    return cfg
+
+
+def _obs_names(cfg: OfflineConfig, ds: Dataset, normalizer: Normalizer, senses: MemorySenses | None, data) -> list[str]:
+    """The observation's feature names, refused when the log's observations are not as wide: a log made with
+    another preset would train an agent that cannot be evaluated."""
+    obs_names = list(build_observations(ds, cfg.obs, normalizer).names) + list(senses.names if senses else ())
+    obs_dim = data.episodes[0].observations.shape[-1]
+    if obs_dim != len(obs_names):
+        raise ConfigError(
+            f"the logged observations have {obs_dim} features, the {cfg.obs!r} preset {len(obs_names)}",
+            hint="pass the --obs preset the data was logged with",
+        )
+    return obs_names
+
+
+def _training_data(cfg: OfflineConfig, ds: Dataset, store_log: LoggedDataset, logged_data, senses, say):
+    """``(relabel, data)``: the relabelling settings and what the minibatches come from (the log itself, or its steps
+    replayed towards relabelled goals)."""
+    relabel = cfg.relabel_config()
+    train_data = logged_data
+    why = not_relabellable(ds, cfg.obs) if cfg.relabel.strip() == "auto" and not relabel.is_identity else None
+    if why:  # the default meets a log it cannot relabel: train on the logged targets, and say so
+        say(f"relabelling goals: auto does not apply ({why}), training on the logged targets")
+        relabel = RelabelConfig.parse("none", cfg.algorithm, seed=cfg.seed)
+    if not relabel.is_identity:  # goals relabelled in every minibatch (or once): dtradar_rl.offline.relabel
+        train_data = relabelled_sampler(logged_data, relabeller(store_log, ds), relabel, senses)
+        say(f"relabelling goals: {relabel.describe()}, discount {relabel.discount:g}, drawn per {relabel.resample}")
+    return relabel, train_data
+
+
+def _fit_timed(cfg: OfflineConfig, algo, train_data, t_start: float, say) -> tuple[list[dict[str, float]], float]:
+    """``(losses, train_s)``: :func:`fit` for ``cfg.n_steps`` updates, each epoch's losses said as they come."""
+    epochs = _epochs(cfg.n_steps)
+
+    def progress(row: dict[str, float]) -> None:
+        say(
+            f"[{time.perf_counter() - t_start:6.1f}s] {cfg.algorithm} epoch {row['epoch']}/{epochs} "
+            f"step {row['step']}  " + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step"))
+        )
+
+    t_fit = time.perf_counter()
+    losses = fit(algo, train_data, cfg.n_steps, epochs=epochs, on_epoch=progress)
+    return losses, time.perf_counter() - t_fit
+
+
+def _save_model(algo, out: Path) -> Path:
+    """Save the algorithm as ``out/model.d3``; its path."""
+    model = out / "model.d3"
+    tmp_model = out / ".model.d3.tmp"
+    out.mkdir(parents=True, exist_ok=True)  # only now is there something to write
+    algo.save(str(tmp_model))
+    os.replace(tmp_model, model)  # a kill mid-save leaves the previous model, never half of one
+    return model
 
 
 def _memory_senses(cfg: OfflineConfig, logged: LoggedDataset, ds: Dataset) -> MemorySenses | None:
