@@ -108,18 +108,50 @@ def seed_floor_snapshots(requested: list[int] | None, count: int, full0_s: float
 def bench_scene(
     scene: str, count: int, radius_m: float, floor_at: list[int] | None, tol_pp: float, stock_solver: bool
 ) -> dict:
+    """One scene's moving twin: built snapshot by snapshot, every snapshot traced in full beside it, the seed-noise
+    floor, and the summary (see the module docstring)."""
     host_before = machine()
-    base_moving = load_moving_scene(scene)
-    period = base_moving.snapshots
-    mv = with_horizon(base_moving, count)
-    base = BuildConfig(scene=scene, variant="moving", progress=False, rt=RTSettings(batch_independent=not stock_solver))
-    config = scene_config(base, mv.base)
+    mv, period, config = _moving_twin(scene, count, stock_solver)
     rt = config.rt
     spec0 = mv.spec_at(0)
     grid = spec0.grid.to_dict()
     log(f"{scene}: {count} snapshots of {mv.dt_s:g} s (own horizon {period}), {grid['nx']} x {grid['ny']} cells")
+    compile_s = _first_compile(spec0, rt)
+    log(f"{scene}: first compile {compile_s:.1f} s")
+    snaps, trace_s, tables_s = _build(mv, config)
+    log(f"{scene}: built {count} snapshots in {trace_s:.1f} s (+ {tables_s:.1f} s joining the table)")
+    rows, kept_full, floor_ks = _compare_with_full(scene, count, mv, period, config, grid, snaps, floor_at)
+    floors = _seed_floor(scene, mv, config, grid, kept_full, floor_ks)
+    host_after = machine()
+    return summarize(
+        scene,
+        mv,
+        period,
+        rt,
+        config,
+        rows,
+        floors,
+        compile_s=compile_s,
+        trace_s=trace_s,
+        tables_s=tables_s,
+        tol_pp=tol_pp,
+        host_before=host_before,
+        host_after=host_after,
+    )
 
-    # the first JIT compile, on a few cells of snapshot 0, so that no timed trace pays for it
+
+def _moving_twin(scene: str, count: int, stock_solver: bool):
+    """The scene's moving twin over ``count`` snapshots, its own horizon and the build's config for it (the
+    settings ``make dataset VARIANT=moving`` would use)."""
+    base_moving = load_moving_scene(scene)
+    period = base_moving.snapshots
+    mv = with_horizon(base_moving, count)
+    base = BuildConfig(scene=scene, variant="moving", progress=False, rt=RTSettings(batch_independent=not stock_solver))
+    return mv, period, scene_config(base, mv.base)
+
+
+def _first_compile(spec0, rt: RTSettings) -> float:
+    """Seconds of the first JIT compile, paid on a few cells of snapshot 0 so that no timed trace pays for it."""
     t0 = time.perf_counter()
     warm = RayTracer(spec0, rt)
     xs, ys = spec0.grid.centres()
@@ -127,10 +159,13 @@ def bench_scene(
     pick = np.linspace(0, len(free_ix) - 1, 4).round().astype(int)
     warm.trace(np.stack([xs[free_ix[pick]], ys[free_iy[pick]], np.full(4, spec0.rx_height_m)], axis=1))
     warm.close()
-    compile_s = time.perf_counter() - t0
-    log(f"{scene}: first compile {compile_s:.1f} s")
+    return time.perf_counter() - t0
 
-    # the moving twin, as `make dataset VARIANT=moving` builds it (dtradar_data.pipeline.moving_build's calls)
+
+def _build(mv, config):
+    """The moving twin as `make dataset VARIANT=moving` builds it (dtradar_data.pipeline.moving_build's calls), in a
+    temporary work folder: its snapshots, the seconds tracing them and the seconds joining the table."""
+    rt = config.rt
     with tempfile.TemporaryDirectory(prefix="dtradar-bench-moving-") as tmp:
 
         def full_trace(spec, batch_dir: Path):
@@ -150,64 +185,38 @@ def bench_scene(
         t0 = time.perf_counter()
         moving.moving_tables(mv, snaps)
         tables_s = time.perf_counter() - t0
-    log(f"{scene}: built {count} snapshots in {trace_s:.1f} s (+ {tables_s:.1f} s joining the table)")
+    return snaps, trace_s, tables_s
 
-    # every snapshot k >= 1 in full, compared with the differential one
+
+def _snapshot0_row(snap0) -> dict:
+    """Snapshot 0's row: the build traced it in full, so it has no full trace of its own to compare with."""
+    return {
+        "k": 0,
+        "t_s": 0.0,
+        "mode": "full",
+        "retraced_cells": snap0.record["retraced_cells"],
+        "free_cells": snap0.record["free_cells"],
+        "differential_s": snap0.record["seconds"],
+        "full_s": snap0.record["seconds"],
+        "note": "the build's snapshot 0 is a full trace: it is its own reference",
+    }
+
+
+def _compare_with_full(scene: str, count: int, mv, period: int, config, grid: dict, snaps, floor_at: list[int] | None):
+    """Every snapshot ``k >= 1`` traced in full and compared with the differential one: the rows, the full traces
+    kept for later comparisons (one period's, and those at the seed floor's snapshots) and those snapshots."""
     full0 = as_dataset("full", grid, snaps[0].cells, snaps[0].paths)
-    rows = [
-        {
-            "k": 0,
-            "t_s": 0.0,
-            "mode": "full",
-            "retraced_cells": snaps[0].record["retraced_cells"],
-            "free_cells": snaps[0].record["free_cells"],
-            "differential_s": snaps[0].record["seconds"],
-            "full_s": snaps[0].record["seconds"],
-            "note": "the build's snapshot 0 is a full trace: it is its own reference",
-        }
-    ]
+    rows = [_snapshot0_row(snaps[0])]
     floor_ks = seed_floor_snapshots(floor_at, count, snaps[0].record["seconds"])
     previous_full = full0
     kept_full: dict[int, Dataset] = {0: full0}  # one period of full traces: a repeated instant is compared with it
     for k in range(1, count):
         spec = mv.spec_at(k)
         t0 = time.perf_counter()
-        cells, paths, _, _ = trace_grid(spec, rt, per_path=config.per_path, progress=False)
+        cells, paths, _, _ = trace_grid(spec, config.rt, per_path=config.per_path, progress=False)
         full_s = time.perf_counter() - t0
         full = as_dataset("full", grid, cells, paths)
-        snap = snaps[k]
-        changes = mv.changed_between(k - 1, k)
-        mask, _ = differential.retrace_mask(
-            mv.spec_at(k - 1),
-            spec,
-            snaps[k - 1].cells,
-            radius_m=config.retrace_radius_m,
-            changed=[c.before for c in changes] + [c.after for c in changes],
-        )
-        if int(mask.sum()) != snap.record["retraced_cells"]:
-            raise AssertionError(f"snapshot {k}: the re-trace mask differs from the build's")
-        retraced = mask.ravel()
-        c = compare(full, as_dataset("differential", grid, snap.cells, snap.paths))
-        diff_s = snap.record["seconds"]
-        row = {
-            "k": k,
-            "t_s": round(k * mv.dt_s, 6),
-            "mode": "differential",
-            "retraced_cells": snap.record["retraced_cells"],
-            "free_cells": snap.record["free_cells"],
-            "reasons": snap.record["reasons"],
-            "movers_moved": len(snap.record["movers_moved"]),
-            "differential_s": diff_s,
-            "full_s": round(full_s, 3),
-            "speedup": round(full_s / diff_s, 3) if diff_s > 0 else None,
-            "differential_vs_full": {
-                "all": stats(c),
-                "retraced": stats(c, retraced),
-                "kept": stats(c, ~retraced),
-            },
-            "previous_full_vs_full": stats(compare(full, previous_full)),
-            "snapshot0_vs_full": stats(compare(full, full0)),
-        }
+        row = _differential_row(k, mv, spec, config, grid, snaps, full, full_s, previous_full, full0)
         if k >= period and mv.spec_at(k % period).objects == spec.objects:
             # the movers are back where they were a whole number of periods ago: the same scene, the same seed
             row["full_vs_full_periods_before"] = stats(compare(full, kept_full[k % period]))
@@ -217,13 +226,62 @@ def bench_scene(
         rows.append(row)
         a = row["differential_vs_full"]
         log(
-            f"{scene} t={k}: {row['retraced_cells']}/{row['free_cells']} re-traced, {diff_s:.2f} s vs {full_s:.2f} s "
-            f"full; agreement {100 * a['all']['agreement']:.1f} % (re-traced {100 * a['retraced']['agreement']:.1f} "
-            f"%, kept {100 * a['kept']['agreement']:.1f} %)"
+            f"{scene} t={k}: {row['retraced_cells']}/{row['free_cells']} re-traced, {row['differential_s']:.2f} s vs "
+            f"{full_s:.2f} s full; agreement {100 * a['all']['agreement']:.1f} % (re-traced "
+            f"{100 * a['retraced']['agreement']:.1f} %, kept {100 * a['kept']['agreement']:.1f} %)"
         )
+    return rows, kept_full, floor_ks
 
-    # the seed-noise floor: a second full trace of a snapshot with seed + 1
+
+def _retraced(k: int, mv, spec, config, snaps) -> np.ndarray:
+    """The cells snapshot ``k`` re-traced (flat), recomputed here so that the comparison can be split into re-traced
+    and kept cells; it must match the build's count, or the split would describe another re-trace than the build's."""
+    changes = mv.changed_between(k - 1, k)
+    mask, _ = differential.retrace_mask(
+        mv.spec_at(k - 1),
+        spec,
+        snaps[k - 1].cells,
+        radius_m=config.retrace_radius_m,
+        changed=[c.before for c in changes] + [c.after for c in changes],
+    )
+    if int(mask.sum()) != snaps[k].record["retraced_cells"]:
+        raise AssertionError(f"snapshot {k}: the re-trace mask differs from the build's")
+    return mask.ravel()
+
+
+def _differential_row(k: int, mv, spec, config, grid: dict, snaps, full, full_s: float, previous_full, full0) -> dict:
+    """Differential snapshot ``k`` against its full trace: cells, seconds, speed-up and agreement (in all, the
+    re-traced and the kept cells), beside the previous snapshot's and snapshot 0's full traces (the price of not
+    re-tracing the movers at all)."""
+    snap = snaps[k]
+    retraced = _retraced(k, mv, spec, config, snaps)
+    c = compare(full, as_dataset("differential", grid, snap.cells, snap.paths))
+    diff_s = snap.record["seconds"]
+    return {
+        "k": k,
+        "t_s": round(k * mv.dt_s, 6),
+        "mode": "differential",
+        "retraced_cells": snap.record["retraced_cells"],
+        "free_cells": snap.record["free_cells"],
+        "reasons": snap.record["reasons"],
+        "movers_moved": len(snap.record["movers_moved"]),
+        "differential_s": diff_s,
+        "full_s": round(full_s, 3),
+        "speedup": round(full_s / diff_s, 3) if diff_s > 0 else None,
+        "differential_vs_full": {
+            "all": stats(c),
+            "retraced": stats(c, retraced),
+            "kept": stats(c, ~retraced),
+        },
+        "previous_full_vs_full": stats(compare(full, previous_full)),
+        "snapshot0_vs_full": stats(compare(full, full0)),
+    }
+
+
+def _seed_floor(scene: str, mv, config, grid: dict, kept_full: dict, floor_ks: list[int]) -> list[dict]:
+    """The seed-noise floor: a second full trace of each of ``floor_ks`` with seed + 1, against the kept one."""
     floors = []
+    rt = config.rt
     other = dataclasses.replace(rt, seed=rt.seed + 1)
     for k in floor_ks:
         cells2, paths2, _, _ = trace_grid(mv.spec_at(k), other, per_path=config.per_path, progress=False)
@@ -231,22 +289,7 @@ def bench_scene(
             {"k": k, "seed": other.seed, **stats(compare(kept_full[k], as_dataset("seed", grid, cells2, paths2)))}
         )
         log(f"{scene}: seed floor at t={k}: {100 * floors[-1]['agreement']:.1f} %")
-    host_after = machine()
-    return summarize(
-        scene,
-        mv,
-        period,
-        rt,
-        config,
-        rows,
-        floors,
-        compile_s=compile_s,
-        trace_s=trace_s,
-        tables_s=tables_s,
-        tol_pp=tol_pp,
-        host_before=host_before,
-        host_after=host_after,
-    )
+    return floors
 
 
 def summarize(scene, mv, period, rt, config, rows, floors, *, compile_s, trace_s, tables_s, tol_pp, **hosts) -> dict:

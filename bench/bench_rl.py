@@ -256,38 +256,45 @@ def train_preset(cfg, preset: str, folder: str, ds, dyn, threads: int, rows: lis
     }
 
 
-def main(cfg: BenchConfig) -> dict:
+def _set_up_torch(cfg: BenchConfig) -> tuple[int, float | None]:
+    """Torch's threads (``--threads`` or auto) and denormals flushed (slow on CPU); the thread count and the 1-min load
+    before the start, which the report keeps since the shared machine's load moves every timing."""
     threads = cfg.threads or auto_threads()
     torch.set_num_threads(threads)
     torch.set_flush_denormal(True)
     load_before = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    ds, dyn, synthetic = _datasets(cfg.scene)
-    print(
-        f"dataset: {ds.name} ({'synthetic stand-in' if synthetic else 'real'}), grid {ds.shape[1]}x{ds.shape[0]}, "
-        f"torch threads {threads}, 1-min load before start {load_before}"
-    )
+    return threads, load_before
 
-    thr = env_throughput(
-        ds, cfg.env_counts, cfg.env_seconds, rounds=cfg.env_rounds, general=cfg.env_general, threads=cfg.env_threads
-    )
-    print("env steps/s:", {k: f"{v:,.0f}" for k, v in thr.items()})
-    stem = "bench_rl" if cfg.scene == "cubicle" else f"bench_rl_{cfg.scene}"
-    out = Path(cfg.out)
-    if cfg.env_only:
-        report = {
-            "dataset": {"name": ds.name, "version": ds.version, "synthetic": synthetic, "grid": list(ds.shape)[::-1]},
-            "machine": {**machine(), "torch_threads": threads, "load_1min_before": load_before},
-            "env_steps_per_s": thr,
-        }
-        out.mkdir(parents=True, exist_ok=True)
-        write_atomic(
-            out / f"{stem}_env.json", json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n"
-        )
-        md = "\n".join(_header(report) + _throughput_rows(thr)) + "\n"
-        write_atomic(out / f"{stem}_env.md", md)
-        print(md)
-        return report
 
+def _dataset_record(ds, synthetic: bool) -> dict:
+    """The report's record of the twin benchmarked on (synthetic: the stand-in, not the scene asked for)."""
+    return {"name": ds.name, "version": ds.version, "synthetic": synthetic, "grid": list(ds.shape)[::-1]}
+
+
+def _machine_record(threads: int, load_before: float | None) -> dict:
+    """The report's machine, taken when the report is made (after the runs: the load they were measured under)."""
+    return {**machine(), "torch_threads": threads, "load_1min_before": load_before}
+
+
+def _write_env_only(cfg: BenchConfig, out: Path, stem: str, ds, synthetic, threads, load_before, thr) -> dict:
+    """``--env-only``: the throughput report alone, to ``<stem>_env.{json,md}``; the report."""
+    report = {
+        "dataset": _dataset_record(ds, synthetic),
+        "machine": _machine_record(threads, load_before),
+        "env_steps_per_s": thr,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / f"{stem}_env.json", json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n")
+    md = "\n".join(_header(report) + _throughput_rows(thr)) + "\n"
+    write_atomic(out / f"{stem}_env.md", md)
+    print(md)
+    return report
+
+
+def _train_tuned(cfg: BenchConfig, ds, dyn, threads: int):
+    """The tuned DQN trained with the budget and evaluated (with decision latency, unlike the other presets: the
+    report's latency is this agent's) on the blueprint and the dynamic twin, unshielded and shielded: its config, its
+    training result, its blueprint metrics and the evaluation rows."""
     scene = ds.name.split("/")[0]
     ours_cfg = config_for(
         "tuned",
@@ -301,14 +308,18 @@ def main(cfg: BenchConfig) -> dict:
     policy = load_policy(result.checkpoint)
     m_bp, _ = evaluate(policy, ds, pairs=cfg.pairs)
     rows = [{"case": f"ours (tuned): {ds.name} -> {ds.name}", **m_bp.to_dict()}]
-    m_dyn = None
     if dyn is not None:
         m_dyn, _ = evaluate(policy, dyn, pairs=cfg.pairs)
         rows.append({"case": f"ours (tuned): {ds.name} -> {dyn.name}", **m_dyn.to_dict()})
         m_sh, _ = evaluate(policy, dyn, pairs=cfg.pairs, shield=True)
         rows.append({"case": f"ours (tuned): {ds.name} -> {dyn.name} (shielded)", **m_sh.to_dict()})
     print(f"tuned DQN: {result.env_steps} env steps, {result.updates} updates in {result.wall_s:.1f} s")
+    return ours_cfg, result, m_bp, rows
 
+
+def _train_robust_and_default(cfg: BenchConfig, ds, dyn, threads: int, rows: list):
+    """The robust and the default preset with the same budget, each unless switched off (``None`` then); their
+    evaluations appended to ``rows``."""
     robust = (
         train_preset(
             cfg,
@@ -329,7 +340,13 @@ def main(cfg: BenchConfig) -> dict:
         if cfg.default
         else None
     )
+    return robust, default
 
+
+def _sb3_runs(cfg: BenchConfig, ds, dyn, ours_cfg, threads: int) -> tuple[dict, dict[int, dict]]:
+    """SB3's DQN at each of ``--sb3-threads`` (or ours' threads): the run compared with (the fastest for the budget,
+    so that SB3 is not judged at a thread count that does not suit it; the first run when none was timed) and every
+    run by its thread count."""
     sb3: dict = {"skipped": "--no-sb3"}
     sb3_runs: dict[int, dict] = {}
     if cfg.sb3:
@@ -341,13 +358,15 @@ def main(cfg: BenchConfig) -> dict:
             )
         timed = [r for r in sb3_runs.values() if "wall_s_for_budget" in r]
         sb3 = min(timed, key=lambda r: r["wall_s_for_budget"]) if timed else next(iter(sb3_runs.values()))
-    for twin in ("blueprint", "dynamic"):
-        if twin in sb3:
-            rows.append({"case": f"SB3 DQN: {ds.name} -> {scene}/{twin}", **sb3[twin], "latency_ms": None})
+    return sb3, sb3_runs
 
+
+def _report(ds, synthetic, threads, load_before, thr, ours_cfg, result, m_bp, robust, default, rows, sb3, sb3_runs):
+    """The report: throughput, decision latency, the tuned agent's training against the paper's and its goal, the
+    other presets, every evaluation row and SB3's runs, with the speed-ups over SB3 where SB3 was timed."""
     report = {
-        "dataset": {"name": ds.name, "version": ds.version, "synthetic": synthetic, "grid": list(ds.shape)[::-1]},
-        "machine": {**machine(), "torch_threads": threads, "load_1min_before": load_before},
+        "dataset": _dataset_record(ds, synthetic),
+        "machine": _machine_record(threads, load_before),
         "env_steps_per_s": thr,
         "batched_vs_gymnasium": {k: v / thr["gymnasium"] for k, v in thr.items() if k != "gymnasium"},
         "decision_latency_ms": m_bp.latency_ms,
@@ -376,6 +395,37 @@ def main(cfg: BenchConfig) -> dict:
         report["train"]["speedup_vs_sb3"] = sb3["wall_s_for_budget"] / result.wall_s
         if default is not None:
             default["speedup_vs_sb3"] = sb3["wall_s_for_budget"] / default["wall_s"]
+    return report
+
+
+def main(cfg: BenchConfig) -> dict:
+    """Set up, measure the env, train and time each side (ours, the other presets, SB3), write JSON + Markdown."""
+    threads, load_before = _set_up_torch(cfg)
+    ds, dyn, synthetic = _datasets(cfg.scene)
+    print(
+        f"dataset: {ds.name} ({'synthetic stand-in' if synthetic else 'real'}), grid {ds.shape[1]}x{ds.shape[0]}, "
+        f"torch threads {threads}, 1-min load before start {load_before}"
+    )
+
+    thr = env_throughput(
+        ds, cfg.env_counts, cfg.env_seconds, rounds=cfg.env_rounds, general=cfg.env_general, threads=cfg.env_threads
+    )
+    print("env steps/s:", {k: f"{v:,.0f}" for k, v in thr.items()})
+    stem = "bench_rl" if cfg.scene == "cubicle" else f"bench_rl_{cfg.scene}"
+    out = Path(cfg.out)
+    if cfg.env_only:
+        return _write_env_only(cfg, out, stem, ds, synthetic, threads, load_before, thr)
+
+    ours_cfg, result, m_bp, rows = _train_tuned(cfg, ds, dyn, threads)
+    robust, default = _train_robust_and_default(cfg, ds, dyn, threads, rows)
+    sb3, sb3_runs = _sb3_runs(cfg, ds, dyn, ours_cfg, threads)
+    scene = ds.name.split("/")[0]
+    for twin in ("blueprint", "dynamic"):
+        if twin in sb3:
+            rows.append({"case": f"SB3 DQN: {ds.name} -> {scene}/{twin}", **sb3[twin], "latency_ms": None})
+    report = _report(
+        ds, synthetic, threads, load_before, thr, ours_cfg, result, m_bp, robust, default, rows, sb3, sb3_runs
+    )
 
     out.mkdir(parents=True, exist_ok=True)
     write_atomic(out / f"{stem}.json", json.dumps({"config": dataclasses.asdict(cfg), **report}, indent=2) + "\n")

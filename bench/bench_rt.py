@@ -59,7 +59,8 @@ def timed_trace(tracer: RayTracer, points: np.ndarray, batch_size: int):
     return merged, dt
 
 
-def main() -> None:
+def _parse_args() -> argparse.Namespace:
+    """The command line (see the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="cubicle")
     ap.add_argument("--variant", default="blueprint")
@@ -87,62 +88,71 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2, help="timed repeats per setting (best is reported)")
     ap.add_argument("--cell-m", type=float, default=None, help="city scenes: cell size instead of the scene's")
     ap.add_argument("--out", type=Path, default=Path("results"))
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def _stem(args: argparse.Namespace) -> str:
+    """The results' file stem: a run off the defaults (scene, row buffer, solver) must not overwrite theirs."""
     stem = "bench_rt" if args.scene == "cubicle" else f"bench_rt_{args.scene}"
     if args.buffer != RTSettings().max_num_paths_per_src:
         stem += f"_buffer{args.buffer:.0e}".replace("+", "")
     if args.stock_solver:
         stem += "_stock"
+    return stem
 
+
+def _free_cells(args: argparse.Namespace):
+    """The scene and the receiver points of its free cells (at receiver height)."""
     spec = load_scene_spec(args.scene, args.variant, cell_m=args.cell_m)
     blocked = occupancy(spec)
     xs, ys = spec.grid.centres()
     iy, ix = np.nonzero(~blocked)
     points = np.stack([xs[ix], ys[iy], np.full(ix.shape, spec.rx_height_m)], axis=1)
     print(f"{spec.name}: {len(points)} free cells of {blocked.size}")
+    return spec, points
 
-    base = RTSettings(
-        device="cpu",
-        batch_size=args.batch_size,
-        max_num_paths_per_src=args.buffer,
-        batch_independent=not args.stock_solver,
-    )
-    tracer = RayTracer(spec, base)
+
+def _first_call(tracer: RayTracer, points: np.ndarray, batch_size: int) -> float:
+    """Seconds of the first trace, JIT compile included: reported apart so that no timed row pays for it."""
     t0 = time.perf_counter()
-    tracer.trace(points[: min(len(points), args.batch_size)])
-    first_call_s = time.perf_counter() - t0
+    tracer.trace(points[: min(len(points), batch_size)])
+    return time.perf_counter() - t0
 
-    def run(samples: int, repeats: int, buffer: int = base.max_num_paths_per_src):
-        tracer.settings = RTSettings(**{**base.__dict__, "samples_per_src": samples, "max_num_paths_per_src": buffer})
-        tracer.trace(points[:8])  # warm the kernels for this setting
-        best, result = np.inf, None
-        for _ in range(repeats):
-            result, dt = timed_trace(tracer, points, args.batch_size)
-            best = min(best, dt)
-        return result, best
 
-    print(f"reference trace at {args.reference:.0e} samples ...")
-    ref, ref_s = run(args.reference, 1, args.reference_buffer)
-    rows = []
-    for s in args.samples:
-        got, dt = run(s, args.repeats)
-        agree = agreement(ref, got)
-        rows.append(
-            {
-                "samples_per_src": s,
-                "seconds": round(dt, 3),
-                "cells_per_s": round(len(points) / dt, 1),
-                "agreement": round(float(agree.mean()), 4),
-                "found_path_share": round(float(got["has"].mean()), 4),
-                "paths_found_vs_reference": round(float(got["num_paths"].sum() / ref["num_paths"].sum()), 4),
-                "median_abs_gain_error_db": round(float(np.nanmedian(np.abs(got["gain_db"] - ref["gain_db"]))), 3),
-                "speedup_vs_reference": round(ref_s / dt, 2),
-            }
-        )
-        print(rows[-1])
+def _best_trace(
+    tracer: RayTracer, base: RTSettings, points: np.ndarray, batch_size: int, samples: int, repeats: int, buffer: int
+):
+    """The grid traced warm at ``samples`` per source and path buffer ``buffer``: the last result and the best of
+    ``repeats`` timings (the best, since load on the shared machine only ever slows a run down)."""
+    tracer.settings = RTSettings(**{**base.__dict__, "samples_per_src": samples, "max_num_paths_per_src": buffer})
+    tracer.trace(points[:8])  # warm the kernels for this setting
+    best, result = np.inf, None
+    for _ in range(repeats):
+        result, dt = timed_trace(tracer, points, batch_size)
+        best = min(best, dt)
+    return result, best
+
+
+def _row(samples: int, got: dict, dt: float, ref: dict, ref_s: float, cells: int) -> dict:
+    """One ``samples_per_src`` setting against the reference: throughput, agreement and gain error."""
+    agree = agreement(ref, got)
+    return {
+        "samples_per_src": samples,
+        "seconds": round(dt, 3),
+        "cells_per_s": round(cells / dt, 1),
+        "agreement": round(float(agree.mean()), 4),
+        "found_path_share": round(float(got["has"].mean()), 4),
+        "paths_found_vs_reference": round(float(got["num_paths"].sum() / ref["num_paths"].sum()), 4),
+        "median_abs_gain_error_db": round(float(np.nanmedian(np.abs(got["gain_db"] - ref["gain_db"]))), 3),
+        "speedup_vs_reference": round(ref_s / dt, 2),
+    }
+
+
+def _result(args, spec, points, base: RTSettings, ref_s: float, first_call_s: float, rows: list[dict]) -> dict:
+    """The results JSON."""
     ok = [r for r in rows if r["agreement"] >= 0.95 and r["cells_per_s"] >= 300]
     host = machine()  # after the runs: the load they were measured under
-    result = {
+    return {
         "scene": spec.name,
         "cell_m": spec.grid.cell_m,
         "free_cells": int(len(points)),
@@ -162,8 +172,10 @@ def main() -> None:
         "machine_details": host,
         "library_versions": library_versions(),
     }
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
+
+
+def _markdown_lines(args, spec, points, base: RTSettings, ref_s: float, first_call_s: float, result: dict) -> list:
+    """The Markdown report's lines: a heading, the reference and the first call, and a table of the rows."""
     lines = [
         f"# Ray-tracing benchmark: {spec.name} ({len(points)} free cells, max_depth {base.max_depth}, "
         f"{result['machine']})",
@@ -180,11 +192,13 @@ def main() -> None:
         f"| {r['samples_per_src']:,} | {r['seconds']} | {r['cells_per_s']} | {100 * r['agreement']:.1f} % | "
         f"{100 * r['found_path_share']:.1f} % | {100 * r['paths_found_vs_reference']:.0f} % | "
         f"{r['median_abs_gain_error_db']} dB | {r['speedup_vs_reference']}× |"
-        for r in rows
+        for r in result["rows"]
     ]
-    (args.out / f"{stem}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return lines
 
+
+def _plot(rows: list[dict], title: str, path: Path) -> None:
+    """Agreement and throughput against samples_per_src, each with its goal line (95 %, 300 cells/s)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -200,9 +214,41 @@ def main() -> None:
     ax2.semilogx(s, [r["cells_per_s"] for r in rows], "s--", color="tab:red")
     ax2.axhline(300, color="tab:red", ls=":")
     ax2.set_ylabel("cells / s", color="tab:red")
-    ax1.set_title(f"{spec.name}: agreement with {args.reference:.0e}-sample reference vs throughput")
+    ax1.set_title(title)
     fig.tight_layout()
-    fig.savefig(args.out / f"{stem}.png", dpi=120)
+    fig.savefig(path, dpi=120)
+
+
+def main() -> None:
+    """Parse, set up the tracer, trace the reference and each samples_per_src, write JSON + Markdown + PNG."""
+    args = _parse_args()
+    stem = _stem(args)
+    spec, points = _free_cells(args)
+    base = RTSettings(
+        device="cpu",
+        batch_size=args.batch_size,
+        max_num_paths_per_src=args.buffer,
+        batch_independent=not args.stock_solver,
+    )
+    tracer = RayTracer(spec, base)
+    first_call_s = _first_call(tracer, points, args.batch_size)
+
+    print(f"reference trace at {args.reference:.0e} samples ...")
+    ref, ref_s = _best_trace(tracer, base, points, args.batch_size, args.reference, 1, args.reference_buffer)
+    rows = []
+    for s in args.samples:
+        got, dt = _best_trace(tracer, base, points, args.batch_size, s, args.repeats, base.max_num_paths_per_src)
+        rows.append(_row(s, got, dt, ref, ref_s, len(points)))
+        print(rows[-1])
+    result = _result(args, spec, points, base, ref_s, first_call_s, rows)
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
+    lines = _markdown_lines(args, spec, points, base, ref_s, first_call_s, result)
+    (args.out / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    title = f"{spec.name}: agreement with {args.reference:.0e}-sample reference vs throughput"
+    _plot(rows, title, args.out / f"{stem}.png")
 
 
 if __name__ == "__main__":
