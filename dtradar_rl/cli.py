@@ -97,7 +97,27 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _parse_and_run(argv: list[str]) -> int:
-    train_default = _train_default(argv)
+    """Parse ``argv`` into one command's config and run it; 0 when it returns."""
+    commands = {
+        **_agent_commands(_train_default(argv)),
+        **_offline_commands(),
+        **_experiment_commands(),
+    }
+    # tyro would turn a config's own check (made while parsing) into its usage box: the checks wait for the
+    # command's validate(), which raises the boundary's one-line error (exit 2), and run again inside the command.
+    with deferred_checks():
+        tyro.extras.subcommand_cli_from_dict(
+            {name: _checked(cmd) for name, cmd in commands.items()},
+            args=argv,
+            prog="python -m dtradar_rl",
+            description="Navigation agents on dtradar datasets. " + DEBUG_HELP,
+        )
+    return 0
+
+
+def _agent_commands(train_default: DQNConfig) -> dict:
+    """train, eval and cross. Each command is made on every call, so its config's defaults are made then, as tyro
+    reads them from the signature (train's are the ``--preset``'s)."""
 
     def train_cmd(cfg: Annotated[DQNConfig, tyro.conf.arg(name="")] = train_default) -> None:
         """Train a DQN agent on a scene's blueprint twin. --preset picks the defaults below: memory-escape-noise
@@ -111,6 +131,13 @@ def _parse_and_run(argv: list[str]) -> int:
     def cross_cmd(cfg: Annotated[CrossConfig, tyro.conf.arg(name="")] = CrossConfig()) -> None:
         """Train-on-i x evaluate-on-j matrix over several datasets (cities: quadrants), as a heatmap."""
         run_cross(cfg.validate())
+
+    return {"train": train_cmd, "eval": eval_cmd, "cross": cross_cmd}
+
+
+def _offline_commands() -> dict:
+    """offline, adapt, log and offline-bench, in the order ``--help`` lists them; a module only one command runs
+    (the d3rlpy trainer, the benchmark) is imported when that command runs, not for every parse."""
 
     def adapt_cmd(cfg: Annotated[AdaptConfig, tyro.conf.arg(name="")] = AdaptConfig()) -> None:
         """Twin update: fine-tune the blueprint agent on the changed (dynamic) twin; success against training
@@ -151,6 +178,12 @@ def _parse_and_run(argv: list[str]) -> int:
 
         run_bench(cfg.validate())
 
+    return {"offline": offline_cmd, "adapt": adapt_cmd, "log": log_cmd, "offline-bench": offline_bench_cmd}
+
+
+def _experiment_commands() -> dict:
+    """solve, sweep and paper: the commands over whole scenes and experiments rather than one agent."""
+
     def solve_cmd(cfg: Annotated[SolveConfig, tyro.conf.arg(name="")] = SolveConfig()) -> None:
         """Solve a twin's navigation MDP exactly: V*/Q* for every (cell, target) under each reward (cached in the data
         root), and the greedy policy's success and SPL on the 500 seeded evaluation pairs; JSON, Markdown, a picture."""
@@ -170,28 +203,7 @@ def _parse_and_run(argv: list[str]) -> int:
         and PNGs): Tables II, V, VI, VII, coverage maps, training curves, inference paths, cross-quadrant bars."""
         run_paper(cfg.validate())
 
-    commands = {
-        "train": train_cmd,
-        "eval": eval_cmd,
-        "cross": cross_cmd,
-        "offline": offline_cmd,
-        "adapt": adapt_cmd,
-        "log": log_cmd,
-        "offline-bench": offline_bench_cmd,
-        "solve": solve_cmd,
-        "sweep": sweep_cmd,
-        "paper": paper_cmd,
-    }
-    # tyro would turn a config's own check (made while parsing) into its usage box: the checks wait for the
-    # command's validate(), which raises the boundary's one-line error (exit 2), and run again inside the command.
-    with deferred_checks():
-        tyro.extras.subcommand_cli_from_dict(
-            {name: _checked(cmd) for name, cmd in commands.items()},
-            args=argv,
-            prog="python -m dtradar_rl",
-            description="Navigation agents on dtradar datasets. " + DEBUG_HELP,
-        )
-    return 0
+    return {"solve": solve_cmd, "sweep": sweep_cmd, "paper": paper_cmd}
 
 
 def _checked(command):
