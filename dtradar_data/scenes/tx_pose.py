@@ -144,51 +144,102 @@ def tx_pose_error(spec: SceneSpec, *, offset_m: float = 0.5, angle_deg: float = 
     transmitter inside the room and out of every object.
     """
     check_tx_pose_error(offset_m, angle_deg, seed)
+    _refuse_a_pose_twin(spec)
+    pose = _draw_pose(spec, offset_m, angle_deg, seed)
+    record = _record(spec, offset_m, angle_deg, seed, pose)
+    return dataclasses.replace(
+        spec,
+        scene=spec.scene + TX_POSE_SUFFIX,
+        title=f"{spec.title}, transmitter {offset_m:g} m and {angle_deg:g} deg off",
+        description=_description(spec, offset_m, angle_deg, seed, pose, record["move_azimuth_deg"]),
+        tx=dataclasses.replace(
+            spec.tx, position_m=pose.position, look_at_m=pose.look_at, orientation_deg=pose.orientation
+        ),
+        provenance={**spec.provenance, "tx_pose_error": record},
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Pose:
+    """The perturbed transmitter (rounded to :data:`DIGITS`) and the draws that made it."""
+
+    position: tuple[float, ...]
+    look_at: tuple[float, ...]
+    orientation: tuple[float, ...]
+    boresight: np.ndarray
+    axis: np.ndarray
+    direction: float
+    directions_tried: int
+
+
+def _refuse_a_pose_twin(spec: SceneSpec) -> None:
+    """A pose twin of a pose twin would stack two errors under one name: refused, pointing at the original."""
     if is_tx_pose_scene(spec.scene):
         raise InvalidSettingError(
             f"{spec.name} already is an antenna-pose-error twin",
             hint=f"apply the pose error to the original scene {spec.scene.removesuffix(TX_POSE_SUFFIX)!r}",
         )
+
+
+def _draw_pose(spec: SceneSpec, offset_m: float, angle_deg: float, seed: int) -> _Pose:
+    """The seeded new pose: the turn's axis is drawn first, then the move's directions, from one generator (the
+    order is part of what a seed means)."""
     tx = spec.tx
     pos0 = np.asarray(tx.position_m, dtype=float)
     r0 = orientation_matrix(*tx_orientation_deg(tx))
-    boresight0 = r0[:, 0]
     rng = np.random.default_rng(seed)
+    axis, orientation, boresight1 = _turn(r0, angle_deg, rng)
+    direction, pos1, tried = _move(spec, pos0, offset_m, rng)
+    position = tuple(round(float(v), DIGITS) for v in pos1)
+    # the look-at keeps its distance along the new boresight, so the spec still says where the array points
+    distance = float(np.linalg.norm(np.subtract(tx.look_at_m, pos0))) if tx.look_at_m is not None else 1.0
+    look_at = tuple(round(float(v), DIGITS) for v in np.asarray(position) + distance * boresight1)
+    return _Pose(position, look_at, orientation, boresight1, axis, direction, tried)
 
-    # The turn: about a seeded axis in the plane perpendicular to the boresight (spanned by the array's local y, z).
+
+def _turn(r0: np.ndarray, angle_deg: float, rng: np.random.Generator) -> tuple[np.ndarray, tuple, np.ndarray]:
+    """The turn's axis, the new orientation (rounded) and its boresight: about a seeded axis in the plane
+    perpendicular to the boresight (spanned by the array's local y, z)."""
     psi = float(rng.uniform(0.0, 2 * math.pi))
     axis = math.cos(psi) * r0[:, 1] + math.sin(psi) * r0[:, 2]
     r1 = _rotate(axis, math.radians(angle_deg)) @ r0
     orientation = tuple(round(v, DIGITS) for v in _euler_deg(r1))
-    boresight1 = orientation_matrix(*orientation)[:, 0]
+    # the boresight of the rounded orientation, the one the spec will hold
+    return axis, orientation, orientation_matrix(*orientation)[:, 0]
 
-    # The move: the first seeded horizontal direction that keeps the transmitter in free space.
+
+def _move(
+    spec: SceneSpec, pos0: np.ndarray, offset_m: float, rng: np.random.Generator
+) -> tuple[float, np.ndarray, int]:
+    """The first seeded horizontal direction that keeps the transmitter in free space: the direction, the new
+    position and how many directions were tried; :class:`InvalidCoordinatesError` after :data:`MAX_TRIES`."""
     rejected: list[str] = []
     for _ in range(MAX_TRIES):
         direction = float(rng.uniform(0.0, 2 * math.pi))
         pos1 = pos0 + offset_m * np.array([math.cos(direction), math.sin(direction), 0.0])
         why = _why_not(spec, pos1)
         if why is None:
-            break
+            return direction, pos1, len(rejected) + 1
         rejected.append(why)
-    else:
-        raise InvalidCoordinatesError(
-            f"{spec.name}: moving the transmitter {offset_m:g} m from {tuple(pos0.round(3))} puts it "
-            f"{rejected[0]} (and in {MAX_TRIES - 1} more seeded directions)",
-            hint="use a smaller offset (--tx-pose-error OFFSET_M ANGLE_DEG) or move the transmitter in the scene file",
-        )
-    position = tuple(round(float(v), DIGITS) for v in pos1)
-    distance = float(np.linalg.norm(np.subtract(tx.look_at_m, pos0))) if tx.look_at_m is not None else 1.0
-    look_at = tuple(round(float(v), DIGITS) for v in np.asarray(position) + distance * boresight1)
+    raise InvalidCoordinatesError(
+        f"{spec.name}: moving the transmitter {offset_m:g} m from {tuple(pos0.round(3))} puts it "
+        f"{rejected[0]} (and in {MAX_TRIES - 1} more seeded directions)",
+        hint="use a smaller offset (--tx-pose-error OFFSET_M ANGLE_DEG) or move the transmitter in the scene file",
+    )
 
-    record: dict[str, Any] = {
+
+def _record(spec: SceneSpec, offset_m: float, angle_deg: float, seed: int, pose: _Pose) -> dict[str, Any]:
+    """The provenance of the twin: the settings, the draws, and the original and perturbed poses side by side."""
+    tx = spec.tx
+    boresight0 = orientation_matrix(*tx_orientation_deg(tx))[:, 0]
+    return {
         "scene": spec.scene,
         "offset_m": float(offset_m),
         "angle_deg": float(angle_deg),
         "seed": int(seed),
-        "move_azimuth_deg": round(math.degrees(direction) % 360.0, DIGITS),
-        "directions_tried": len(rejected) + 1,
-        "turn_axis": [round(float(v), DIGITS) for v in axis],
+        "move_azimuth_deg": round(math.degrees(pose.direction) % 360.0, DIGITS),
+        "directions_tried": pose.directions_tried,
+        "turn_axis": [round(float(v), DIGITS) for v in pose.axis],
         "original": {
             "position_m": list(tx.position_m),
             "look_at_m": None if tx.look_at_m is None else list(tx.look_at_m),
@@ -196,27 +247,24 @@ def tx_pose_error(spec: SceneSpec, *, offset_m: float = 0.5, angle_deg: float = 
             "boresight": [round(float(v), DIGITS) for v in boresight0],
         },
         "perturbed": {
-            "position_m": list(position),
-            "look_at_m": list(look_at),
-            "orientation_deg": list(orientation),
-            "boresight": [round(float(v), DIGITS) for v in boresight1],
+            "position_m": list(pose.position),
+            "look_at_m": list(pose.look_at),
+            "orientation_deg": list(pose.orientation),
+            "boresight": [round(float(v), DIGITS) for v in pose.boresight],
         },
     }
+
+
+def _description(spec: SceneSpec, offset_m: float, angle_deg: float, seed: int, pose: _Pose, azimuth_deg: float) -> str:
+    """The twin's description: the original's, then what was moved and turned, from where to where."""
+    tx = spec.tx
     was = "Sionna's default orientation (boresight +x)" if tx.look_at_m is None else f"looking at {_fmt(tx.look_at_m)}"
-    description = (
+    return (
         f"{spec.description} Antenna-pose-error twin of {spec.name}: the transmitter is moved {offset_m:g} m "
-        f"horizontally (towards azimuth {record['move_azimuth_deg']:.1f} deg) from {_fmt(tx.position_m)} to "
-        f"{_fmt(position)} m, and its antenna array, {was}, is turned {angle_deg:g} deg about an axis perpendicular "
-        f"to its boresight, to look at {_fmt(look_at)} (orientation {_fmt(orientation)} deg); seed {seed}. "
-        "Everything else is the original twin."
-    )
-    return dataclasses.replace(
-        spec,
-        scene=spec.scene + TX_POSE_SUFFIX,
-        title=f"{spec.title}, transmitter {offset_m:g} m and {angle_deg:g} deg off",
-        description=description,
-        tx=dataclasses.replace(tx, position_m=position, look_at_m=look_at, orientation_deg=orientation),
-        provenance={**spec.provenance, "tx_pose_error": record},
+        f"horizontally (towards azimuth {azimuth_deg:.1f} deg) from {_fmt(tx.position_m)} to "
+        f"{_fmt(pose.position)} m, and its antenna array, {was}, is turned {angle_deg:g} deg about an axis "
+        f"perpendicular to its boresight, to look at {_fmt(pose.look_at)} (orientation {_fmt(pose.orientation)} deg); "
+        f"seed {seed}. Everything else is the original twin."
     )
 
 
