@@ -66,19 +66,44 @@ def plot(res: dict, path: Path) -> None:
 
 
 def markdown(res: dict) -> str:
-    def pct(x):
-        return f"{100 * x:.1f} %"
+    """The Markdown of one scene's result: the setting, the timings, the goals, the per-snapshot table."""
+    return (
+        "\n".join(
+            [
+                f"# `{res['scene']}/moving`: differential snapshots vs full traces",
+                "",
+                _setting(res),
+                "",
+                *_timings(res),
+                "",
+                *_goals(res["goals"]),
+                "",
+                *_snapshot_table(res["per_snapshot"]),
+                *_repeats(res),
+                "",
+                "Snapshot 0 of the build is a full trace and the reference of t = 0; the seed floor compares a full "
+                "trace with seed + 1 to the one with the build's seed at the same instant.",
+            ]
+        )
+        + "\n"
+    )
 
-    g = res["goals"]
 
-    def verdict(goal):
-        return "not evaluated" if goal["met"] is None else ("**met**" if goal["met"] else "**not met**")
+def _pct(x) -> str:
+    """A fraction as a percentage with one decimal."""
+    return f"{100 * x:.1f} %"
 
-    floors = ", ".join(f"{pct(f['agreement'])} (t = {f['k']})" for f in res["seed_floor"]) or "not run"
+
+def _verdict(goal) -> str:
+    """A goal's outcome in bold; a goal the run could not judge (``met`` is None) says so."""
+    return "not evaluated" if goal["met"] is None else ("**met**" if goal["met"] else "**not met**")
+
+
+def _setting(res: dict) -> str:
+    """The paragraph of what was run: snapshots against the twin's own horizon, movers, grid, tracer settings and
+    the machine."""
     rt = res["rt"]
-    lines = [
-        f"# `{res['scene']}/moving`: differential snapshots vs full traces",
-        "",
+    return (
         f"{res['snapshots']} snapshots of {res['dt_s']:g} s (the twin's own horizon: {res['own_horizon']}; "
         + (
             "past it the movers go round again, each snapshot still traced from the one before"
@@ -92,33 +117,50 @@ def markdown(res: dict) -> str:
         f"{rt.get('batch_size')}, seed {rt.get('seed')}"
         + ("" if rt.get("batch_independent", False) else ", `--rt.no-batch-independent`")
         + f". Machine: {res['machine']} at the start, "
-        f"{res['machine_after']} at the end.",
-        "",
+        f"{res['machine_after']} at the end."
+    )
+
+
+def _timings(res: dict) -> list[str]:
+    """The bullets of the compile, the build, differential against full, and agreement with the seed floor."""
+    g = res["goals"]
+    floors = ", ".join(f"{_pct(f['agreement'])} (t = {f['k']})" for f in res["seed_floor"]) or "not run"
+    return [
         f"- First JIT compile (excluded from every time below): {res['first_compile_s']:.1f} s.",
         f"- Build (`moving.trace_snapshots` + `moving_tables`, warm): {g['build_time']['warm_s']:.1f} s for "
         f"{res['snapshots']} snapshots ({res['build_tables_s']:.1f} s of it joining the table); "
         f"{g['build_time']['with_first_compile_s']:.1f} s with the compile.",
         f"- Snapshots 1–{res['snapshots'] - 1}: differential {res['differential_total_s']:.1f} s in all vs full "
         f"{res['full_total_s']:.1f} s ({res['speedup_total']:.2f}× in total, median {res['speedup_median']:.2f}× per "
-        f"snapshot, worst {g['speedup']['min']:.2f}×); {pct(res['retraced_fraction_mean'])} of the free cells "
+        f"snapshot, worst {g['speedup']['min']:.2f}×); {_pct(res['retraced_fraction_mean'])} of the free cells "
         "re-traced on average.",
         f"- Agreement with the full trace of the same instant (strongest path, free cells): mean "
-        f"{pct(res['agreement_mean'])}, lowest {pct(res['agreement_min'])}; seed-noise floor {floors}.",
-        "",
+        f"{_pct(res['agreement_mean'])}, lowest {_pct(res['agreement_min'])}; seed-noise floor {floors}.",
+    ]
+
+
+def _goals(g: dict) -> list[str]:
+    """The three goals (speed-up, agreement, build time), each with its verdict and the counts behind it."""
+    return [
         "Goals:",
         "",
-        f"- {g['speedup']['goal']}: {verdict(g['speedup'])} ({g['speedup']['snapshots_meeting']} of "
+        f"- {g['speedup']['goal']}: {_verdict(g['speedup'])} ({g['speedup']['snapshots_meeting']} of "
         f"{g['speedup']['of']} snapshots; worst {g['speedup']['min']:.2f}×).",
-        f"- {g['agreement']['goal']}: {verdict(g['agreement'])} ({g['agreement']['snapshots_meeting']} of "
+        f"- {g['agreement']['goal']}: {_verdict(g['agreement'])} ({g['agreement']['snapshots_meeting']} of "
         f"{g['agreement']['of']} snapshots).",
-        f"- {g['build_time']['goal']}: {verdict(g['build_time'])} ({g['build_time']['warm_s']:.1f} s warm for "
+        f"- {g['build_time']['goal']}: {_verdict(g['build_time'])} ({g['build_time']['warm_s']:.1f} s warm for "
         f"{g['build_time']['snapshots']} snapshots).",
-        "",
+    ]
+
+
+def _snapshot_table(per_snapshot: list[dict]) -> list[str]:
+    """One row a snapshot; a full trace (snapshot 0) is the reference, so it has no ratio or agreement."""
+    lines = [
         "| k | re-traced | differential s | full s | ratio | agreement all / re-traced / kept | median / p95 "
         "abs. gain diff | snapshot 0 reused | previous full reused |",
         "|---:|---:|---:|---:|---:|---|---:|---:|---:|",
     ]
-    for r in res["per_snapshot"]:
+    for r in per_snapshot:
         if r["mode"] == "full":
             lines.append(
                 f"| {r['k']} | {r['retraced_cells']} of {r['free_cells']} (full) | {r['differential_s']:.2f} | "
@@ -126,26 +168,27 @@ def markdown(res: dict) -> str:
             )
             continue
         a = r["differential_vs_full"]
-        kept = pct(a["kept"]["agreement"]) if a["kept"]["cells"] else "–"
-        redo = pct(a["retraced"]["agreement"]) if a["retraced"]["cells"] else "–"
+        kept = _pct(a["kept"]["agreement"]) if a["kept"]["cells"] else "–"
+        redo = _pct(a["retraced"]["agreement"]) if a["retraced"]["cells"] else "–"
         lines.append(
             f"| {r['k']} | {r['retraced_cells']} of {r['free_cells']} | {r['differential_s']:.2f} | "
-            f"{r['full_s']:.2f} | {r['speedup']:.2f}× | {pct(a['all']['agreement'])} / {redo} / {kept} | "
+            f"{r['full_s']:.2f} | {r['speedup']:.2f}× | {_pct(a['all']['agreement'])} / {redo} / {kept} | "
             f"{a['all']['gain_median_db']:.3f} / {a['all']['gain_p95_db']:.2f} dB | "
-            f"{pct(r['snapshot0_vs_full']['agreement'])} | {pct(r['previous_full_vs_full']['agreement'])} |"
+            f"{_pct(r['snapshot0_vs_full']['agreement'])} | {_pct(r['previous_full_vs_full']['agreement'])} |"
         )
+    return lines
+
+
+def _repeats(res: dict) -> list[str]:
+    """Past the twin's own horizon the movers repeat: how far the full traces agree with those a period before
+    (none when the run stayed within the horizon)."""
     repeats = [r for r in res["per_snapshot"] if "full_vs_full_periods_before" in r]
-    if repeats:
-        same = [r["full_vs_full_periods_before"]["agreement"] for r in repeats]
-        lines += [
-            "",
-            f"Snapshots {repeats[0]['k']}–{repeats[-1]['k']} show the movers where snapshot k mod "
-            f"{res['own_horizon']} (the twin's own horizon) does: their full traces agree with those in "
-            f"{pct(min(same))}–{pct(max(same))} of the cells (same scene, same seed).",
-        ]
-    lines += [
+    if not repeats:
+        return []
+    same = [r["full_vs_full_periods_before"]["agreement"] for r in repeats]
+    return [
         "",
-        "Snapshot 0 of the build is a full trace and the reference of t = 0; the seed floor compares a full trace "
-        "with seed + 1 to the one with the build's seed at the same instant.",
+        f"Snapshots {repeats[0]['k']}–{repeats[-1]['k']} show the movers where snapshot k mod "
+        f"{res['own_horizon']} (the twin's own horizon) does: their full traces agree with those in "
+        f"{_pct(min(same))}–{_pct(max(same))} of the cells (same scene, same seed).",
     ]
-    return "\n".join(lines) + "\n"
