@@ -43,6 +43,23 @@ def spread(values: list[float]) -> str:
 
 
 def main() -> None:
+    args = _parser().parse_args()
+    runs, out = Path(args.runs), Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows, adapt_rows, train_s = [], [], {}
+    for scene in args.scenes:
+        twins = {v: load_dataset(f"{scene}/{v}") for v in ("blueprint", "dynamic")}
+        rows += _planner_rows(scene, twins, args)
+        for seed in args.seeds:
+            for preset in args.presets:
+                rows += _agent_rows(scene, seed, preset, twins, runs, train_s, args)
+        for seed in args.seeds if args.adapt_seeds is None else args.adapt_seeds:
+            adapt_rows.append(_adapted(scene, seed, runs, out, args))
+    _write(rows, adapt_rows, train_s, args, out)
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The options; the module's docstring is the ``--help`` text."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="+", default=["cubicle", "meeting"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
@@ -54,69 +71,73 @@ def main() -> None:
     ap.add_argument("--runs", default=str(run_dir("bench_dynamic")))
     ap.add_argument("--out", default="results")
     ap.add_argument("--name", default="bench_dynamic", help="stem of the result files")
-    args = ap.parse_args()
-    runs, out = Path(args.runs), Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows, adapt_rows, train_s = [], [], {}
-    for scene in args.scenes:
-        twins = {v: load_dataset(f"{scene}/{v}") for v in ("blueprint", "dynamic")}
-        planner = FingerprintPlanner(twins["blueprint"])
-        for v, ds in twins.items():
-            m, _ = evaluate(planner, ds, pairs=args.pairs, latency=True)
-            rows.append({"scene": scene, "agent": "planner", "seed": None, "twin": v, **m.to_dict()})
-            print(f"{scene} planner -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}", flush=True)
-        for seed in args.seeds:
-            for preset in args.presets:
-                run = runs / scene / preset / f"seed{seed}"
-                if not (run / "model.pt").exists():
-                    state = machine_state()
-                    result = train(
-                        config_for(
-                            preset, scene=scene, seed=seed, out=str(run), verbose=False, total_env_steps=args.steps
-                        )
-                    )
-                    train_s[f"{scene}/{preset}/{seed}"] = {"wall_s": result.wall_s, "machine": state}
-                policy = load_policy(run / "model.pt")
-                for v, ds in twins.items():
-                    m, _ = evaluate(policy, ds, pairs=args.pairs, latency=True)
-                    rows.append(
-                        {
-                            "scene": scene,
-                            "agent": preset,
-                            "seed": seed,
-                            "twin": v,
-                            **m.to_dict(),
-                            "train_s": policy.meta["stats"].get("wall_s"),
-                        }
-                    )
-                    print(
-                        f"{scene} {preset} seed {seed} -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}", flush=True
-                    )
-        for seed in args.seeds if args.adapt_seeds is None else args.adapt_seeds:
-            state = machine_state()
-            t0 = time.perf_counter()
-            res = adapt(
-                AdaptConfig(
-                    scene=scene,
-                    checkpoint=str(runs / scene / "memory" / f"seed{seed}" / "model.pt"),
-                    seconds=args.seconds,
-                    pairs=args.pairs,
-                    seed=seed,
-                    verbose=False,
-                    out=str(runs / scene / "adapt" / f"seed{seed}"),
-                )
-            )
-            adapt_rows.append(
-                {
-                    "scene": scene,
-                    "seed": seed,
-                    "curves": res.curves,
-                    "machine": state,
-                    "wall_s": time.perf_counter() - t0,
-                }
-            )
-            shutil.copy(res.out_dir / "curve.png", out / f"{args.name}_adapt_{scene}_seed{seed}.png")
-            print(res.markdown, flush=True)
+    return ap
+
+
+def _planner_rows(scene: str, twins: dict, args) -> list[dict]:
+    """The classical planner on both twins; it needs no training, so it has no seed."""
+    rows = []
+    planner = FingerprintPlanner(twins["blueprint"])
+    for v, ds in twins.items():
+        m, _ = evaluate(planner, ds, pairs=args.pairs, latency=True)
+        rows.append({"scene": scene, "agent": "planner", "seed": None, "twin": v, **m.to_dict()})
+        print(f"{scene} planner -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}", flush=True)
+    return rows
+
+
+def _agent_rows(scene: str, seed: int, preset: str, twins: dict, runs: Path, train_s: dict, args) -> list[dict]:
+    """One preset and seed on both twins, zero-shot from the blueprint; trained first unless its ``model.pt`` is
+    there (a fresh training's seconds and machine go into ``train_s``)."""
+    run = runs / scene / preset / f"seed{seed}"
+    if not (run / "model.pt").exists():
+        state = machine_state()
+        result = train(
+            config_for(preset, scene=scene, seed=seed, out=str(run), verbose=False, total_env_steps=args.steps)
+        )
+        train_s[f"{scene}/{preset}/{seed}"] = {"wall_s": result.wall_s, "machine": state}
+    policy = load_policy(run / "model.pt")
+    rows = []
+    for v, ds in twins.items():
+        m, _ = evaluate(policy, ds, pairs=args.pairs, latency=True)
+        rows.append(
+            {
+                "scene": scene,
+                "agent": preset,
+                "seed": seed,
+                "twin": v,
+                **m.to_dict(),
+                "train_s": policy.meta["stats"].get("wall_s"),
+            }
+        )
+        print(f"{scene} {preset} seed {seed} -> {v}: success {m.success_rate:.3f} SPL {m.spl:.3f}", flush=True)
+    return rows
+
+
+def _adapted(scene: str, seed: int, runs: Path, out: Path, args) -> dict:
+    """The twin update: the memory agent of ``seed`` fine-tuned on the dynamic twin against training from scratch;
+    its curves, and its figure copied beside the results."""
+    state = machine_state()
+    t0 = time.perf_counter()
+    res = adapt(
+        AdaptConfig(
+            scene=scene,
+            checkpoint=str(runs / scene / "memory" / f"seed{seed}" / "model.pt"),
+            seconds=args.seconds,
+            pairs=args.pairs,
+            seed=seed,
+            verbose=False,
+            out=str(runs / scene / "adapt" / f"seed{seed}"),
+        )
+    )
+    row = {"scene": scene, "seed": seed, "curves": res.curves, "machine": state, "wall_s": time.perf_counter() - t0}
+    shutil.copy(res.out_dir / "curve.png", out / f"{args.name}_adapt_{scene}_seed{seed}.png")
+    print(res.markdown, flush=True)
+    return row
+
+
+def _write(rows: list[dict], adapt_rows: list[dict], train_s: dict, args, out: Path) -> None:
+    """The Markdown (and, through :func:`report`, the per-scene figures), then the JSON with the machine at the end,
+    then the Markdown printed."""
     md = report(rows, adapt_rows, args)
     write_atomic(out / f"{args.name}.md", md)
     write_atomic(

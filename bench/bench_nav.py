@@ -134,6 +134,33 @@ def _twins(scene: str) -> dict[str, object]:
 
 
 def main() -> None:
+    args = _parser().parse_args()
+    _check_before_training(args)
+    m_start = machine()
+    runs = _train_all(args)
+    if args.train_only:
+        return
+    torch.set_num_threads(1)  # the evaluations: 500 robots at once gain nothing from a second thread on 2 cores
+    rows = []
+    for scene in args.scenes:
+        twins = _twins(scene)
+        planner = None if args.no_planner else planner_for_scene(scene)
+        for seed in args.seeds:
+            for agent, (policy, train_s) in _agents(scene, seed, runs, planner, args).items():
+                rows += _evaluated(scene, seed, agent, policy, train_s, twins, args)
+    result = {
+        "args": vars(args),
+        "rows": rows,
+        "machine": {"start": m_start, "end": machine()},
+        "goals": GOALS,
+        "command": "python bench/bench_nav.py " + " ".join(sys.argv[1:]),
+        "load_before": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+    }
+    _write(result, Path(args.out), args.name)
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The options; the module's docstring is the ``--help`` text (``--preset`` is the old spelling, kept hidden)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
         "--scenes", nargs="+", default=["cubicle", "meeting", "dallas-q1", "dallas-q2", "dallas-q3", "dallas-q4"]
@@ -152,14 +179,20 @@ def main() -> None:
     ap.add_argument("--runs", default=str(run_dir("bench_nav")))
     ap.add_argument("--out", default="results")
     ap.add_argument("--name", default="bench_nav", help="stem of the result files")
-    args = ap.parse_args()
+    return ap
+
+
+def _check_before_training(args) -> None:
+    """Fail before hours of training, not after: a repeated seed, or a scene whose blueprint is not built."""
     if len(set(args.seeds)) != len(args.seeds):
         sys.exit(f"--seeds repeats a seed ({args.seeds}): one run would be counted twice")
-    for scene in args.scenes:  # fail before hours of training, not after
+    for scene in args.scenes:
         load_dataset(f"{scene}/blueprint")
-    m_start = machine()
 
-    # Trainings first (the long part), --jobs at a time, in fresh processes so their threads are their own.
+
+def _train_all(args) -> dict[tuple, tuple[str, float | None]]:
+    """Every (scene, seed, agent)'s checkpoint and training seconds. Trainings first (the long part), ``--jobs`` at
+    a time, in fresh processes so their threads are their own; SB3 on the first seed only."""
     jobs = [(scene, seed, p) for scene in args.scenes for seed in args.seeds for p in args.presets]
     if args.sb3_seconds > 0:
         jobs += [(scene, args.seeds[0], SB3) for scene in args.scenes]
@@ -178,59 +211,58 @@ def main() -> None:
             runs[job] = fut.result()
             print(f"trained {job[0]} s{job[1]} {job[2]}: {runs[job][1]:.0f} s", flush=True)
     print(f"trainings: {time.perf_counter() - t0:.0f} s wall, {args.jobs} at a time", flush=True)
-    if args.train_only:
-        return
+    return runs
 
-    torch.set_num_threads(1)  # the evaluations: 500 robots at once gain nothing from a second thread on 2 cores
+
+def _agents(scene: str, seed: int, runs: dict, planner, args) -> dict[str, tuple[object, float | None]]:
+    """The policies evaluated for one scene and seed, with their training seconds: our presets, and on the first
+    seed SB3 and the planner (they have no seed of their own)."""
+    agents = {p: (load_policy(runs[(scene, seed, p)][0]), runs[(scene, seed, p)][1]) for p in args.presets}
+    if seed == args.seeds[0]:  # no seed of their own
+        if (scene, seed, SB3) in runs:
+            agents[SB3] = (load_policy(runs[(scene, seed, SB3)][0]), runs[(scene, seed, SB3)][1])
+        if planner is not None:
+            agents["planner"] = (planner, None)
+    return agents
+
+
+def _evaluated(scene: str, seed: int, agent: str, policy, train_s, twins: dict, args) -> list[dict]:
+    """One agent on every built twin under every ``--noise`` level, then on the pose twins without noise (their
+    error is the pose, not the measurements); a row each, printed as it comes."""
     rows = []
-    for scene in args.scenes:
-        twins = _twins(scene)
-        planner = None if args.no_planner else planner_for_scene(scene)
-        for seed in args.seeds:
-            agents = {p: (load_policy(runs[(scene, seed, p)][0]), runs[(scene, seed, p)][1]) for p in args.presets}
-            if seed == args.seeds[0]:  # no seed of their own
-                if (scene, seed, SB3) in runs:
-                    agents[SB3] = (load_policy(runs[(scene, seed, SB3)][0]), runs[(scene, seed, SB3)][1])
-                if planner is not None:
-                    agents["planner"] = (planner, None)
-            for agent, (policy, train_s) in agents.items():
-                cases = [(n, v) for n in args.noise for v in ("blueprint", "dynamic") if v in twins]
-                cases += [(POSE, v) for v in ("blueprint", "dynamic") if v + POSE_SUFFIX in twins]
-                for noise, variant in cases:
-                    ds = twins[variant + POSE_SUFFIX] if noise == POSE else twins[variant]
-                    m, _ = evaluate(policy, ds, pairs=args.pairs, noise="none" if noise == POSE else noise)
-                    rows.append(
-                        {
-                            "scene": scene,
-                            "seed": seed,
-                            "agent": agent,
-                            "noise": noise,
-                            "twin": variant,
-                            "dataset": f"{ds.name}@{(ds.version or '-')[:12]}",
-                            "success": m.success_rate,
-                            "spl": m.spl,
-                            "collisions": m.collisions,
-                            "p50_ms": m.latency_ms,
-                            "p99_ms": m.latency_p99_ms,
-                            "train_s": train_s,
-                        }
-                    )
-                    print(
-                        f"{scene:14s} s{seed} {agent:20s} {noise:9s} {variant:9s} success {m.success_rate:.3f}"
-                        f" SPL {m.spl:.3f} collisions {m.collisions:.2f} p50 {m.latency_ms:.3f} ms",
-                        flush=True,
-                    )
-    result = {
-        "args": vars(args),
-        "rows": rows,
-        "machine": {"start": m_start, "end": machine()},
-        "goals": GOALS,
-        "command": "python bench/bench_nav.py " + " ".join(sys.argv[1:]),
-        "load_before": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
-    }
-    out = Path(args.out)
+    cases = [(n, v) for n in args.noise for v in ("blueprint", "dynamic") if v in twins]
+    cases += [(POSE, v) for v in ("blueprint", "dynamic") if v + POSE_SUFFIX in twins]
+    for noise, variant in cases:
+        ds = twins[variant + POSE_SUFFIX] if noise == POSE else twins[variant]
+        m, _ = evaluate(policy, ds, pairs=args.pairs, noise="none" if noise == POSE else noise)
+        rows.append(
+            {
+                "scene": scene,
+                "seed": seed,
+                "agent": agent,
+                "noise": noise,
+                "twin": variant,
+                "dataset": f"{ds.name}@{(ds.version or '-')[:12]}",
+                "success": m.success_rate,
+                "spl": m.spl,
+                "collisions": m.collisions,
+                "p50_ms": m.latency_ms,
+                "p99_ms": m.latency_p99_ms,
+                "train_s": train_s,
+            }
+        )
+        print(
+            f"{scene:14s} s{seed} {agent:20s} {noise:9s} {variant:9s} success {m.success_rate:.3f}"
+            f" SPL {m.spl:.3f} collisions {m.collisions:.2f} p50 {m.latency_ms:.3f} ms",
+            flush=True,
+        )
+    return rows
+
+
+def _write(result: dict, out: Path, name: str) -> None:
+    """``<name>.json``, ``.md`` and ``.png`` under ``out``, then the table printed."""
     out.mkdir(parents=True, exist_ok=True)
-    stem = out / args.name
+    stem = out / name
     write_atomic(stem.with_suffix(".json"), json.dumps(result, indent=2) + "\n")
     md = markdown(result)
     write_atomic(stem.with_suffix(".md"), md)

@@ -113,6 +113,33 @@ def settings_for(spec, args):
 
 
 def main() -> None:
+    args = _parser().parse_args()
+    workers = args.workers or os.cpu_count() or 1
+    rows = [_measured(entry, args, workers) for entry in args.scenes]
+    ceiling = _ceiling(args, workers)
+    host = machine()
+    described = f"{describe(host)}, no GPU (LLVM backend)"
+    load = host["load_average"][0] if host["load_average"] else None
+    result = {
+        "machine": described,
+        "load_average_at_end": load,
+        "machine_details": host,
+        "rows": rows,
+        "ceiling": ceiling,
+        "library_versions": library_versions(),
+    }
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "bench_ray.json").write_text(json.dumps(result, indent=2) + "\n")
+    lines = _report(rows, ceiling, workers, described)
+    (args.out / "bench_ray.md").write_text("\n".join(lines) + "\n")
+    if rows:
+        plot(rows, workers, args.out / "bench_ray.png", described)
+    print("\n".join(lines))
+    assert all(r["identical_tables"] for r in rows), "Ray and serial tables differ"
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The options; ``--help`` shows the docstring's first paragraph only."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", nargs="*", default=["cubicle", "dallas-q3"])
     ap.add_argument(
@@ -138,70 +165,66 @@ def main() -> None:
         help="scene of the machine's own ceiling: one tracer alone vs one per worker at once, no Ray ('' = skip)",
     )
     ap.add_argument("--out", type=Path, default=Path("results"))
-    args = ap.parse_args()
-    workers = args.workers or os.cpu_count() or 1
-    rows = []
-    for entry in args.scenes:
-        specs = [load_scene_spec(scene, "blueprint") for scene, _ in build_targets(entry, "blueprint")]
-        jobs = [(spec, settings_for(spec, args)) for spec in specs]
-        free = sum(int((~occupancy(spec)).sum()) for spec in specs)
-        layouts = [(int((~occupancy(s)).sum()), batch_layout(int((~occupancy(s)).sum()), st)) for s, st in jobs]
-        batches = sum(-(-n // size) for n, size in layouts)
-        settings = jobs[0][1]
-        name = entry if len(specs) > 1 else specs[0].name
-        print(
-            f"{name}: {len(specs)} scene(s), {free} free cells in {batches} batches "
-            f"({', '.join(str(size) for _, size in layouts)} cells each), {settings.samples_per_src:.0e} rays, "
-            f"buffer {settings.max_num_paths_per_src:.0e}"
-            + (", Sionna's own solver" if args.stock_solver else ", batch-independent")
-        )
-        serial, serial_s = timed(jobs, "serial", 0)
-        print(f"  serial: {serial_s:.1f} s ({free / serial_s:.1f} cells/s)")
-        on_ray, ray_s = timed(jobs, "ray", workers)
-        used = min(workers, max(-(-n // size) for n, size in layouts))
-        print(f"  ray ({used} workers): {ray_s:.1f} s ({free / ray_s:.1f} cells/s), speed-up {serial_s / ray_s:.2f}x")
-        rows.append(
-            {
-                "scene": name,
-                "scenes": [s.name for s in specs],
-                "free_cells": free,
-                "batch_size": settings.batch_size,
-                "cells_per_batch": [size for _, size in layouts],
-                "batch_independent": not args.stock_solver,
-                "batches": batches,
-                "samples_per_src": settings.samples_per_src,
-                "max_num_paths_per_src": settings.max_num_paths_per_src,
-                "serial_s": round(serial_s, 2),
-                "serial_cells_per_s": round(free / serial_s, 1),
-                "ray_workers": used,
-                "ray_s": round(ray_s, 2),
-                "ray_cells_per_s": round(free / ray_s, 1),
-                "speedup": round(serial_s / ray_s, 2),
-                "identical_tables": all(a.equals(b) for a, b in zip(on_ray, serial)),
-                "per_worker_cells_per_s": round(free / ray_s / used, 1),
-            }
-        )
-    ceiling = None
-    if args.contention:
-        spec = load_scene_spec(args.contention, "blueprint")
-        ceiling = contention(args.contention, settings_for(spec, args), workers)
-        print(
-            f"ceiling: {ceiling['cells']} cells of {args.contention} in {ceiling['alone_s']} s alone, "
-            f"{ceiling['together_s']} s with {workers} at once: at most {ceiling['ceiling_speedup']}x on this machine"
-        )
-    host = machine()
-    described = f"{describe(host)}, no GPU (LLVM backend)"
-    load = host["load_average"][0] if host["load_average"] else None
-    result = {
-        "machine": described,
-        "load_average_at_end": load,
-        "machine_details": host,
-        "rows": rows,
-        "ceiling": ceiling,
-        "library_versions": library_versions(),
+    return ap
+
+
+def _measured(entry: str, args, workers: int) -> dict:
+    """One ``--scenes`` entry (a city: all its quadrants) traced serially, then on Ray; its row of the table."""
+    specs = [load_scene_spec(scene, "blueprint") for scene, _ in build_targets(entry, "blueprint")]
+    jobs = [(spec, settings_for(spec, args)) for spec in specs]
+    free = sum(int((~occupancy(spec)).sum()) for spec in specs)
+    layouts = [(int((~occupancy(s)).sum()), batch_layout(int((~occupancy(s)).sum()), st)) for s, st in jobs]
+    batches = sum(-(-n // size) for n, size in layouts)
+    settings = jobs[0][1]
+    name = entry if len(specs) > 1 else specs[0].name
+    print(
+        f"{name}: {len(specs)} scene(s), {free} free cells in {batches} batches "
+        f"({', '.join(str(size) for _, size in layouts)} cells each), {settings.samples_per_src:.0e} rays, "
+        f"buffer {settings.max_num_paths_per_src:.0e}"
+        + (", Sionna's own solver" if args.stock_solver else ", batch-independent")
+    )
+    serial, serial_s = timed(jobs, "serial", 0)
+    print(f"  serial: {serial_s:.1f} s ({free / serial_s:.1f} cells/s)")
+    on_ray, ray_s = timed(jobs, "ray", workers)
+    # no more workers can be busy than the scene with the most batches has batches
+    used = min(workers, max(-(-n // size) for n, size in layouts))
+    print(f"  ray ({used} workers): {ray_s:.1f} s ({free / ray_s:.1f} cells/s), speed-up {serial_s / ray_s:.2f}x")
+    return {
+        "scene": name,
+        "scenes": [s.name for s in specs],
+        "free_cells": free,
+        "batch_size": settings.batch_size,
+        "cells_per_batch": [size for _, size in layouts],
+        "batch_independent": not args.stock_solver,
+        "batches": batches,
+        "samples_per_src": settings.samples_per_src,
+        "max_num_paths_per_src": settings.max_num_paths_per_src,
+        "serial_s": round(serial_s, 2),
+        "serial_cells_per_s": round(free / serial_s, 1),
+        "ray_workers": used,
+        "ray_s": round(ray_s, 2),
+        "ray_cells_per_s": round(free / ray_s, 1),
+        "speedup": round(serial_s / ray_s, 2),
+        "identical_tables": all(a.equals(b) for a, b in zip(on_ray, serial)),
+        "per_worker_cells_per_s": round(free / ray_s / used, 1),
     }
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "bench_ray.json").write_text(json.dumps(result, indent=2) + "\n")
+
+
+def _ceiling(args, workers: int) -> dict | None:
+    """The machine's own ceiling on ``--contention`` (None when it is ''), printed."""
+    if not args.contention:
+        return None
+    spec = load_scene_spec(args.contention, "blueprint")
+    ceiling = contention(args.contention, settings_for(spec, args), workers)
+    print(
+        f"ceiling: {ceiling['cells']} cells of {args.contention} in {ceiling['alone_s']} s alone, "
+        f"{ceiling['together_s']} s with {workers} at once: at most {ceiling['ceiling_speedup']}x on this machine"
+    )
+    return ceiling
+
+
+def _report(rows: list[dict], ceiling: dict | None, workers: int, described: str) -> list[str]:
+    """The Markdown lines: one row an entry, with the projection to 4 and 16 machines, then the ceiling."""
     lines = [
         f"# Serial vs Ray tracing ({described})",
         "",
@@ -223,11 +246,7 @@ def main() -> None:
             f"{ceiling['alone_s']} s by one process alone, {ceiling['together_s']} s by each of {workers} at once: "
             f"at most {ceiling['ceiling_speedup']}× on {workers} workers before any start-up.",
         ]
-    (args.out / "bench_ray.md").write_text("\n".join(lines) + "\n")
-    if rows:
-        plot(rows, workers, args.out / "bench_ray.png", described)
-    print("\n".join(lines))
-    assert all(r["identical_tables"] for r in rows), "Ray and serial tables differ"
+    return lines
 
 
 def plot(rows, workers: int, path: Path, described: str) -> None:
