@@ -70,17 +70,17 @@ from dtradar_rl.experiments.offline_figures import plot, plot_fqe
 from dtradar_rl.experiments.offline_jobs import (
     BenchJob,
     auto_workers,
-    finished_row,
     parallel_gain,
     run_job,
     run_jobs,
     run_jobs_on_ray,
     save_row,
 )
+from dtradar_rl.experiments.offline_plan import bench_jobs, reused_rows, training_layout
 from dtradar_rl.experiments.offline_report import markdown, ope_summary, summarize
 from dtradar_rl.experiments.offline_tabular import tabular_section
 from dtradar_rl.offline.behaviours import behaviour_policy
-from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig
+from dtradar_rl.offline.config import ALGORITHMS
 from dtradar_rl.offline.formats import as_logged
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.medium_agent import resolve_spec
@@ -301,70 +301,58 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
 
 
 def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
+    """The benchmark of ``cfg`` in its held ``--out``: the twins and their references, the online agent, the logged
+    datasets, then the trainings (the finished ones reused) beside the tabular section, and the results written."""
     say = print if cfg.verbose else (lambda *a, **k: None)
     t_start = time.perf_counter()
-    out = cfg.out_dir
-    out.mkdir(parents=True, exist_ok=True)
+    cfg.out_dir.mkdir(parents=True, exist_ok=True)
     m_start = machine()
+    twins, blueprint, refs = _twins_and_references(cfg)
+    ckpt, online = _online(cfg, twins, refs, say)
+    datasets, ids = log_datasets(cfg, ckpt, twins, blueprint, refs)
+    head = {"references": refs, "online_dqn": online, "datasets": datasets}
+    head["setup_s"] = time.perf_counter() - t_start
+    jobs = bench_jobs(cfg, ids)
+    reused, todo = reused_rows(cfg, jobs, say)
+    workers, layout = training_layout(cfg, todo, len(reused), say)
+    # the tables run in this process: beside trainings that run elsewhere (worker processes, Ray), at the same time
+    tables = _tables(cfg, ids, twins, refs, say, overlap=bool(todo) and (cfg.executor == "ray" or workers >= 2))
+    runs: list[dict[str, Any]] = []
+    done = _gatherer(cfg, jobs, refs, head, runs, m_start, t_start, layout, say)
+    _train(cfg, reused, todo, workers, done)
+    if cfg.tabular:
+        head["tabular"], head["tabular_s"] = tables()
+    runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
+    result = _finish(cfg, head, runs, m_start, t_start, layout=layout)
+    _say_results(cfg, result, say)
+    return result
+
+
+def _twins_and_references(cfg: OfflineBenchConfig) -> tuple[dict[str, Any], Any, dict[str, dict[str, float]]]:
+    """The evaluated twins by name, the blueprint the datasets are logged on (loaded again only when it is not
+    evaluated), and each twin's random and expert references by variant."""
     twins = {f"{cfg.scene}/{v}": load_dataset(f"{cfg.scene}/{v}") for v in cfg.variants}
     blueprint = twins.get(f"{cfg.scene}/blueprint") or load_dataset(f"{cfg.scene}/blueprint")
     refs = {
         name.split("/")[1]: reference_scores(ds, pairs=cfg.pairs, seed=EVAL_SEED, device=cfg.device)
         for name, ds in twins.items()
     }
-    ckpt, online = _online(cfg, twins, refs, say)
-    datasets, ids = log_datasets(cfg, ckpt, twins, blueprint, refs)
-    head = {"references": refs, "online_dqn": online, "datasets": datasets}
-    head["setup_s"] = time.perf_counter() - t_start
-    jobs = [
-        BenchJob(
-            behaviour=beh,
-            algorithm=algo,
-            seed=seed,
-            logged=ids[beh],
-            config=OfflineConfig(
-                scene=cfg.scene,
-                algorithm=algo,
-                seed=seed,
-                n_steps=cfg.n_steps,
-                relabel=cfg.relabel,
-                senses=cfg.senses,
-                pairs=cfg.pairs,
-                eval_variants=tuple(cfg.variants),
-                shield=False,
-                latency=False,  # not reported here; ~0.5 s per twin and run
-                device=cfg.device,
-                num_envs=cfg.num_envs,
-                threads=1,
-                verbose=False,
-                out=str(out / "runs" / beh / algo / f"seed{seed}"),
-            ),
-            fqe_steps=cfg.fqe_steps if cfg.fqe else 0,
-            fqe_gamma=cfg.fqe_gamma,
-        )
-        for beh in cfg.behaviours
-        for algo in (cfg.algorithms if cfg.deep else ())
-        for seed in cfg.seeds
-    ]
+    return twins, blueprint, refs
 
-    # an interrupted benchmark's finished runs (same settings, data, libraries) are not trained again
-    reused = {i: row for i, job in enumerate(jobs) if cfg.reuse and (row := finished_row(job)) is not None}
-    todo = [job for i, job in enumerate(jobs) if i not in reused]
-    if reused:
-        say(f"reusing {len(reused)} of {len(jobs)} runs finished in {out / 'runs'} (--no-reuse trains them again)")
-    if cfg.executor == "ray":
-        workers, gain = 0, None
-        layout = {"jobs": len(todo), "executor": "ray", "ray_address": cfg.ray_address, "torch_threads": 1}
-        say(f"{len(todo)} trainings of {cfg.n_steps} updates as Ray tasks of 1 CPU, 1 torch thread each")
-    else:
-        workers, gain = (cfg.workers, None) if cfg.workers else auto_workers(len(todo))
-        workers = min(workers, max(1, len(todo)))
-        layout = {"jobs": len(todo), "workers": workers, "torch_threads": 1, "parallel_gain": gain}
-        say(f"{len(todo)} trainings of {cfg.n_steps} updates in {workers} process(es), 1 torch thread each")
-    layout["reused"] = len(reused)
-    # the tables run in this process: beside trainings that run elsewhere (worker processes, Ray), at the same time
-    tables = _tables(cfg, ids, twins, refs, say, overlap=bool(todo) and (cfg.executor == "ray" or workers >= 2))
-    runs: list[dict[str, Any]] = []
+
+def _gatherer(
+    cfg: OfflineBenchConfig,
+    jobs: list[BenchJob],
+    refs: dict[str, dict[str, float]],
+    head: dict[str, Any],
+    runs: list[dict[str, Any]],
+    m_start: dict[str, Any],
+    t_start: float,
+    layout: dict[str, Any],
+    say,
+):
+    """The callable each finished run's row is handed to (``fresh=False``: a reused one): it keeps a fresh row in its
+    run folder, scores the row, appends it to ``runs``, says it and writes the partial results."""
     job_of = {(j.behaviour, j.algorithm, j.seed): j for j in jobs}
 
     def done(run: dict[str, Any], fresh: bool = True) -> None:
@@ -387,22 +375,30 @@ def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
         )
         _finish(cfg, head, runs, m_start, t_start, plots=False, layout=layout)  # partial results survive
 
+    return done
+
+
+def _train(
+    cfg: OfflineBenchConfig, reused: dict[int, dict[str, Any]], todo: list[BenchJob], workers: int, done
+) -> None:
+    """The reused rows handed to ``done`` first, then the ``todo`` trainings run, on Ray or in ``workers``
+    processes, each row handed to ``done`` as it comes."""
     for row in reused.values():
         done(row, fresh=False)
     if cfg.executor == "ray" and todo:
         run_jobs_on_ray(todo, cfg.ray_address, done)  # each row handed to done, which gathers them in runs
     elif todo:
         run_jobs(todo, workers, done)
-    if cfg.tabular:
-        head["tabular"], head["tabular_s"] = tables()
-    runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
-    result = _finish(cfg, head, runs, m_start, t_start, layout=layout)
+
+
+def _say_results(cfg: OfflineBenchConfig, result: dict[str, Any], say) -> None:
+    """``bench.md`` and the paths of the files written, on the console."""
+    out = cfg.out_dir
     say(markdown(result), end="")
     say(
         f"results: {out / 'bench.json'}, {out / 'bench.md'}, {out / 'bench.png'}"
         + (f", {out / 'bench_fqe.png'}" if cfg.fqe and cfg.deep else "")
     )
-    return result
 
 
 __all__ = [

@@ -185,12 +185,30 @@ def _size_on_disk(ds: Dataset) -> int | None:
 
 # -- the report --------------------------------------------------------------------------------------------------
 def run_paper(cfg: PaperConfig) -> Report:
+    """The report of ``cfg``: the built twins (the rest named with their build commands), their sizes and coverage
+    maps, the paper's agent over seeds per scene, the cross-quadrant matrices, then ``report.{json,md}``."""
     cfg = cfg.validate()
     say = _Progress()
     out, figs = Path(cfg.out), Path(cfg.out) / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     report = Report(config=asdict(cfg), machine=machine_info())
+    twins = _load_twins(cfg, report, say)
+    _describe_datasets(twins, report, figs)
+    _train_paper_agent(cfg, twins, report, out, figs, say)
+    if cfg.cross:
+        for group, scenes in cross_groups(cfg, twins):
+            say(
+                f"cross-quadrant matrix of {group}: goal-conditioned agents ({cfg.cross_preset}, "
+                f"{cfg.cross_steps:,} steps each) on {', '.join(scenes)}"
+            )
+            report.cross.append(_cross(cfg, group, scenes, twins, out, figs, say))
+    _write_report(report, out, say)
+    return report
 
+
+def _load_twins(cfg: PaperConfig, report: Report, say) -> dict[str, Dataset]:
+    """Every twin of ``--scenes`` that is built, by name; the others go to ``report.missing`` with the command that
+    builds them."""
     say(f"datasets of {len(cfg.scenes)} scene(s)")
     twins: dict[str, Dataset] = {}
     for scene in cfg.scenes:
@@ -201,6 +219,12 @@ def run_paper(cfg: PaperConfig) -> Report:
             except DtradarError as e:
                 report.missing.append({"dataset": name, "command": build_command(scene), "why": e.message})
                 say(f"  {name}: not built, skipped -- build it with: {build_command(scene)}")
+    return twins
+
+
+def _describe_datasets(twins: dict[str, Dataset], report: Report, figs: Path) -> None:
+    """Each twin's size (Tables II and V) and coverage map (Figs. 5 and 7) into ``report``; the map is the
+    dataset's own where it has one."""
     for name, ds in twins.items():
         free = int((~ds.blocked).sum())
         report.datasets.append(
@@ -225,6 +249,10 @@ def run_paper(cfg: PaperConfig) -> Report:
             how = "drawn from the table's path_gain_db"
         report.coverage.append({"dataset": name, "png": png.name, "source": how})
 
+
+def _train_paper_agent(cfg: PaperConfig, twins: dict[str, Dataset], report: Report, out: Path, figs: Path, say) -> None:
+    """The paper's agent trained (or reused) on every built blueprint for every seed, then each scene's seeds
+    judged against its Table VI pair, with their curves and greedy paths, into ``report``."""
     jobs = [
         SeedJob(
             scene=scene,
@@ -240,78 +268,84 @@ def run_paper(cfg: PaperConfig) -> Report:
         if f"{scene}/blueprint" in twins
         for seed in cfg.seeds
     ]
-    if jobs:
-        workers = cfg.jobs or auto_workers(len(jobs))
+    if not jobs:
+        return
+    workers = cfg.jobs or auto_workers(len(jobs))
+    say(
+        f"training the paper's agent (Table VI pair): {len(jobs)} run(s) = "
+        f"{len(jobs) // len(cfg.seeds)} scene(s) x {len(cfg.seeds)} seed(s), {workers} at once"
+    )
+    rows = run_seeds(jobs, workers, say)
+    for scene in dict.fromkeys(j.scene for j in jobs):
+        mine = [r for r in rows if r["scene"] == scene]
+        entry = _seed_summary(scene, mine, figs)
+        for variant in ("blueprint", "dynamic"):
+            if variant in mine[0]["greedy"]:
+                report.inference.append(_greedy_paths(scene, variant, mine, twins, figs))
+        report.training.append(entry)
         say(
-            f"training the paper's agent (Table VI pair): {len(jobs)} run(s) = "
-            f"{len(jobs) // len(cfg.seeds)} scene(s) x {len(cfg.seeds)} seed(s), {workers} at once"
+            f"  {scene}: {entry['reproduced']} of {entry['n_seeds']} seeds reproduce the pair "
+            f"(goal: {entry['needed']}); greedy on the blueprint {entry['greedy_reached'].get('blueprint')}, "
+            f"on the dynamic twin {entry['greedy_reached'].get('dynamic', '-')}"
         )
-        rows = run_seeds(jobs, workers, say)
-        for scene in dict.fromkeys(j.scene for j in jobs):
-            mine = [r for r in rows if r["scene"] == scene]
-            entry = summarize(scene, mine)
-            row = paper_pair(scene)
-            entry["paper"] = asdict(row) if row else None
-            png = figs / f"training_{scene}.png"
-            plot_seed_curves(
-                {r["seed"]: read_curves(Path(r["run"]) / "curves.csv") for r in mine},
-                png,
-                shortest=entry["pair"]["shortest"],
-                paper_min=row.min_steps if row else None,
-                title=f"{scene}/blueprint: the paper's agent over {len(mine)} seed(s), pair "
-                f"{tuple(entry['pair']['start'])} -> {tuple(entry['pair']['target'])}",
-            )
-            entry["png"] = png.name
-            for variant in ("blueprint", "dynamic"):
-                if variant not in mine[0]["greedy"]:
-                    continue
-                g = [r["greedy"][variant] for r in mine]
-                hits = sum(x["reached"] for x in g)
-                png = figs / f"paths_{scene}_{variant}.png"
-                plot_paths(
-                    twins[f"{scene}/{variant}"],
-                    [x["path"] for x in g],
-                    png,
-                    successes=[x["reached"] for x in g],
-                    title=f"{scene}/{variant}: the paper's agent, greedy, {hits} of {len(g)} seeds reach the target; "
-                    f"shortest {g[0]['shortest']}" + (f"; paper: {row.min_steps} (its grid)" if row else ""),
-                )
-                report.inference.append(
-                    {
-                        "scene": scene,
-                        "variant": variant,
-                        "png": png.name,
-                        "shortest": g[0]["shortest"],
-                        "start": g[0]["start"],
-                        "target": g[0]["target"],
-                        "reached": hits,
-                        "seeds": [
-                            {"seed": r["seed"], **{k: v for k, v in x.items() if k != "path"}} for r, x in zip(mine, g)
-                        ],
-                    }
-                )
-            report.training.append(entry)
-            say(
-                f"  {scene}: {entry['reproduced']} of {entry['n_seeds']} seeds reproduce the pair "
-                f"(goal: {entry['needed']}); greedy on the blueprint {entry['greedy_reached'].get('blueprint')}, "
-                f"on the dynamic twin {entry['greedy_reached'].get('dynamic', '-')}"
-            )
 
-    if cfg.cross:
-        for group, scenes in cross_groups(cfg, twins):
-            say(
-                f"cross-quadrant matrix of {group}: goal-conditioned agents ({cfg.cross_preset}, "
-                f"{cfg.cross_steps:,} steps each) on {', '.join(scenes)}"
-            )
-            report.cross.append(_cross(cfg, group, scenes, twins, out, figs, say))
 
+def _seed_summary(scene: str, mine: list[dict[str, Any]], figs: Path) -> dict[str, Any]:
+    """The seeds of ``scene`` judged over (Table VI), the paper's row beside them, and their training curves
+    drawn (Figs. 9, 11-16, 18-21)."""
+    entry = summarize(scene, mine)
+    row = paper_pair(scene)
+    entry["paper"] = asdict(row) if row else None
+    png = figs / f"training_{scene}.png"
+    plot_seed_curves(
+        {r["seed"]: read_curves(Path(r["run"]) / "curves.csv") for r in mine},
+        png,
+        shortest=entry["pair"]["shortest"],
+        paper_min=row.min_steps if row else None,
+        title=f"{scene}/blueprint: the paper's agent over {len(mine)} seed(s), pair "
+        f"{tuple(entry['pair']['start'])} -> {tuple(entry['pair']['target'])}",
+    )
+    entry["png"] = png.name
+    return entry
+
+
+def _greedy_paths(
+    scene: str, variant: str, mine: list[dict[str, Any]], twins: dict[str, Dataset], figs: Path
+) -> dict[str, Any]:
+    """The seeds' greedy paths on one twin of ``scene`` drawn together (Figs. 10, 22-24) and their inference
+    entry: how many reach the target, and each seed's run without its path."""
+    row = paper_pair(scene)
+    g = [r["greedy"][variant] for r in mine]
+    hits = sum(x["reached"] for x in g)
+    png = figs / f"paths_{scene}_{variant}.png"
+    plot_paths(
+        twins[f"{scene}/{variant}"],
+        [x["path"] for x in g],
+        png,
+        successes=[x["reached"] for x in g],
+        title=f"{scene}/{variant}: the paper's agent, greedy, {hits} of {len(g)} seeds reach the target; "
+        f"shortest {g[0]['shortest']}" + (f"; paper: {row.min_steps} (its grid)" if row else ""),
+    )
+    return {
+        "scene": scene,
+        "variant": variant,
+        "png": png.name,
+        "shortest": g[0]["shortest"],
+        "start": g[0]["start"],
+        "target": g[0]["target"],
+        "reached": hits,
+        "seeds": [{"seed": r["seed"], **{k: v for k, v in x.items() if k != "path"}} for r, x in zip(mine, g)],
+    }
+
+
+def _write_report(report: Report, out: Path, say) -> None:
+    """The wall time and the machine's load over the run into ``report``, then ``report.json`` and ``report.md``."""
     report.wall_s = time.perf_counter() - say.t0
     report.machine["load_avg_max"] = round(max(say.loads + [os.getloadavg()[0]]), 2)
     report.machine["load_avg_end"] = round(os.getloadavg()[0], 2)
     write_atomic(out / "report.json", json.dumps(asdict(report), indent=2, default=str) + "\n")
     write_atomic(out / "report.md", render(report))
     say(f"report: {out / 'report.md'} ({report.wall_s:.0f} s)")
-    return report
 
 
 def cross_groups(cfg: PaperConfig, twins: dict[str, Dataset]) -> list[tuple[str, list[str]]]:
