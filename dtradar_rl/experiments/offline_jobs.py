@@ -3,7 +3,8 @@ evaluated and (with FQE) off-policy evaluated by :func:`run_job`, in this proces
 one torch thread each (:func:`run_jobs`), as many as the cores measurably work in parallel (:func:`auto_workers`),
 or as Ray tasks of one CPU each (:func:`run_jobs_on_ray`, ``--executor ray``, the executor of sweeps: a local Ray on
 this machine's cores or a cluster at an address). A job is seeded and trains on one torch thread, so its row is the
-same wherever it runs. :mod:`dtradar_rl.experiments.offline_bench` builds the jobs and gathers their rows.
+same wherever it runs. :mod:`dtradar_rl.experiments.offline_plan` builds the jobs and
+:mod:`dtradar_rl.experiments.offline_bench` gathers their rows.
 
 A finished job's row is kept in its run folder (:func:`save_row`, written whole), with everything the row depends
 on (:func:`job_key`): a benchmark that was interrupted and runs again reuses those rows (:func:`finished_row`) and
