@@ -111,7 +111,7 @@ def bench_scene(
     """One scene's moving twin: built snapshot by snapshot, every snapshot traced in full beside it, the seed-noise
     floor, and the summary (see the module docstring)."""
     host_before = machine()
-    mv, period, config = _moving_twin(scene, count, stock_solver)
+    mv, period, config = _moving_twin(scene, count, radius_m, stock_solver)
     rt = config.rt
     spec0 = mv.spec_at(0)
     grid = spec0.grid.to_dict()
@@ -140,13 +140,19 @@ def bench_scene(
     )
 
 
-def _moving_twin(scene: str, count: int, stock_solver: bool):
+def _moving_twin(scene: str, count: int, radius_m: float, stock_solver: bool):
     """The scene's moving twin over ``count`` snapshots, its own horizon and the build's config for it (the
-    settings ``make dataset VARIANT=moving`` would use)."""
+    settings ``make dataset VARIANT=moving`` would use, with ``--radius-m`` as its re-trace radius)."""
     base_moving = load_moving_scene(scene)
     period = base_moving.snapshots
     mv = with_horizon(base_moving, count)
-    base = BuildConfig(scene=scene, variant="moving", progress=False, rt=RTSettings(batch_independent=not stock_solver))
+    base = BuildConfig(
+        scene=scene,
+        variant="moving",
+        progress=False,
+        retrace_radius_m=radius_m,
+        rt=RTSettings(batch_independent=not stock_solver),
+    )
     return mv, period, scene_config(base, mv.base)
 
 
@@ -364,7 +370,12 @@ def main() -> None:
         help="snapshots per scene: T for every scene or SCENE=T (default: cubicle=60, dallas-q3=4: a full Dallas Q3 "
         f"trace takes minutes; other scenes {FALLBACK_SNAPSHOTS})",
     )
-    ap.add_argument("--radius-m", type=float, default=BuildConfig.retrace_radius_m)
+    ap.add_argument(
+        "--radius-m",
+        type=float,
+        default=BuildConfig.retrace_radius_m,
+        help="re-trace radius around what moved between snapshots, metres (the build's --retrace-radius-m)",
+    )
     ap.add_argument(
         "--seed-floor",
         nargs="*",
