@@ -51,6 +51,11 @@ class OfflineBenchConfig(Config):
     """environment steps logged per dataset (not medium-replay: the medium agent's whole run)"""
     n_steps: int = BENCH_UPDATES
     """d3rlpy updates per run"""
+    batch_size: int = 256
+    """minibatch size of one update (the samples a run draws are updates x batch: docs/logged-datasets.md)"""
+    precision: str = "fp32"
+    """arithmetic of the training updates: fp32 or bf16 (OfflineConfig.precision; bf16 for bcq, dqn, ddqn and nfq,
+    bc and cql train in fp32)"""
     relabel: str = "auto"
     """goal relabelling of every run (dtradar_rl.offline.relabel): auto (each algorithm's best measured mix, the
     default), none (the logged targets, the benchmark before relabelling), or any mix --relabel takes"""
@@ -130,7 +135,8 @@ class OfflineBenchConfig(Config):
             raise ConfigError("--seeds, --algorithms and --behaviours must each list at least one value")
         for a in self.algorithms:
             OfflineConfig(algorithm=a, relabel=self.relabel).relabel_config()  # a mix that does not parse
-        OfflineConfig(senses=self.senses).validate()  # an unknown --senses
+        # an unknown --senses or --precision (bcq: an algorithm that trains in either precision)
+        OfflineConfig(algorithm="bcq", senses=self.senses, precision=self.precision).validate()
         if self.workers < 0:
             raise ConfigError("--workers must be >= 0 (0 = one per CPU core)")
         if self.executor != "ray" and self.ray_address:
@@ -139,7 +145,7 @@ class OfflineBenchConfig(Config):
             raise ConfigError("--workers applies to --executor local only (Ray places one task per CPU)")
         if not 0 < self.fqe_gamma <= 1:
             raise ConfigError(f"--fqe-gamma must be in (0, 1], got {self.fqe_gamma}")
-        for name in ("steps", "n_steps", "pairs", "num_envs", "online_steps", "fqe_steps"):
+        for name in ("steps", "n_steps", "batch_size", "pairs", "num_envs", "online_steps", "fqe_steps"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} must be >= 1")
         return self

@@ -9,7 +9,7 @@ from typing import Any
 
 from dtradar_rl.experiments.offline_bench_config import OfflineBenchConfig
 from dtradar_rl.experiments.offline_jobs import BenchJob, auto_workers, finished_row
-from dtradar_rl.offline.config import OfflineConfig
+from dtradar_rl.offline.config import BF16_ALGORITHMS, OfflineConfig
 
 
 def bench_jobs(cfg: OfflineBenchConfig, ids: dict[str, str]) -> list[BenchJob]:
@@ -26,6 +26,8 @@ def bench_jobs(cfg: OfflineBenchConfig, ids: dict[str, str]) -> list[BenchJob]:
                 algorithm=algo,
                 seed=seed,
                 n_steps=cfg.n_steps,
+                batch_size=cfg.batch_size,
+                precision=cfg.precision if algo in BF16_ALGORITHMS else "fp32",
                 relabel=cfg.relabel,
                 senses=cfg.senses,
                 pairs=cfg.pairs,

@@ -183,13 +183,19 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _numerics(cfg: dict[str, Any]) -> str:
+    """`` (batch 1024, bf16)`` where a benchmark's batch or precision is not the default (256, fp32), else nothing."""
+    batch, precision = cfg.get("batch_size", 256), cfg.get("precision", "fp32")
+    return f" (batch {batch}, {precision})" if (batch, precision) != (256, "fp32") else ""
+
+
 def _heading(result: dict[str, Any]) -> list[str]:
     """What was trained and evaluated, and what the normalised score means (with the references)."""
     cfg = result["config"]
     refs = result.get("references") or {}
     return [
         f"Offline RL on `{cfg['scene']}`: d3rlpy algorithms trained on logged datasets of the blueprint twin, "
-        f"{cfg['n_steps']} updates per run, goals relabelled: {cfg.get('relabel', 'none')}, "
+        f"{cfg['n_steps']} updates per run{_numerics(cfg)}, goals relabelled: {cfg.get('relabel', 'none')}, "
         f"{len(cfg['seeds'])} seed(s) ({', '.join(map(str, cfg['seeds']))}), "
         f"mean ± std over seeds; evaluated greedy and unshielded on {cfg['pairs']} seeded (start, target) pairs "
         "(seed 2024) of each twin.",

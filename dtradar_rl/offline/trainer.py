@@ -60,6 +60,7 @@ from dtradar_rl.offline.log_settings import check_compatible
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.memory_senses import MemorySenses, memory_senses
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
+from dtradar_rl.offline.precision import update_autocast
 from dtradar_rl.offline.relabel import RelabelConfig, not_relabellable
 from dtradar_rl.offline.relabelled_sampler import relabelled_sampler
 from dtradar_rl.offline.relabeller import relabeller
@@ -197,13 +198,16 @@ def fit(
     epochs: int | None = None,
     fast: bool = True,
     on_epoch: Callable[[dict[str, float]], None] | None = None,
+    precision: str = "fp32",
+    device: str = "cpu",
 ) -> list[dict[str, float]]:
     """Train ``algo`` ``n_steps`` updates on ``data`` (a d3rlpy dataset); the per-epoch mean losses.
 
     The settings ``bench/bench_offline_speed.py`` measured fastest, none of which changes a weight: d3rlpy's file
     logger, progress bar, timestamped folder, per-epoch model saves and evaluators off; ``fast``: minibatches from
     :func:`fast_sampling`; ``epochs`` (default :func:`_epochs`: up to 10, a few per run cost nothing measurable)
-    only sets how often the losses are averaged. The torch thread count is the caller's.
+    only sets how often the losses are averaged. The torch thread count is the caller's; ``precision`` and ``device``
+    choose :func:`~dtradar_rl.offline.precision.update_autocast`.
     """
     d3rlpy = import_d3rlpy()
     epochs = epochs or _epochs(n_steps)
@@ -211,7 +215,7 @@ def fit(
     if fast and not algo.need_returns_to_go:
         data = fast_sampling(data)
     losses: list[dict[str, float]] = []
-    with quiet_d3rlpy():
+    with quiet_d3rlpy(), update_autocast(precision, device):
         for epoch, metrics in algo.fitter(
             data,
             n_steps=n_steps,
@@ -395,8 +399,8 @@ def _fit_timed(cfg: OfflineConfig, algo, train_data, t_start: float, say) -> tup
             f"step {row['step']}  " + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step"))
         )
 
-    t_fit = time.perf_counter()
-    losses = fit(algo, train_data, cfg.n_steps, epochs=epochs, on_epoch=progress)
+    t_fit, numerics = time.perf_counter(), {"precision": cfg.precision, "device": cfg.device}
+    losses = fit(algo, train_data, cfg.n_steps, epochs=epochs, on_epoch=progress, **numerics)
     return losses, time.perf_counter() - t_fit
 
 
