@@ -52,10 +52,11 @@ class OfflineBenchConfig(Config):
     n_steps: int = BENCH_UPDATES
     """d3rlpy updates per run"""
     batch_size: int = 256
-    """minibatch size of one update (the samples a run draws are updates x batch: docs/logged-datasets.md)"""
+    """minibatch size of one update (0 = auto: 512 where the updates run in bf16, else 256; the samples a run draws
+    are updates x batch: docs/logged-datasets.md)"""
     precision: str = "fp32"
-    """arithmetic of the training updates: fp32 or bf16 (OfflineConfig.precision; bf16 for bcq, dqn, ddqn and nfq,
-    bc and cql train in fp32)"""
+    """arithmetic of the training updates: auto, fp32 or bf16 (OfflineConfig.precision; bf16 for bcq, dqn, ddqn and
+    nfq only, bc and cql train in fp32)"""
     relabel: str = "auto"
     """goal relabelling of every run (dtradar_rl.offline.relabel): auto (each algorithm's best measured mix, the
     default), none (the logged targets, the benchmark before relabelling), or any mix --relabel takes"""
@@ -145,7 +146,9 @@ class OfflineBenchConfig(Config):
             raise ConfigError("--workers applies to --executor local only (Ray places one task per CPU)")
         if not 0 < self.fqe_gamma <= 1:
             raise ConfigError(f"--fqe-gamma must be in (0, 1], got {self.fqe_gamma}")
-        for name in ("steps", "n_steps", "batch_size", "pairs", "num_envs", "online_steps", "fqe_steps"):
+        if self.batch_size < 0:
+            raise ConfigError("--batch-size must be >= 0 (0 = auto)")
+        for name in ("steps", "n_steps", "pairs", "num_envs", "online_steps", "fqe_steps"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"--{name.replace('_', '-')} must be >= 1")
         return self

@@ -27,7 +27,7 @@ def bench_jobs(cfg: OfflineBenchConfig, ids: dict[str, str]) -> list[BenchJob]:
                 seed=seed,
                 n_steps=cfg.n_steps,
                 batch_size=cfg.batch_size,
-                precision=cfg.precision if algo in BF16_ALGORITHMS else "fp32",
+                precision="fp32" if cfg.precision == "bf16" and algo not in BF16_ALGORITHMS else cfg.precision,
                 relabel=cfg.relabel,
                 senses=cfg.senses,
                 pairs=cfg.pairs,

@@ -184,8 +184,10 @@ def markdown(result: dict[str, Any]) -> str:
 
 
 def _numerics(cfg: dict[str, Any]) -> str:
-    """`` (batch 1024, bf16)`` where a benchmark's batch or precision is not the default (256, fp32), else nothing."""
+    """`` (batch 1024, bf16)`` where a benchmark's batch or precision is not 256 and fp32, else nothing (0 and auto
+    are said as such: each run's results record what they resolved to)."""
     batch, precision = cfg.get("batch_size", 256), cfg.get("precision", "fp32")
+    batch = batch or "auto"
     return f" (batch {batch}, {precision})" if (batch, precision) != (256, "fp32") else ""
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from dtradar_data.core.errors import unknown_name
 from dtradar_rl.offline.behaviours import BehaviourConfig
+from dtradar_rl.offline.precision import AUTO_BATCH, BF16_ALGORITHMS, PRECISIONS, resolve_precision
 from dtradar_rl.offline.relabel import DEFAULT_DISCOUNT, RelabelConfig
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.runs import run_dir
@@ -30,11 +31,7 @@ ALGORITHMS: dict[str, str] = {
 #: The senses an offline agent can train with: ``none`` (what the log holds: the memoryless observation) or
 #: ``memory`` (the default online agent's memory window, rebuilt from the log: dtradar_rl.offline.memory_senses).
 SENSES = ("auto", "none", "memory")
-#: --precision values: the arithmetic of a training's updates (see OfflineConfig.precision)
-PRECISIONS = ("fp32", "bf16")
-#: the algorithms that train in bf16: d3rlpy 2.8.1's BC and CQL losses come out as bfloat16 scalars that its own
-#: loss logging cannot convert (TypeError: unsupported ScalarType BFloat16)
-BF16_ALGORITHMS = ("bcq", "dqn", "ddqn", "nfq")
+
 #: ``--senses auto``: each algorithm's best measured (Dallas Q3 expert and medium, 4 000 updates, relabelled; the
 #: cubicle within a few points either way: docs/logged-datasets.md). The imitation-anchored learners (bc; cql, whose
 #: conservative term pulls towards the logged moves) read the logged trail behind them as the next move's cue and fall
@@ -74,7 +71,7 @@ class OfflineConfig(BehaviourConfig):
     n_steps: int = 10_000
     """d3rlpy gradient updates"""
     batch_size: int = 256
-    """minibatch size of one update"""
+    """minibatch size of one update (0 = auto: 512 where the updates run in bf16, else 256)"""
     lr: float = 1e-3
     """Adam learning rate (d3rlpy's Atari default, 6.25e-5, is too slow for a short run; 1e-3 beat 3e-4 for every
     algorithm measured on the cubicle's expert and medium data at 3 K updates, by 10-50 points of normalised score,
@@ -123,7 +120,8 @@ class OfflineConfig(BehaviourConfig):
     visited this episode and its earlier stands on its cell, rebuilt exactly from the log; evaluated in the same memory
     env, with its loop escape: dtradar_rl.offline.memory_senses)"""
     precision: str = "fp32"
-    """arithmetic of the training updates: fp32, or bf16 (each update under torch.autocast in bfloat16; weights,
+    """arithmetic of the training updates: auto (bf16 for bcq, dqn, ddqn and nfq on a CPU with bf16 matrix units,
+    else fp32), fp32, or bf16 (each update under torch.autocast in bfloat16; weights,
     optimiser and evaluation in fp32; bcq, dqn, ddqn and nfq only). Needs a CPU with bf16 matrix units (AMX, AVX512-
     BF16), else it is slower: on a 2-core Intel Xeon with AMX, Dallas Q3 expert BCQ at batch 512 trained in the time
     fp32 takes at 256 (41 s against 39 s) to 82.0 against 75.3 normalised; at batch 1024, 1.8x faster than fp32 at
@@ -178,12 +176,23 @@ class OfflineConfig(BehaviourConfig):
         return self._memory("escape_after", 0)
 
     @property
+    def update_precision(self) -> str:
+        """``precision`` with ``auto`` resolved for this algorithm, device and CPU (:func:`resolve_precision`)."""
+        return resolve_precision(self.precision, self.algorithm, self.device)
+
+    @property
+    def update_batch_size(self) -> int:
+        """``batch_size`` with 0 resolved for :attr:`update_precision` (:data:`AUTO_BATCH`)."""
+        return self.batch_size or AUTO_BATCH[self.update_precision]
+
+    @property
     def out_dir(self) -> Path:
         return Path(self.out or run_dir(self.scene, "offline", self.algorithm))
 
     def check_ranges(self) -> None:
         super().check_ranges()
-        self.check_at_least(1, "transitions", "n_steps", "batch_size", "target_update_interval", "pairs")
+        self.check_at_least(1, "transitions", "n_steps", "target_update_interval", "pairs")
+        self.check_at_least(0, "batch_size")
         self.check_at_least(0, "eval_seed")
         self.check_within(0, 1, "gamma", "bcq_flexibility", open_interval=True)
         if not self.lr > 0:

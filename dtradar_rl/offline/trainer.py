@@ -78,7 +78,7 @@ def make_algorithm(cfg: OfflineConfig):
     d3rlpy = import_d3rlpy()
     check_algorithm(cfg.algorithm)
     common = {
-        "batch_size": cfg.batch_size,
+        "batch_size": cfg.update_batch_size,
         "learning_rate": cfg.lr,
         "encoder_factory": d3rlpy.models.VectorEncoderFactory(hidden_units=list(cfg.hidden)),
     }
@@ -332,10 +332,11 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
 
 def _torch_threads(cfg: OfflineConfig) -> dict[str, Any]:
     """Set torch's threads (and flush denormals, whose arithmetic is slow on CPU); the reproducibility record's
-    thread count and its setting."""
+    thread count and its setting, and the precision and batch size the updates ran with (``auto`` resolved)."""
     torch.set_num_threads(cfg.threads or auto_threads())
     torch.set_flush_denormal(True)
-    return {"threads": torch.get_num_threads(), "threads_setting": cfg.threads}
+    numerics = {"precision": cfg.update_precision, "batch_size": cfg.update_batch_size}
+    return {"threads": torch.get_num_threads(), "threads_setting": cfg.threads, **numerics}
 
 
 def _twin_and_log(
@@ -399,7 +400,7 @@ def _fit_timed(cfg: OfflineConfig, algo, train_data, t_start: float, say) -> tup
             f"step {row['step']}  " + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step"))
         )
 
-    t_fit, numerics = time.perf_counter(), {"precision": cfg.precision, "device": cfg.device}
+    t_fit, numerics = time.perf_counter(), {"precision": cfg.update_precision, "device": cfg.device}
     losses = fit(algo, train_data, cfg.n_steps, epochs=epochs, on_epoch=progress, **numerics)
     return losses, time.perf_counter() - t_fit
 

@@ -7,6 +7,7 @@ import torch
 from dtradar_data.core.errors import UnknownNameError
 from dtradar_rl.experiments.offline_bench_config import OfflineBenchConfig
 from dtradar_rl.experiments.offline_plan import bench_jobs
+from dtradar_rl.offline import precision
 from dtradar_rl.offline.config import BF16_ALGORITHMS, OfflineConfig
 from dtradar_rl.offline.formats import import_d3rlpy, to_mdp_dataset
 from dtradar_rl.offline.logged import LogConfig, log_dataset
@@ -64,3 +65,14 @@ def test_bf16_is_refused_for_bc_and_cql_and_the_benchmark_trains_them_in_fp32():
     jobs = bench_jobs(cfg, {beh: f"{TINY}/blueprint/{beh}@v0" for beh in cfg.behaviours})
     got = {(j.config.algorithm, j.config.precision, j.config.batch_size) for j in jobs}
     assert got == {(a, "bf16" if a in BF16_ALGORITHMS else "fp32", 512) for a in cfg.algorithms}
+
+
+@pytest.mark.parametrize("units", [True, False])
+def test_auto_trains_the_q_learners_in_bf16_at_batch_512_only_on_a_cpu_with_bf16_matrix_units(monkeypatch, units):
+    monkeypatch.setattr(precision, "bf16_matrix_units", lambda: units)
+    for algo in ("bcq", "dqn", "ddqn", "nfq", "bc", "cql"):
+        cfg = OfflineConfig(algorithm=algo, precision="auto", batch_size=0).validate()
+        bf16 = units and algo in BF16_ALGORITHMS
+        assert (cfg.update_precision, cfg.update_batch_size) == (("bf16", 512) if bf16 else ("fp32", 256)), algo
+    assert OfflineConfig(algorithm="dqn", precision="auto", device="cuda").update_precision == "fp32"
+    assert OfflineConfig(algorithm="dqn", precision="fp32", batch_size=0).update_batch_size == 256
