@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
+import multiprocessing.connection
 import os
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -172,6 +175,16 @@ def run_job(job: BenchJob) -> dict[str, Any]:
 
 def _init_worker() -> None:
     torch.set_num_threads(1)
+    # A benchmark killed by a signal runs no clean-up, and its workers went on training the jobs already queued to
+    # them (seen: two, ten minutes after a SIGTERM); each worker leaves when its parent does.
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        threading.Thread(target=_exit_with_parent, args=(parent.sentinel,), daemon=True).start()
+
+
+def _exit_with_parent(sentinel: int) -> None:
+    multiprocessing.connection.wait([sentinel])
+    os._exit(1)
 
 
 #: a bare Python loop that counts for a while and prints the count (a process's share of the CPU)
