@@ -221,8 +221,9 @@ class OfflineConfig(BehaviourConfig):
         return self
 
 
-#: What a config saved without a field meant by it (:meth:`OfflineConfig.from_dict`): relabelling came later.
-SAVED_DEFAULTS: dict[str, object] = {"relabel": "none", "senses": "none"}
+#: What a config saved without a field meant by it (:meth:`OfflineConfig.from_dict`): relabelling, senses and the
+#: precision came later.
+SAVED_DEFAULTS: dict[str, object] = {"relabel": "none", "senses": "none", "precision": "fp32"}
 
 
 def check_algorithm(name: str) -> str:

@@ -76,3 +76,9 @@ def test_auto_trains_the_q_learners_in_bf16_at_batch_512_only_on_a_cpu_with_bf16
         assert (cfg.update_precision, cfg.update_batch_size) == (("bf16", 512) if bf16 else ("fp32", 256)), algo
     assert OfflineConfig(algorithm="dqn", precision="auto", device="cuda").update_precision == "fp32"
     assert OfflineConfig(algorithm="dqn", precision="fp32", batch_size=0).update_batch_size == 256
+
+
+def test_a_config_saved_before_precision_existed_reads_as_fp32():
+    saved = OfflineConfig(algorithm="dqn").to_dict()
+    del saved["precision"]
+    assert OfflineConfig.from_dict(saved).precision == "fp32"
