@@ -120,12 +120,12 @@ class OfflineConfig(BehaviourConfig):
     visited this episode and its earlier stands on its cell, rebuilt exactly from the log; evaluated in the same memory
     env, with its loop escape: dtradar_rl.offline.memory_senses)"""
     precision: str = "fp32"
-    """arithmetic of the training updates: auto (bf16 for bcq, dqn, ddqn and nfq on a CPU with bf16 matrix units,
-    else fp32), fp32, or bf16 (each update under torch.autocast in bfloat16; weights,
-    optimiser and evaluation in fp32; bcq, dqn, ddqn and nfq only). Needs a CPU with bf16 matrix units (AMX, AVX512-
-    BF16), else it is slower: on a 2-core Intel Xeon with AMX, Dallas Q3 expert BCQ at batch 512 trained in the time
-    fp32 takes at 256 (41 s against 39 s) to 82.0 against 75.3 normalised; at batch 1024, 1.8x faster than fp32 at
-    1024, the same score (docs/logged-datasets.md)"""
+    """arithmetic of the training updates: fp32 (the default), bf16 (each update under torch.autocast in bfloat16;
+    weights, optimiser and evaluation in fp32; bcq, dqn, ddqn and nfq only; needs a CPU with bf16 matrix units, AMX or
+    AVX512-BF16, else it is slower), or auto (bf16 for those four where the CPU has the units, else fp32). On a 2-core
+    Xeon with AMX, Dallas Q3 expert BCQ in bf16 at batch 512 trained in about fp32's time at 256 to 82.0 against 75.3;
+    the full offline benchmark with auto gained 3.8-8.2 per family but took 35.2 min against its 30, so fp32 stays the
+    default (docs/logged-datasets.md)"""
     out: str = ""
     """output directory (default runs/<scene>/offline/<algorithm>)"""
 
