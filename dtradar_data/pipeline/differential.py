@@ -198,11 +198,14 @@ def retrace(
     per_path: bool,
     tracer_factory,
     changed: list | None = None,
+    helpers=None,
 ):
     """``(cells, paths, blocked, tracer, mask, counts)``: the parent's per-cell table (and per-path table, with
     ``per_path``) with the cells :func:`retrace_mask` selects re-traced in ``spec``, in batches of
     ``settings.batch_size`` in row-major order; ``tracer_factory()`` makes the tracer of ``spec`` (only when a cell
-    is re-traced; ``tracer`` is None otherwise). ``changed`` as for :func:`retrace_mask`."""
+    is re-traced; ``tracer`` is None otherwise). ``changed`` as for :func:`retrace_mask`. ``helpers``
+    (:class:`~dtradar_data.pipeline.trace_helpers.TraceHelpers`): other processes trace parts of the cells at the
+    same time, where the rows do not depend on the parts (batch-independent tracing)."""
     blocked = occupancy(spec)
     mask, counts = retrace_mask(parent_spec, spec, parent_cells, radius_m=radius_m, changed=changed)
     xs, ys = spec.grid.centres()
@@ -215,9 +218,7 @@ def retrace(
         ix, iy = free_ix[todo], free_iy[todo]
         points = np.stack([xs[ix], ys[iy], np.full(len(todo), spec.rx_height_m)], axis=1)
         tracer.check_points(points)
-        for s in range(0, len(todo), settings.batch_size):
-            sl = slice(s, s + settings.batch_size)
-            cells, paths = trace_batch(tracer, points[sl], ix[sl], iy[sl], per_path=per_path)
+        for sl, (cells, paths) in _traced(tracer, spec, settings, points, ix, iy, per_path=per_path, helpers=helpers):
             for k in features.CELL_RADIO_KEYS:
                 merged[k][todo[sl]] = cells[k]
             if per_path:
@@ -227,6 +228,15 @@ def retrace(
     if per_path:
         paths_tbl = features.paths_table([_keep_parent_paths(parent_paths, mask | blocked), *new_paths])
     return cells_tbl, paths_tbl, blocked, tracer, mask, counts
+
+
+def _traced(tracer, spec, settings, points, ix, iy, *, per_path: bool, helpers):
+    """``(slice, (cells, paths))`` of each trace call over ``points``: batches of ``settings.batch_size`` in this
+    process, or parts shared with ``helpers`` when they take them."""
+    if helpers is not None and helpers.splits(len(points), settings):
+        return helpers.trace(tracer, spec, settings, points, ix, iy, per_path=per_path)
+    batches = [slice(s, s + settings.batch_size) for s in range(0, len(points), settings.batch_size)]
+    return ((sl, trace_batch(tracer, points[sl], ix[sl], iy[sl], per_path=per_path)) for sl in batches)
 
 
 def _column(table: pa.Table, name: str) -> np.ndarray:

@@ -6,7 +6,9 @@ between the two (:meth:`MovingScene.changed_between`: each mover's old and new b
 differential rule selects around them (:func:`dtradar_data.pipeline.differential.retrace_mask`: occupancy changed,
 within the re-trace radius, line of sight or strongest path's first leg passing near), and every other cell keeps
 snapshot ``k-1``'s row and per-path rows. A cell far from every mover is therefore traced once, in snapshot 0, and
-carried through time.
+carried through time. A differential snapshot's cells are traced in this process and in helper processes at once
+(:mod:`dtradar_data.pipeline.trace_helpers`, one per further core; batch-independent tracing only), joined in
+row-major order: the same rows as in one process.
 
 Each finished snapshot is kept in the build's work folder (``snapshot_<k>.cells.parquet``, ``.paths.parquet`` and
 ``.json``, the JSON written last: a snapshot is done when its JSON exists), so an interrupted build restarts at the
@@ -39,6 +41,7 @@ from dtradar_data.core.errors import SchemaMismatchError
 from dtradar_data.core.schema import MOVING_CELL_SCHEMA, MOVING_PATH_SCHEMA
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.pipeline import differential
+from dtradar_data.pipeline.trace_helpers import TraceHelpers, helper_count
 from dtradar_data.rt.tracer import RayTracer
 
 #: The animation stored beside the card of a moving twin.
@@ -133,19 +136,32 @@ def trace_snapshots(
     work_dir.mkdir(parents=True, exist_ok=True)
     out: list[Snapshot] = []
     bar = tqdm(total=count, unit="snapshot", desc=f"tracing {moving.name}", disable=not progress)
-    for k in range(count):
-        snap = load_snapshot(work_dir, k, per_path=per_path)
-        if snap is None:
-            if k == 0:
-                snap = _full_snapshot(moving, work_dir, full_trace)
-            else:
-                snap = differential_snapshot(moving, k, out[-1], settings, radius_m=radius_m, per_path=per_path)
-            save_snapshot(work_dir, snap)
-            bar.set_postfix_str(f"t={k}: {snap.record['retraced_cells']} of {snap.record['free_cells']} cells traced")
-        out.append(snap)
-        bar.update(1)
+    with _helpers(moving, settings, work_dir, count) as helpers:
+        for k in range(count):
+            snap = load_snapshot(work_dir, k, per_path=per_path)
+            if snap is None:
+                if k == 0:
+                    snap = _full_snapshot(moving, work_dir, full_trace)
+                else:
+                    snap = differential_snapshot(
+                        moving, k, out[-1], settings, radius_m=radius_m, per_path=per_path, helpers=helpers
+                    )
+                save_snapshot(work_dir, snap)
+                r = snap.record
+                bar.set_postfix_str(f"t={k}: {r['retraced_cells']} of {r['free_cells']} cells traced")
+            out.append(snap)
+            bar.update(1)
     bar.close()
     return out
+
+
+def _helpers(moving, settings, work_dir: Path, count: int) -> TraceHelpers:
+    """The helper processes that trace parts of each differential snapshot beside this one (:mod:`.trace_helpers`):
+    started now, so they load the tracer while snapshot 0 is traced; none when every differential snapshot is done."""
+    if all(snapshot_done(work_dir, k) for k in range(1, count)):
+        return TraceHelpers(0)
+    spec = moving.spec_at(0)
+    return TraceHelpers(helper_count(int((~occupancy(spec)).sum()), settings), spec, settings)
 
 
 def _full_snapshot(moving, work_dir: Path, full_trace: FullTrace) -> Snapshot:
@@ -168,10 +184,11 @@ def _full_snapshot(moving, work_dir: Path, full_trace: FullTrace) -> Snapshot:
 
 
 def differential_snapshot(
-    moving, k: int, previous: Snapshot, settings, *, radius_m: float, per_path: bool, tracer_factory=None
+    moving, k: int, previous: Snapshot, settings, *, radius_m: float, per_path: bool, tracer_factory=None, helpers=None
 ) -> Snapshot:
     """Snapshot ``k`` from snapshot ``k-1`` (``previous``): the cells around the movers that moved re-traced in
-    ``spec_at(k)`` (in row-major order, batches of ``settings.batch_size``), every other row kept."""
+    ``spec_at(k)`` (in row-major order, batches of ``settings.batch_size``, or parts shared with ``helpers``), every
+    other row kept."""
     if previous.k != k - 1:
         raise ValueError(f"snapshot {k} is traced from snapshot {k - 1}, not {previous.k}")
     before, spec = moving.spec_at(k - 1), moving.spec_at(k)
@@ -188,6 +205,7 @@ def differential_snapshot(
         per_path=per_path,
         tracer_factory=tracer_factory or (lambda: RayTracer(spec, settings)),
         changed=changed,
+        helpers=helpers,
     )
     if tracer is not None:
         tracer.close()

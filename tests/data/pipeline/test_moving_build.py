@@ -2,7 +2,8 @@
 snapshot 1 is re-traced differentially from snapshot 0 and equals a full trace of the same instant in the cells it
 re-traced (both traced one cell per batch, so a cell's row does not depend on its batch) and snapshot 0 everywhere
 else; the stored table follows the moving-twin contract; an interrupted build resumes at the first missing snapshot;
-the twin loads, lists, verifies and has a card with its animation."""
+the twin loads, lists, verifies and has a card with its animation; a build that shares each snapshot's cells with a
+helper process stores the same tables and version."""
 
 from __future__ import annotations
 
@@ -337,3 +338,32 @@ def test_the_moving_variant_is_a_command_line_choice(capsys):
         cli.main(["build", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "moving" in text and "differentially from the one before" in text
+
+
+@pytest.mark.sionna
+def test_a_build_that_shares_its_cells_with_a_helper_process_stores_the_same_tables_and_version(
+    built, tmp_path, monkeypatch
+):
+    """The corridor again, every differential snapshot's cells alternating between the build and one helper."""
+    from dtradar_data.pipeline import moving, trace_helpers
+    from dtradar_data.pipeline.builder import build
+
+    ds, config, root, _ = built
+    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root))
+    want_paths = _load(paths=True).paths_table
+    monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
+    monkeypatch.setattr(trace_helpers, "MIN_CELLS_PER_PART", 1)
+    monkeypatch.setattr(moving, "helper_count", lambda *args, **kwargs: 1)
+    shared = []
+    real = trace_helpers.TraceHelpers.trace
+
+    def counted(self, *args, **kwargs):
+        shared.append(self.count)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(trace_helpers.TraceHelpers, "trace", counted)
+    (again,) = build(config)
+    assert shared == [1], "snapshot 1 was shared with the helper"
+    assert again.version == ds.version
+    assert again.table.equals(ds.table)
+    assert _load(paths=True).paths_table.equals(want_paths)
