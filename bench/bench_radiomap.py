@@ -123,30 +123,21 @@ class Bench:
     def radio_map(self, grid, settings: RTSettings, samples: int, *, fine: int = 1, port: int | None = None):
         """RadioMapSolver path gain ``[ny·fine, nx·fine]`` on the grid's plane at receiver height; ``port``: a one-hot
         precoding on that TX port (else Sionna's default, all ports 1/√N)."""
-        rt, mi = self.tracer.rt, self.tracer.mi
+        mi = self.tracer.mi
         precoding = None
         if port is not None:
             n = self.tracer.scene.tx_array.num_ant
             re = np.zeros(n, np.float32)
             re[port] = 1.0
             precoding = (mi.TensorXf(re), mi.TensorXf(np.zeros(n, np.float32)))
-        rm = rt.RadioMapSolver()(
-            self.tracer.scene,
-            center=mi.Point3f(*grid["centre"]),
-            orientation=mi.Point3f(0, 0, 0),
-            size=mi.Point2f(*grid["size"]),
-            cell_size=mi.Point2f(grid["cell_m"] / fine, grid["cell_m"] / fine),
-            precoding_vec=precoding,
+        return self.tracer.radio_map(
+            centre_m=grid["centre"],
+            size_m=grid["size"],
+            cell_m=grid["cell_m"] / fine,
             samples_per_tx=samples,
-            max_depth=settings.max_depth,
-            los=settings.los,
-            specular_reflection=settings.specular_reflection,
-            diffuse_reflection=settings.diffuse_reflection,
-            refraction=settings.refraction,
-            diffraction=settings.diffraction,
-            seed=settings.seed,
+            settings=settings,
+            precoding_vec=precoding,
         )
-        return np.asarray(rm.path_gain, dtype=np.float64)[0]
 
 
 def reduce(a: np.ndarray) -> dict[str, np.ndarray]:

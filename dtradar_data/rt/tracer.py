@@ -311,23 +311,29 @@ class RayTracer:
         size_m: tuple[float, float],
         cell_m: float,
         samples_per_tx: int = 2_000_000,
+        settings: RTSettings | None = None,
+        precoding_vec=None,
     ) -> np.ndarray:
-        """Path gain (linear) on a horizontal plane with RadioMapSolver: ``float64[ny, nx]`` (row 0 = lowest y)."""
+        """Path gain (linear) on a horizontal plane with RadioMapSolver: ``float64[ny, nx]`` (row 0 = lowest y).
+        ``settings``: the interactions, depth and seed (default this tracer's); ``precoding_vec``: Sionna's
+        ``(real, imag)`` precoding of the TX ports (default its own: every port 1/sqrt(N))."""
         rt, mi = self.rt, self.mi
+        s = settings or self.settings
         rm = rt.RadioMapSolver()(
             self.scene,
             center=mi.Point3f(*centre_m),
             orientation=mi.Point3f(0, 0, 0),
             size=mi.Point2f(*size_m),
             cell_size=mi.Point2f(cell_m, cell_m),
+            precoding_vec=precoding_vec,
             samples_per_tx=samples_per_tx,
-            max_depth=self.settings.max_depth,
-            los=self.settings.los,
-            specular_reflection=self.settings.specular_reflection,
-            diffuse_reflection=self.settings.diffuse_reflection,
-            refraction=self.settings.refraction,
-            diffraction=self.settings.diffraction,
-            seed=self.settings.seed,
+            max_depth=s.max_depth,
+            los=s.los,
+            specular_reflection=s.specular_reflection,
+            diffuse_reflection=s.diffuse_reflection,
+            refraction=s.refraction,
+            diffraction=s.diffraction,
+            seed=s.seed,
         )
         return np.asarray(rm.path_gain, dtype=np.float64)[0]
 
