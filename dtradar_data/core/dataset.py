@@ -27,7 +27,7 @@ import pyarrow as pa
 
 from dtradar_data.core.errors import InvalidCoordinatesError, SchemaMismatchError
 from dtradar_data.core.grid import Grid
-from dtradar_data.core.schema import RADIO_COLUMNS
+from dtradar_data.core.schema import RADIO_COLUMNS, tx_column
 
 #: The grid of a stored dataset is the scene's receiver grid (``meta["grid"]``); one class for both.
 GridInfo = Grid
@@ -64,6 +64,24 @@ class Dataset:
     @property
     def shape(self) -> tuple[int, int]:
         return self.grid_info.shape
+
+    @property
+    def transmitters(self) -> int:
+        """``K``, the twin's transmitters: 1, plus one per ``tx{k}_`` column set of the table (transmitter ``k``'s
+        radio columns, :func:`~dtradar_data.core.schema.tx_column`)."""
+        names, k = set(self.table.column_names), 1
+        while tx_column("num_paths", k) in names:
+            k += 1
+        return k
+
+    def heard(self) -> np.ndarray:
+        """``bool[H, W]`` (static twins): the cell has a path from at least one transmitter."""
+        self._static_only("reception mask")
+        out = np.zeros(self.shape, bool)
+        for k in range(self.transmitters):
+            col = self.table.column(tx_column("num_paths", k)).to_numpy(zero_copy_only=False)
+            out |= col.reshape(self.shape) > 0
+        return out
 
     # -- moving twins (see the module docstring) ------------------------------------------------------------------
     @property

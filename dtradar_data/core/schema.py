@@ -111,14 +111,66 @@ MOVING_COLUMN_DESCRIPTIONS: dict[str, str] = {f[0]: f[3] for f in _MOVING_CELL_F
 MOVING_PATH_COLUMN_DESCRIPTIONS: dict[str, str] = {f[0]: f[3] for f in _MOVING_PATH_FIELDS}
 
 
-def cell_schema(moving: bool) -> pa.Schema:
-    """The per-cell schema of a static twin, or of a moving one."""
-    return MOVING_CELL_SCHEMA if moving else CELL_SCHEMA
+#: The version of the several-transmitter extension (the ``tx{k}_`` columns and the per-path ``tx`` column): hashed
+#: into the versions of twins with more than one transmitter only, so one-transmitter versions keep their hashes.
+MULTI_TX_SCHEMA_VERSION = 1
+
+#: The per-transmitter radio columns of the cell table: transmitter 0's keep their names, transmitter ``k >= 1``'s
+#: are ``tx{k}_<name>`` (:func:`tx_column`).
+TX_CELL_COLUMNS: tuple[str, ...] = ("num_paths", "los", *RADIO_COLUMNS)
+_TX_FIELD = ("tx", pa.int16(), False, "index of the transmitter the path leaves (meta transmitters[tx]; 0 = the first)")
 
 
-def path_schema(moving: bool) -> pa.Schema:
-    """The per-path schema of a static twin, or of a moving one."""
-    return MOVING_PATH_SCHEMA if moving else PATH_SCHEMA
+def tx_column(name: str, k: int) -> str:
+    """The cell-table column of radio feature ``name`` for transmitter ``k`` (``name`` itself for ``k = 0``)."""
+    return name if k == 0 else f"tx{k}_{name}"
+
+
+def _tx_fields(fields, transmitters: int):
+    """``fields`` plus, for transmitters 1..K-1, their copies of the radio fields (``tx{k}_`` names)."""
+    by_name = {f[0]: f for f in fields}
+    extra = []
+    for k in range(1, transmitters):
+        for name in TX_CELL_COLUMNS:
+            _, typ, nullable, desc = by_name[name]
+            extra.append((tx_column(name, k), typ, nullable, f"transmitter {k}: {desc}"))
+    return [*fields, *extra]
+
+
+def _with_transmitters(schema: pa.Schema, transmitters: int) -> pa.Schema:
+    meta = dict(schema.metadata or {})
+    meta[b"dtradar.transmitters"] = str(transmitters).encode()
+    meta[b"dtradar.multi_tx_schema_version"] = str(MULTI_TX_SCHEMA_VERSION).encode()
+    return schema.with_metadata(meta)
+
+
+def check_transmitters(transmitters) -> int:
+    if isinstance(transmitters, bool) or not isinstance(transmitters, int) or transmitters < 1:
+        raise ValueError(f"a twin has 1 or more transmitters, got {transmitters!r}")
+    return transmitters
+
+
+def cell_schema(moving: bool, transmitters: int = 1) -> pa.Schema:
+    """The per-cell schema of a static twin, or of a moving one; with ``transmitters`` K > 1 (static twins only) the
+    radio columns of transmitters 1..K-1 follow the static columns (:func:`tx_column`)."""
+    if check_transmitters(transmitters) == 1:
+        return MOVING_CELL_SCHEMA if moving else CELL_SCHEMA
+    if moving:
+        raise ValueError("a moving twin has one transmitter in this version")
+    schema = _schema(_tx_fields(_CELL_FIELDS, transmitters), "cells")
+    return _with_transmitters(schema, transmitters)
+
+
+def path_schema(moving: bool, transmitters: int = 1) -> pa.Schema:
+    """The per-path schema of a static twin, or of a moving one; with K > 1 transmitters an int16 ``tx`` column
+    precedes ``path`` (rows sorted by ``(iy, ix, tx, path)``)."""
+    if check_transmitters(transmitters) == 1:
+        return MOVING_PATH_SCHEMA if moving else PATH_SCHEMA
+    if moving:
+        raise ValueError("a moving twin has one transmitter in this version")
+    fields = list(_PATH_FIELDS)
+    fields.insert(2, _TX_FIELD)
+    return _with_transmitters(_schema(fields, "paths"), transmitters)
 
 
 def schema_to_json(schema: pa.Schema) -> str:

@@ -19,7 +19,7 @@ import pyarrow as pa
 
 from dtradar_data.core.dataset import Dataset, GridInfo
 from dtradar_data.core.errors import InvalidCoordinatesError
-from dtradar_data.core.schema import CELL_SCHEMA, SCHEMA_VERSION
+from dtradar_data.core.schema import CELL_SCHEMA, SCHEMA_VERSION, TX_CELL_COLUMNS, cell_schema, tx_column
 
 #: The two columns a moving twin adds to the per-cell table (see :mod:`dtradar_data.core.dataset`).
 MOVING_FIELDS = (pa.field("t", pa.int32(), nullable=False), pa.field("mover", pa.bool_(), nullable=False))
@@ -93,6 +93,43 @@ def synthetic_dataset(
     table = synthetic_table(nx, ny, blocked, cell_m=cell_m, **kwargs)
     grid = GridInfo(x0_m=0.5 * cell_m, y0_m=0.5 * cell_m, cell_m=cell_m, nx=nx, ny=ny)
     meta = {"name": name, "schema_version": SCHEMA_VERSION, "grid": grid.to_dict(), "synthetic": True}
+    return Dataset.from_table(table, meta, name=name)
+
+
+def synthetic_multi_tx_dataset(
+    nx: int = 8,
+    ny: int = 6,
+    blocked: np.ndarray | None = None,
+    *,
+    txs: tuple[tuple[float, float, float], ...] = ((0.3, 0.2, 3.0), (3.7, 2.8, 3.0)),
+    heard: np.ndarray | None = None,
+    cell_m: float = 0.5,
+    name: str = "synthetic-tx/blueprint",
+    **kwargs,
+) -> Dataset:
+    """A twin with ``len(txs)`` transmitters (:func:`~dtradar_data.core.schema.cell_schema` with K > 1): each
+    transmitter's columns as :func:`synthetic_table` computes them for it, nulled (no path, ``num_paths`` 0) where
+    ``heard[k]`` (``bool[K, ny, nx]``, default everywhere) is False: the cells transmitter ``k`` does not reach."""
+    blocked = np.zeros((ny, nx), bool) if blocked is None else np.asarray(blocked, bool)
+    heard = np.ones((len(txs), ny, nx), bool) if heard is None else np.asarray(heard, bool)
+    cols: dict[str, pa.Array] = {}
+    for k, tx in enumerate(txs):
+        part = synthetic_table(nx, ny, blocked | ~heard[k], cell_m=cell_m, tx=tx, **kwargs)
+        if k == 0:
+            cols.update({c: part.column(c) for c in ("ix", "iy", "x_m", "y_m")})
+            cols["blocked"] = pa.array(blocked.ravel())
+        for c in TX_CELL_COLUMNS:
+            cols[tx_column(c, k)] = part.column(c)
+    schema = cell_schema(False, len(txs))
+    table = pa.Table.from_arrays([cols[f.name] for f in schema], schema=schema)
+    grid = GridInfo(x0_m=0.5 * cell_m, y0_m=0.5 * cell_m, cell_m=cell_m, nx=nx, ny=ny)
+    meta = {
+        "name": name,
+        "schema_version": SCHEMA_VERSION,
+        "grid": grid.to_dict(),
+        "synthetic": True,
+        "transmitters": [{"name": f"tx{k}", "position_m": list(tx)} for k, tx in enumerate(txs)],
+    }
     return Dataset.from_table(table, meta, name=name)
 
 
