@@ -59,6 +59,8 @@ class VersionRecord(BaseModel):
     build_inputs_hash: str | None = None
     rt: dict[str, Any] = Field(default_factory=dict)
     transmitter: dict[str, Any] = Field(default_factory=dict)
+    transmitters: list[dict[str, Any]] | None = None
+    """Every transmitter, transmitter 0 first: written only for a twin with several."""
     grid: dict[str, Any] = Field(default_factory=dict)
     rx_height_m: float | list[float] | None = None
     robot_height_m: float | None = None

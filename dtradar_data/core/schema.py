@@ -144,6 +144,13 @@ def _with_transmitters(schema: pa.Schema, transmitters: int) -> pa.Schema:
     return schema.with_metadata(meta)
 
 
+def meta_transmitters(meta: dict) -> int:
+    """K, the transmitters of a stored version, from its ``meta.json``: the ``transmitters`` list (written only when
+    a twin has several), else 1."""
+    listed = meta.get("transmitters")
+    return len(listed) if isinstance(listed, list) and listed else 1
+
+
 def check_transmitters(transmitters) -> int:
     if isinstance(transmitters, bool) or not isinstance(transmitters, int) or transmitters < 1:
         raise ValueError(f"a twin has 1 or more transmitters, got {transmitters!r}")

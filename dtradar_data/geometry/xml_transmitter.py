@@ -44,13 +44,19 @@ def mesh_shape_at(spec: SceneSpec, p) -> str | None:
 
 
 def check_transmitter_in_mesh(spec: SceneSpec) -> None:
-    """:class:`InvalidCoordinatesError` if the transmitter of an XML-based spec is off the XML's shapes, below its
+    """:class:`InvalidCoordinatesError` if a transmitter of an XML-based spec is off the XML's shapes, below its
     ground, or inside one of its shapes (named). Specs without an XML base pass (their readers checked them)."""
     if spec.base is None:
         return
-    x, y, z = (float(v) for v in spec.tx.position_m)
-    where = f"{spec.name}: the transmitter at ({x:g}, {y:g}, {z:g}) m"
     meshes = [m for _, m in shape_meshes(spec.base) if len(m.faces)]
+    for k, tx in enumerate(spec.transmitters):
+        label = "the transmitter" if not spec.more_tx else f"transmitter {k}" + (f" ({tx.name})" if tx.name else "")
+        _check_one(spec, meshes, tx.position_m, label)
+
+
+def _check_one(spec: SceneSpec, meshes, position_m, label: str) -> None:
+    x, y, z = (float(v) for v in position_m)
+    where = f"{spec.name}: {label} at ({x:g}, {y:g}, {z:g}) m"
     if meshes:
         x0 = min(m.bounds[0][0] for m in meshes)
         y0 = min(m.bounds[0][1] for m in meshes)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dtradar_data.core.schema import tx_column
 from dtradar_data.rt import features
 
 
@@ -47,6 +48,8 @@ def trace_batch(
     With ``--rt.batch-independent``, besides the radio features, ``cells["retrace_depth"]`` (int8) says how many
     times the cell's PathSolver call was halved because its path buffer filled (0: traced with the whole batch; -1:
     the cell filled it on its own), for the dataset card: ``(retrace_depth != 0).sum()`` cells were re-traced."""
+    if getattr(tracer, "num_tx", 1) > 1:
+        return _trace_each(tracer, points, ix, iy, per_path=per_path)
     batch = tracer.trace(points)
     if not tracer.settings.batch_independent:  # Sionna's own solver: the rows of every stored version, unchanged
         cells = features.reduce_cells(batch)
@@ -56,6 +59,24 @@ def trace_batch(
     cells["retrace_depth"] = np.asarray(tracer.last_retrace_depth, np.int8)
     paths = features.path_rows(batch, ix, iy) if per_path else {}
     return cells, paths
+
+
+def _trace_each(tracer, points, ix, iy, *, per_path: bool):
+    """:func:`trace_batch` of a scene with several transmitters: one trace, transmitter ``k``'s features under
+    ``tx{k}_`` keys (:func:`~dtradar_data.core.schema.tx_column`), its paths with ``tx = k``."""
+    reduce = _reduce_cells if tracer.settings.batch_independent else features.reduce_cells
+    cells: dict[str, np.ndarray] = {}
+    paths: list[dict[str, np.ndarray]] = []
+    for k, batch in enumerate(tracer.trace_each(points)):
+        cells.update({tx_column(key, k): v for key, v in reduce(batch).items()})
+        if per_path:
+            rows = features.path_rows(batch, ix, iy)
+            rows["tx"] = np.full(len(rows["ix"]), k, np.int16)
+            paths.append(rows)
+    if tracer.settings.batch_independent:
+        cells["retrace_depth"] = np.asarray(tracer.last_retrace_depth, np.int8)
+    merged = {key: np.concatenate([p[key] for p in paths]) for key in paths[0]} if paths else {}
+    return cells, merged
 
 
 def _reduce_cells(batch) -> dict[str, np.ndarray]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from dtradar_data.core.schema import MOVING_SCHEMA_VERSION, SCHEMA_VERSION
+from dtradar_data.core.schema import MOVING_SCHEMA_VERSION, MULTI_TX_SCHEMA_VERSION, SCHEMA_VERSION
 from dtradar_data.pipeline import differential
 from dtradar_data.pipeline.config import BuildConfig
 from dtradar_data.pipeline.coverage import COVERAGE_SUBCELLS
@@ -37,6 +37,8 @@ def build_inputs(spec, config: BuildConfig, *, libraries: dict[str, str] | None 
             else None
         ),
     }
+    if spec.more_tx:  # only then: one-transmitter versions keep their hashes
+        inputs["multi_tx_schema_version"] = MULTI_TX_SCHEMA_VERSION
     if spec.prisms and "city" in spec.provenance:
         inputs["city_overview"] = [s.digest() for s in city_quadrant_specs(spec, config)]
     return inputs

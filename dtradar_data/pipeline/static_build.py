@@ -18,6 +18,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_data.core.ids import DatasetId, format_id
 from dtradar_data.core.layout import work_root
+from dtradar_data.core.schema import tx_column
 from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.geometry.xml_transmitter import check_transmitter_in_mesh
@@ -201,7 +202,7 @@ def _new_version(job: _Job, work_dir: Path, tmp: Path, traced: _Traced) -> NewVe
         "stats": {
             "num_cells": int(traced.blocked.size),
             "num_free": num_free,
-            "num_with_paths": int(np.count_nonzero(traced.cells.column("num_paths").to_numpy() > 0)),
+            **_with_paths(traced.cells, len(spec.transmitters)),
             "num_paths_total": traced.paths.num_rows if traced.paths is not None else None,
             "trace_seconds": round(traced.seconds, 2),
             **(_retraced(work_dir, settings, num_free) if settings.batch_independent else {}),
@@ -220,3 +221,13 @@ def _retraced(work_dir: Path, settings: RTSettings, free_cells: int) -> dict[str
         return {}
     d = np.concatenate(depth)
     return {"cells_retraced_for_full_path_buffer": int((d != 0).sum()), "cells_filling_it_alone": int((d < 0).sum())}
+
+
+def _with_paths(cells: pa.Table, transmitters: int) -> dict:
+    """``num_with_paths``: the cells with a path from at least one transmitter; with several, also how many each
+    transmitter reaches (``num_with_paths_per_tx``, transmitter 0 first)."""
+    each = [cells.column(tx_column("num_paths", k)).to_numpy() > 0 for k in range(transmitters)]
+    out = {"num_with_paths": int(np.count_nonzero(np.logical_or.reduce(each)))}
+    if transmitters > 1:
+        out["num_with_paths_per_tx"] = [int(np.count_nonzero(e)) for e in each]
+    return out

@@ -122,6 +122,7 @@ def version_meta(spec, settings: RTSettings, name: str, version: str, inputs: di
             "mitsuba_variant": active_variant() or "(reused cached batches)",
         },
         "transmitter": spec.tx.to_dict(),
+        **({"transmitters": [t.to_dict() for t in spec.transmitters]} if spec.more_tx else {}),
         "grid": spec.grid.to_dict(),
         "rx_height_m": spec.rx_height_m,
         "robot_height_m": spec.robot_height_m,

@@ -94,9 +94,10 @@ def trace_grid(
         if b not in on_ray:  # the Ray executor advanced the bar as its batches finished
             bar.update(len(rx.points[sl]))
     bar.close()
-    merged = {k: np.concatenate([c[k] for c in cell_parts]) for k in features.CELL_RADIO_KEYS}
-    cells_tbl = features.cells_table(rx.xs, rx.ys, rx.blocked, merged)
-    paths_tbl = features.paths_table(path_parts) if per_path else None
+    k = len(spec.transmitters)
+    merged = {key: np.concatenate([c[key] for c in cell_parts]) for key in features.radio_keys(k)}
+    cells_tbl = features.cells_table(rx.xs, rx.ys, rx.blocked, merged, k)
+    paths_tbl = features.paths_table(path_parts, k) if per_path else None
     return cells_tbl, paths_tbl, rx.blocked, tracer
 
 

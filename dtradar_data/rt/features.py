@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
-from dtradar_data.core.schema import CELL_SCHEMA, PATH_SCHEMA
+from dtradar_data.core.schema import cell_schema, path_schema, tx_column
 
 # Sionna InteractionType codes -> one letter each (the per-path table's `interactions` column).
 INTERACTION_LETTERS = {1: "S", 2: "D", 4: "R", 8: "F"}
@@ -123,9 +123,18 @@ def path_rows(batch, ix: np.ndarray, iy: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def cells_table(xs: np.ndarray, ys: np.ndarray, blocked: np.ndarray, free_features: dict[str, np.ndarray]) -> pa.Table:
+def radio_keys(transmitters: int = 1) -> tuple[str, ...]:
+    """The radio keys of a cell table with ``transmitters`` transmitters (``tx{k}_`` for k >= 1)."""
+    return tuple(tx_column(key, k) for k in range(transmitters) for key in CELL_RADIO_KEYS)
+
+
+def cells_table(
+    xs: np.ndarray, ys: np.ndarray, blocked: np.ndarray, free_features: dict[str, np.ndarray], transmitters: int = 1
+) -> pa.Table:
     """Assemble the full per-cell table: ``blocked`` is ``bool[ny, nx]``; ``free_features`` holds one value per free
-    cell in row-major order (from :func:`reduce_cells`). Blocked cells get no paths and null radio columns."""
+    cell in row-major order (from :func:`reduce_cells`; transmitter k's under ``tx{k}_`` keys). Blocked cells get no
+    paths and null radio columns."""
+    schema = cell_schema(False, transmitters)
     ny, nx = blocked.shape
     iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
     x, y = np.meshgrid(xs, ys, indexing="xy")
@@ -138,16 +147,17 @@ def cells_table(xs: np.ndarray, ys: np.ndarray, blocked: np.ndarray, free_featur
         "y_m": pa.array(y.ravel(), pa.float64()),
         "blocked": pa.array(blocked.ravel()),
     }
-    for key in CELL_RADIO_KEYS:
+    for key in radio_keys(transmitters):
         src = np.asarray(free_features[key])
         if src.shape[0] != free.sum():
             raise ValueError(f"feature {key!r} has {src.shape[0]} values for {int(free.sum())} free cells")
-        field = CELL_SCHEMA.field(key)
-        if key == "num_paths":
+        field = schema.field(key)
+        base = key.split("_", 1)[1] if key.startswith("tx") and key[2:3].isdigit() else key
+        if base == "num_paths":
             full = np.zeros(n, np.int16)
             full[free] = src
             cols[key] = pa.array(full, pa.int16())
-        elif key == "los":
+        elif base == "los":
             full = np.zeros(n, bool)
             full[free] = src
             cols[key] = pa.array(full)
@@ -155,15 +165,18 @@ def cells_table(xs: np.ndarray, ys: np.ndarray, blocked: np.ndarray, free_featur
             full = np.full(n, np.nan, np.float32)
             full[free] = src
             cols[key] = pa.array(full, field.type, mask=np.isnan(full))
-    return pa.Table.from_pydict(cols, schema=CELL_SCHEMA)
+    return pa.Table.from_pydict(cols, schema=schema)
 
 
-def paths_table(rows: list[dict[str, np.ndarray]]) -> pa.Table:
-    """Concatenate :func:`path_rows` outputs into a ``PATH_SCHEMA`` table, sorted by (iy, ix, path)."""
+def paths_table(rows: list[dict[str, np.ndarray]], transmitters: int = 1) -> pa.Table:
+    """Concatenate :func:`path_rows` outputs into a ``PATH_SCHEMA`` table, sorted by (iy, ix, path); with several
+    transmitters (rows with a ``tx`` key) by (iy, ix, tx, path)."""
+    schema = path_schema(False, transmitters)
     cols = {}
-    for f in PATH_SCHEMA:
+    for f in schema:
         parts = [r[f.name] for r in rows]
         values = np.concatenate(parts) if parts else np.array([], dtype=object if f.name == "interactions" else None)
         cols[f.name] = pa.array(values.tolist() if f.name == "interactions" else values, f.type)
-    table = pa.Table.from_pydict(cols, schema=PATH_SCHEMA)
-    return table.sort_by([("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")])
+    table = pa.Table.from_pydict(cols, schema=schema)
+    keys = ["iy", "ix", "path"] if transmitters == 1 else ["iy", "ix", "tx", "path"]
+    return table.sort_by([(k, "ascending") for k in keys])

@@ -129,6 +129,14 @@ def trace_device(settings: RTSettings) -> str:
     return "cuda" if _uses_cuda(dr, "auto", cpu_only=False) else "cpu"
 
 
+def _pose(tx) -> dict:
+    """The Transmitter keywords of ``tx``'s power and pose: an exact orientation (a pose-error twin) wins over the
+    look-at point."""
+    if tx.orientation_deg is not None:
+        return {"power_dbm": tx.power_dbm, "orientation": [math.radians(v) for v in tx.orientation_deg]}
+    return {"power_dbm": tx.power_dbm, **({"look_at": list(tx.look_at_m)} if tx.look_at_m is not None else {})}
+
+
 def active_variant() -> str | None:
     return _MI.variant() if _MI is not None else None
 
@@ -151,17 +159,29 @@ class RayTracer:
         self.scene = rt.load_scene(str(xml), merge_shapes=True)
         self.scene.frequency = settings.frequency_hz
         tx = spec.tx  # the transmitter array is part of the scene (paper: 8x2 tr38901 VH, on the ceiling)
+        for other in getattr(spec, "more_tx", ()):  # Sionna's scene has one array for every transmitter
+            if (other.num_rows, other.num_cols, other.pattern, other.polarization) != (
+                tx.num_rows,
+                tx.num_cols,
+                tx.pattern,
+                tx.polarization,
+            ):
+                raise InvalidSettingError(
+                    f"{spec.name}: transmitter {other.name or ''} has another array than transmitter 0 "
+                    f"({other.num_rows}x{other.num_cols} {other.pattern} {other.polarization} vs "
+                    f"{tx.num_rows}x{tx.num_cols} {tx.pattern} {tx.polarization}): Sionna gives a scene one array",
+                    hint="give every [[tx]] the same num_rows, num_cols, pattern and polarization",
+                )
         self.scene.tx_array = rt.PlanarArray(
             num_rows=tx.num_rows, num_cols=tx.num_cols, pattern=tx.pattern, polarization=tx.polarization
         )
         self.scene.rx_array = rt.PlanarArray(
             num_rows=1, num_cols=1, pattern=settings.rx_pattern, polarization=settings.rx_polarization
         )
-        if tx.orientation_deg is not None:  # an exact orientation (a pose-error twin) wins over the look-at point
-            kwargs = {"orientation": [math.radians(v) for v in tx.orientation_deg]}
-        else:
-            kwargs = {"look_at": list(tx.look_at_m)} if tx.look_at_m is not None else {}
-        self.scene.add(rt.Transmitter("tx", position=list(tx.position_m), power_dbm=tx.power_dbm, **kwargs))
+        transmitters = getattr(spec, "transmitters", (tx,))
+        for k, t in enumerate(transmitters):  # one trace covers all of them: the solver shoots from each
+            self.scene.add(rt.Transmitter("tx" if k == 0 else f"tx{k}", position=list(t.position_m), **_pose(t)))
+        self.num_tx = len(transmitters)
         if settings.batch_independent:
             if self.variant.startswith("cuda"):
                 # Sionna's deterministic CUDA generator has its own shared hash table; not patched (no GPU here)
@@ -222,17 +242,25 @@ class RayTracer:
             self.scene.add(self.rt.Receiver(name, position=[float(v) for v in p]))
 
     def trace(self, points: np.ndarray) -> PathBatch:
-        """Trace paths from the transmitter to every point (batch in the caller). One PathSolver call, or more where
-        the path buffer fills: then the receivers are re-traced in halves until no call fills it, so that a
-        receiver's paths do not depend on the receivers traced with it (see the module doc)."""
+        """Trace paths from the transmitter (transmitter 0 of several) to every point (batch in the caller). One
+        PathSolver call, or more where the path buffer fills: then the receivers are re-traced in halves until no
+        call fills it, so that a receiver's paths do not depend on the receivers traced with it (see the module
+        doc)."""
+        return self.trace_each(points)[0]
+
+    def trace_each(self, points: np.ndarray) -> list[PathBatch]:
+        """:meth:`trace` for every transmitter of the scene at once: one :class:`PathBatch` per transmitter, from
+        the same PathSolver calls."""
         points = np.asarray(points, dtype=np.float64)
         self.check_points(points)
         depth = np.zeros(len(points), np.int8)
         parts = self._trace_split(points, depth, 0)
         self.last_retrace_depth = depth
-        return parts[0] if len(parts) == 1 else _concat(parts)
+        if len(parts) == 1:
+            return parts[0]
+        return [_concat([p[k] for p in parts]) for k in range(self.num_tx)]
 
-    def _trace_split(self, points: np.ndarray, depth: np.ndarray, level: int) -> list[PathBatch]:
+    def _trace_split(self, points: np.ndarray, depth: np.ndarray, level: int) -> list[list[PathBatch]]:
         batch, full = self._trace_once(points)
         if not full:
             depth[:] = level
@@ -245,8 +273,8 @@ class RayTracer:
             points[half:], depth[half:], level + 1
         )
 
-    def _trace_once(self, points: np.ndarray) -> tuple[PathBatch, bool]:
-        """One PathSolver call: the paths and whether the path buffer filled."""
+    def _trace_once(self, points: np.ndarray) -> tuple[list[PathBatch], bool]:
+        """One PathSolver call: the paths of each transmitter and whether the path buffer filled."""
         self._set_receivers(points)
         import drjit as dr
 
@@ -259,34 +287,35 @@ class RayTracer:
             full = bool(getattr(self._solver, "buffer_full", False))
             self.solver_calls += 1
             self.overflowed_calls += full
-            return self._to_numpy(paths, len(points)), full
+            return [self._to_numpy(paths, len(points), k) for k in range(self.num_tx)], full
         finally:
             if pin:
                 dr.set_thread_count(threads)
 
-    def _to_numpy(self, paths, n: int) -> PathBatch:
+    def _to_numpy(self, paths, n: int, k: int = 0) -> PathBatch:
+        """Transmitter ``k``'s paths of one solver call (the rows of every transmitter share the call's width)."""
         a_re, a_im = (np.asarray(x, dtype=np.float32) for x in paths.a)
         a = a_re + 1j * a_im
         if self.settings.synthetic_array:
             # a: [rx, rx_ant, tx, tx_ant, P]; geometry: [rx, tx, P]; interactions: [D, rx, tx, P]
-            a = a[:, :, 0, :, :]  # one transmitter
+            a = a[:, :, k, :, :]
             ref = a[:, 0, 0, :]
             gain = np.mean(np.abs(a) ** 2, axis=(1, 2))
 
             def geo(x):
-                return np.asarray(x)[:, 0, :]
+                return np.asarray(x)[:, k, :]
 
-            inter = np.asarray(paths.interactions)[:, :, 0, :]
+            inter = np.asarray(paths.interactions)[:, :, k, :]
         else:
             # a: [rx, rx_ant, tx, tx_ant, P]; geometry: [rx, rx_ant, tx, tx_ant, P]: use the reference ports
-            a = a[:, :, 0, :, :]
+            a = a[:, :, k, :, :]
             ref = a[:, 0, 0, :]
             gain = np.mean(np.abs(a) ** 2, axis=(1, 2))
 
             def geo(x):
-                return np.asarray(x)[:, 0, 0, 0, :]
+                return np.asarray(x)[:, 0, k, 0, :]
 
-            inter = np.asarray(paths.interactions)[:, :, 0, 0, 0, :]
+            inter = np.asarray(paths.interactions)[:, :, 0, k, 0, :]
         valid = geo(paths.valid).astype(bool)
         batch = PathBatch(
             valid=valid,

@@ -138,10 +138,16 @@ class TxSpec:
     """The array's orientation as Sionna's (yaw about z, pitch about y, roll about x) in degrees; when set it orients
     the array instead of ``look_at_m`` (which then only records where the boresight points). Set by an
     antenna-pose-error twin (:mod:`dtradar_data.scenes.tx_pose`), whose turn a look-at point cannot express."""
+    name: str | None = None
+    """The scene file's name for the transmitter (``[[tx]] name``), shown by the dataset card; None for a twin's only
+    transmitter, whose digest predates names."""
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able; ``orientation_deg`` only when set, so the digests of scenes written before it stay valid."""
+        """JSON-able; ``orientation_deg`` and ``name`` only when set, so the digests of scenes written before them stay
+        valid."""
         d = asdict(self)
+        if self.name is None:
+            d.pop("name")
         d["position_m"] = list(self.position_m)
         d["look_at_m"] = None if self.look_at_m is None else list(self.look_at_m)
         if self.orientation_deg is None:
@@ -187,6 +193,14 @@ class SceneSpec:
     rt_defaults: dict[str, Any] = field(default_factory=dict, compare=False)
     """Ray-tracing settings this scene needs instead of the indoor defaults (a city's ``[rt]`` section: outdoor paths
     are 20x longer). Not in the digest: the settings used are hashed into the version anyway."""
+    more_tx: tuple[TxSpec, ...] = ()
+    """Transmitters 1..K-1 of a twin with several (a scene file's further ``[[tx]]`` tables); ``tx`` is transmitter 0.
+    One trace covers all of them; transmitter k's radio columns are ``tx{k}_<name>`` in the cell table."""
+
+    @property
+    def transmitters(self) -> tuple[TxSpec, ...]:
+        """Every transmitter, ``tx`` first."""
+        return (self.tx, *self.more_tx)
 
     @property
     def name(self) -> str:
@@ -218,6 +232,10 @@ class SceneSpec:
         else:
             d.pop("base")
         d["tx"] = self.tx.to_dict()
+        if self.more_tx:  # only when used: the digests of one-transmitter scenes stay valid
+            d["more_tx"] = [t.to_dict() for t in self.more_tx]
+        else:
+            d.pop("more_tx")
         return d
 
     def canonical_json(self) -> str:

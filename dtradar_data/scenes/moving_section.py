@@ -194,6 +194,12 @@ def moving_scene_from_section(
         _raise_first(exc, origin, "[moving]", _MOVING_KEYS)
     movers = tuple(_mover(raw, i, origin) for i, raw in enumerate(model.mover))
     base = base_spec(model.base)
+    if base.more_tx:  # the moving tables and their differential snapshots are one transmitter's, for now
+        raise SceneFileError(
+            f"{origin}: [moving]: the {model.base} twin has {len(base.transmitters)} transmitters, and a moving twin "
+            "has one in this version",
+            hint="build the moving twin from a scene file with one [tx]; the static twins take several",
+        )
     dt_s = model.dt_s if model.dt_s is not None else base.grid.cell_m / ROBOT_SPEED_MPS
     if model.horizon_s is not None:
         snapshots = round(model.horizon_s / dt_s)

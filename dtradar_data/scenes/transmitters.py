@@ -1,13 +1,13 @@
-"""Where a scene's transmitter may stand: one per scene file, and never inside anything the scene holds.
+"""Where a scene's transmitters may stand: one or more per scene file, and never inside anything the scene holds.
 
 A transmitter inside a metal cubicle or a building traces without error and gives a table in which most cells hear
 nothing, which is worse than a refusal: the dataset looks valid. So every reader refuses it when the scene is named,
 before any mesh is written or ray traced:
 
-- :func:`check_one_transmitter`: a file's ``tx`` is one ``[tx]`` table. ``[[tx]]`` (an array of tables, the form
-  several transmitters would take) and ``tx = []`` are refused with what this version does instead: a twin has one
-  transmitter, so a deployment with several is one dataset per transmitter.
-- :func:`object_at` / :func:`check_transmitter_clear`: the transmitter is in none of the spec's boxes (objects,
+- :func:`check_transmitter_tables`: a file's ``tx`` is one ``[tx]`` table or an array of ``[[tx]]`` tables (a
+  deployment with several access points or base stations; the first is transmitter 0). ``tx = []``, an entry that is
+  not a table and two transmitters of one name are refused; :func:`tx_tables` lists them.
+- :func:`object_at` / :func:`check_transmitter_clear`: no transmitter is in one of the spec's boxes (objects,
   walls, floor, ceiling) or prisms (a city's buildings), in every variant (a dynamic change can move an object onto
   it). The shapes of an XML scene's own mesh are checked by
   :func:`~dtradar_data.geometry.xml_meshes.check_transmitter_in_mesh` when that scene is built, since reading its
@@ -24,32 +24,52 @@ import numpy as np
 from dtradar_data.core.errors import SceneFileError
 from dtradar_data.scenes.model import SceneSpec
 
-__all__ = ["ONE_TRANSMITTER_HINT", "check_one_transmitter", "check_transmitter_clear", "object_at"]
+__all__ = ["check_transmitter_clear", "check_transmitter_tables", "object_at", "tx_label", "tx_tables"]
 
-ONE_TRANSMITTER_HINT = (
-    "write one [tx] table: a twin has one transmitter; for a deployment with several, build one dataset (one scene "
-    "file, its own [scene] name) per transmitter"
-)
+#: The most transmitters one twin holds: each adds 14 columns to the cell table and its rays to every trace.
+MAX_TRANSMITTERS = 16
 
 
-def check_one_transmitter(data: dict[str, Any], origin: str, *, section: str = "tx") -> None:
-    """:class:`SceneFileError` unless the parsed TOML's ``section`` is absent (the reader names it missing) or one
-    table: ``[[tx]]`` blocks and ``tx = [...]`` are refused, with how many there were and which names they gave."""
+def check_transmitter_tables(data: dict[str, Any], origin: str, *, section: str = "tx") -> None:
+    """:class:`SceneFileError` unless the parsed TOML's ``section`` is absent (the reader names it missing), one table,
+    or a non-empty array of tables with distinct names, at most :data:`MAX_TRANSMITTERS`."""
     value = data.get(section)
     if not isinstance(value, list):
         return
     if not value:
         raise SceneFileError(
-            f"{origin}: {section} = [] holds no transmitter: a scene needs one", hint=ONE_TRANSMITTER_HINT
+            f"{origin}: {section} = [] holds no transmitter: a scene needs one",
+            hint=f"write a [{section}] table, or one [[{section}]] table per transmitter",
         )
-    names = [t.get("name") for t in value if isinstance(t, dict) and t.get("name") is not None]
+    bad = [k for k, t in enumerate(value) if not isinstance(t, dict)]
+    if bad:
+        raise SceneFileError(
+            f"{origin}: {section}[{bad[0]}] is {value[bad[0]]!r}, not a table",
+            hint=f"write each transmitter as a [[{section}]] table with position_m = [x, y, z]",
+        )
+    if len(value) > MAX_TRANSMITTERS:
+        raise SceneFileError(
+            f"{origin}: {len(value)} [[{section}]] tables: a twin holds at most {MAX_TRANSMITTERS} transmitters",
+            hint="split the deployment into several twins (scene files), or merge nearby transmitters",
+        )
+    names = [t.get("name") for t in value if t.get("name") is not None]
     dupes = sorted({str(n) for n in names if names.count(n) > 1})
-    what = f"{len(value)} [[{section}]] tables" if len(value) > 1 else f"a [[{section}]] block (an array of tables)"
-    more = f" (named {', '.join(map(repr, names))}" + (f"; {', '.join(dupes)} more than once)" if dupes else ")")
-    raise SceneFileError(
-        f"{origin}: {what}{more if names else ''}: this version traces one transmitter per scene",
-        hint=ONE_TRANSMITTER_HINT if len(value) > 1 else f"write [{section}] (single brackets) for the transmitter",
-    )
+    if dupes:
+        raise SceneFileError(
+            f"{origin}: [[{section}]] name {', '.join(map(repr, dupes))} is given to more than one transmitter",
+            hint="give each transmitter its own name (the dataset card lists them by name)",
+        )
+
+
+def tx_tables(value) -> list:
+    """The transmitter tables of a parsed document's ``tx``: one table, or the array of ``[[tx]]`` tables."""
+    return list(value) if isinstance(value, (list, tuple)) else [value]
+
+
+def tx_label(k: int, tx) -> str:
+    """How errors and cards name transmitter ``k``: ``[[tx]] 'north'`` or ``[[tx]] #2`` (1-based like a file's)."""
+    name = getattr(tx, "name", None)
+    return f"[[tx]] {name!r}" if name else f"[[tx]] #{k + 1}"
 
 
 def object_at(spec: SceneSpec, p) -> str | None:
@@ -75,9 +95,14 @@ def object_at(spec: SceneSpec, p) -> str | None:
 
 
 def check_transmitter_clear(spec: SceneSpec, origin: str, *, where: str = "[tx]") -> None:
-    """:class:`SceneFileError` if the transmitter of ``spec`` stands inside one of its boxes or prisms, naming the
+    """:class:`SceneFileError` if a transmitter of ``spec`` stands inside one of its boxes or prisms, naming the
     object, its extent and the variant (a dynamic twin's change can cover a transmitter its blueprint leaves free)."""
-    pos = tuple(float(v) for v in spec.tx.position_m)
+    for k, tx in enumerate(spec.transmitters):
+        _check_clear(spec, tx, origin, where if len(spec.transmitters) == 1 else tx_label(k, tx))
+
+
+def _check_clear(spec: SceneSpec, tx, origin: str, where: str) -> None:
+    pos = tuple(float(v) for v in tx.position_m)
     name = object_at(spec, pos)
     if name is None:
         return

@@ -52,7 +52,7 @@ from dtradar_data.scenes.sionna_scenes import (
     sionna_version,
     sionna_xml,
 )
-from dtradar_data.scenes.transmitters import check_one_transmitter
+from dtradar_data.scenes.transmitters import check_transmitter_tables, tx_tables
 from dtradar_data.scenes.xml_shapes import mesh_scene
 
 FORMAT = 1
@@ -95,6 +95,7 @@ class GridSection(SceneFileModel):
 
 
 class TxSection(SceneFileModel):
+    name: Text | None = None
     position_m: Vec3
     look_at_m: Vec3 | None = None
     num_rows: PosInt = 8
@@ -114,7 +115,8 @@ class MeshSceneDocument(SceneFileModel):
     scene: MeshSceneMeta
     xml: XmlSection
     grid: GridSection
-    tx: TxSection
+    tx: TxSection | list[TxSection]
+    """One ``[tx]`` table, or one ``[[tx]]`` table per transmitter (the first is transmitter 0)."""
     robot: RobotSection = RobotSection()
 
 
@@ -127,7 +129,7 @@ def is_mesh_scene_file(path: Path) -> bool:
 
 
 def _parse(data: dict[str, Any], origin: str) -> MeshSceneDocument:
-    check_one_transmitter(data, origin)
+    check_transmitter_tables(data, origin)
     try:
         return MeshSceneDocument.model_validate(data)
     except ValidationError as exc:
@@ -162,8 +164,12 @@ def _spec(
         the_grid = _file_grid(g, origin)
     if cell_m is not None:  # same area, other cells
         the_grid = grid_with_cell(the_grid, check_cell_m(cell_m))
-    t = doc.tx
-    position = t.position_m if tx is None else tx_from_option(tx)
+    tables = tx_tables(doc.tx)
+    if tx is not None and len(tables) > 1:
+        raise SceneFileError(
+            f"{origin}: --tx places one transmitter, and this scene has {len(tables)} ([[tx]] tables)",
+            hint="edit the [[tx]] tables' position_m in the scene file instead of passing --tx",
+        )
     if variant != "blueprint":
         raise SceneFileError(
             f"{origin} has no {variant} twin: only its blueprint",
@@ -179,21 +185,29 @@ def _spec(
         licence=doc.scene.licence,
         attribution=doc.scene.attribution,
         grid=the_grid,
-        tx=TxSpec(
-            position_m=tuple(position),
-            look_at_m=_grid_centre(the_grid, doc.robot.rx_height_m) if t.look_at_m is None else t.look_at_m,
-            num_rows=t.num_rows,
-            num_cols=t.num_cols,
-            pattern=t.pattern,
-            polarization=t.polarization,
-            power_dbm=t.power_dbm,
-        ),
+        tx=_tx_spec(tables[0], the_grid, doc.robot.rx_height_m, None if tx is None else tx_from_option(tx)),
+        more_tx=tuple(_tx_spec(t, the_grid, doc.robot.rx_height_m) for t in tables[1:]),
         rx_height_m=doc.robot.rx_height_m,
         robot_height_m=doc.robot.robot_height_m,
         objects=(),
         base=base,
         provenance={"xml": base.xml, "xml_path": base.path},
         rt_defaults=dict(OUTDOOR_RT_DEFAULTS) if base.xml.startswith("sionna:") else {},
+    )
+
+
+def _tx_spec(t: TxSection, grid: Grid, rx_height_m: float, position=None) -> TxSpec:
+    """One transmitter of the file (at ``position`` when ``--tx`` moves it), looking at the grid's centre unless
+    the file says where."""
+    return TxSpec(
+        position_m=tuple(t.position_m if position is None else position),
+        look_at_m=_grid_centre(grid, rx_height_m) if t.look_at_m is None else t.look_at_m,
+        num_rows=t.num_rows,
+        num_cols=t.num_cols,
+        pattern=t.pattern,
+        polarization=t.polarization,
+        power_dbm=t.power_dbm,
+        name=t.name,
     )
 
 

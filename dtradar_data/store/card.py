@@ -27,7 +27,13 @@ from dtradar_data.core.schema import (
     MOVING_PATH_SCHEMA,
     PATH_COLUMN_DESCRIPTIONS,
     PATH_SCHEMA,
+    cell_schema,
+    path_schema,
 )
+from dtradar_data.store.card_sections import city_section as _city_section
+from dtradar_data.store.card_sections import fmt as _fmt
+from dtradar_data.store.card_sections import moving_section as _moving_section
+from dtradar_data.store.card_sections import tx_pose_section as _tx_pose_section
 
 DEFAULT_HUB_NAMESPACE = "dtradar"
 TAGS = ("robotics", "reinforcement-learning", "wireless", "radio", "ray-tracing", "sionna", "digital-twin", "parquet")
@@ -41,7 +47,6 @@ VARIANT_TEXT = {
 #: The animation a moving twin's version carries (written by :mod:`dtradar_data.pipeline.moving`).
 MOVING_GIF_FILE = P.MOVING_GIF_FILE
 #: A moving twin's card lists at most this many snapshots one by one (the first ones, then a summary).
-MOVING_ROWS = 40
 _UNITS = (("_rad", "rad"), ("_db", "dB"), ("_hz", "Hz"), ("_m", "m"), ("_s", "s"))
 # Hub licence identifiers (https://huggingface.co/docs/hub/repositories-licenses) for the licences scenes use.
 _LICENCES = {
@@ -93,20 +98,6 @@ def _unit(column: str) -> str:
     return next((u for suffix, u in _UNITS if column.endswith(suffix)), "—")
 
 
-def _fmt(value: Any) -> str:
-    if value is None:
-        return "—"
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    if isinstance(value, (list, tuple)):
-        return "(" + ", ".join(_fmt(v) for v in value) + ")"
-    if isinstance(value, dict):
-        return ", ".join(f"{k}={_fmt(v)}" for k, v in sorted(value.items()))
-    return str(value).replace("|", "\\|").replace("\n", " ")
-
-
 def _flatten(d: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
     out = []
     for k, v in sorted(d.items()):
@@ -136,6 +127,27 @@ def _changes(prev: dict[str, Any] | None, cur: dict[str, Any]) -> str:
     la, lb = prev.get("library_versions") or {}, cur.get("library_versions") or {}
     out += [f"{k} {la.get(k, '—')} → {lb.get(k, '—')}" for k in sorted(la.keys() | lb.keys()) if la.get(k) != lb.get(k)]
     return "; ".join(out) or "rebuilt with the same inputs"
+
+
+def _field_descriptions(schema) -> dict[str, str]:
+    return {f.name: (f.metadata or {}).get(b"description", b"").decode() for f in schema}
+
+
+def _transmitter_table(rec: VersionRecord) -> list[dict[str, Any]]:
+    """One row per transmitter of a twin with several: its index, name, column prefix, position and pose."""
+    rows = []
+    for k, t in enumerate(rec.transmitters or []):
+        rows.append(
+            {
+                "k": k,
+                "name": t.get("name") or f"tx{k}",
+                "prefix": "(none)" if k == 0 else f"`tx{k}_`",
+                "position": _fmt(t.get("position_m")),
+                "look_at": _fmt(t.get("look_at_m") or t.get("orientation_deg")),
+                "reached": (rec.stats.get("num_with_paths_per_tx") or ["—"] * (k + 1))[k],
+            }
+        )
+    return rows
 
 
 def _columns(schema, descriptions) -> list[dict[str, Any]]:
@@ -248,6 +260,9 @@ def _version_values(rec: VersionRecord, tag: str | None) -> dict[str, Any]:
     }
 
 
+_POSE_KEYS = ("name", "position_m", "look_at_m", "orientation_deg")
+
+
 def _scene_values(rec: VersionRecord) -> dict[str, Any]:
     """The template's values describing the twin: grid, heights, variant, transmitter, objects and provenance."""
     grid = rec.grid
@@ -264,7 +279,9 @@ def _scene_values(rec: VersionRecord) -> dict[str, Any]:
         "description": rec.description or "(no scene description recorded)",
         "variant": rec.variant,
         "variant_text": VARIANT_TEXT.get(rec.variant, ""),
-        "transmitter_rows": [(k, _fmt(v)) for k, v in _flatten(rec.transmitter)],
+        "transmitter_rows": [] if rec.transmitters else [(k, _fmt(v)) for k, v in _flatten(rec.transmitter)],
+        "transmitters": _transmitter_table(rec),
+        "array_rows": [(k, _fmt(v)) for k, v in _flatten(rec.transmitter) if k not in _POSE_KEYS],
         "object_rows": [(k, m, c) for (k, m), c in sorted(counts.items())],
         "num_objects": len(objects),
         "source": rec.source or "not recorded",
@@ -292,6 +309,9 @@ def _table_values(rec: VersionRecord, moving: dict[str, Any] | None) -> dict[str
     n, stats = rec.num_rows, rec.stats
     cells = (MOVING_CELL_SCHEMA, MOVING_COLUMN_DESCRIPTIONS) if moving else (CELL_SCHEMA, COLUMN_DESCRIPTIONS)
     paths = (MOVING_PATH_SCHEMA, MOVING_PATH_COLUMN_DESCRIPTIONS) if moving else (PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS)
+    k = len(rec.transmitters or []) or 1  # several transmitters: their schemas, descriptions from the fields
+    if k > 1:
+        cells, paths = ((s, _field_descriptions(s)) for s in (cell_schema(False, k), path_schema(False, k)))
     ranges = stats.get("columns") or {}
     return {
         "num_rows": n,
@@ -309,129 +329,6 @@ def _table_values(rec: VersionRecord, moving: dict[str, Any] | None) -> dict[str
 
 
 CITY_FILE = P.CITY_FILE
-
-
-def _moving_section(rec: VersionRecord) -> dict[str, Any] | None:
-    """What the card says about a moving twin (``meta["moving"]`` and the builder's ``meta["moving_build"]``)."""
-    extra = rec.model_extra or {}
-    moving = extra.get("moving")
-    if not isinstance(moving, dict):
-        return None
-    build = extra.get("moving_build") or {}
-    movers = []
-    for m in build.get("movers") or []:
-        movers.append(
-            {
-                "name": m.get("name"),
-                "kind": m.get("kind"),
-                "material": m.get("material"),
-                "speed": _fmt(m.get("speed_mps")),
-                "mode": m.get("mode"),
-                "waypoints": len(m.get("waypoints") or []),
-                "size": f"{_fmt(m.get('width_m'))} × {_fmt(m.get('length_m'))} × {_fmt(m.get('height_m'))}",
-                "offset": _fmt(m.get("start_offset_s")),
-            }
-        )
-    rows = build.get("per_snapshot") or []
-    provenance = build.get("provenance") or {}
-    grid = rec.grid
-    return {
-        "snapshots": moving.get("snapshots"),
-        "dt_s": _fmt(moving.get("dt_s")),
-        "horizon_s": _fmt(build.get("horizon_s")),
-        "names": ", ".join(f"`{n}`" for n in moving.get("movers") or []),
-        "movers": movers,
-        "base": (build.get("base") or {}).get("variant", "blueprint"),
-        "base_digest": str((build.get("base") or {}).get("digest", ""))[:16],
-        "dt_from": provenance.get("dt_from", "—"),
-        "horizon_from": provenance.get("horizon_from", "—"),
-        "rule": build.get("rule", "—"),
-        "radius_m": _fmt(build.get("radius_m")),
-        "full_seconds": _fmt(build.get("full_seconds")),
-        "diff_seconds": _fmt(build.get("differential_seconds_mean")),
-        "retraced_mean": _fmt(build.get("retraced_cells_mean")),
-        "free_mean": _fmt(build.get("free_cells_mean")),
-        "full_cells": rows[0].get("retraced_cells", "—") if rows else "—",
-        "rows": [
-            {
-                "t": r.get("t"),
-                "mode": r.get("mode"),
-                "retraced": r.get("retraced_cells"),
-                "free": r.get("free_cells"),
-                "moved": ", ".join(r.get("movers_moved") or []) or "—",
-                "seconds": _fmt(r.get("seconds")),
-            }
-            for r in rows[:MOVING_ROWS]
-        ],
-        "rows_left": max(0, len(rows) - MOVING_ROWS),
-        "cells_per_snapshot": int(grid.get("nx", 0)) * int(grid.get("ny", 0)),
-        "gif": MOVING_GIF_FILE if MOVING_GIF_FILE in rec.files else None,
-    }
-
-
-def _tx_pose_section(rec: VersionRecord) -> dict[str, Any] | None:
-    """What the card says about an antenna-pose-error twin (``meta["tx_pose_error"]``), numbers rounded for reading."""
-    pose = (rec.model_extra or {}).get("tx_pose_error")
-    if not pose:
-        return None
-
-    def side(d: dict[str, Any]) -> dict[str, str]:
-        return {
-            k: "(" + ", ".join(f"{round(float(x), 3) + 0.0:g}" for x in v) + ")" if v else "none" for k, v in d.items()
-        }
-
-    return {
-        **pose,
-        "move_azimuth": f"{float(pose.get('move_azimuth_deg', 0.0)):.1f}",
-        "original": side(pose.get("original") or {}),
-        "perturbed": side(pose.get("perturbed") or {}),
-    }
-
-
-_PLURALS = {"building": "buildings", "parking": "parking lots", "road": "roads"}
-
-
-def _city_section(rec: VersionRecord) -> dict[str, Any] | None:
-    """What the card says about a city quadrant (``meta["city"]``, written by the pipeline from the scene)."""
-    city = (rec.model_extra or {}).get("city")
-    if not city:
-        return None
-    fp, tx, dyn = city.get("footprints", {}), city.get("tx", {}), city.get("dynamic")
-    report = fp.get("report") or {}
-    skipped = report.get("skipped") or {}
-    dynamic = None
-    if dyn:
-        roads = "; ".join(f"{r['name']} from {r['from_m']} to {r['to_m']}" for r in dyn.get("roads", []))
-        vehicles = ", ".join(
-            f"{n} {k}{'es' if k == 'bus' and n != 1 else 's' if n != 1 else ''}"
-            for k, n in (dyn.get("vehicles") or {}).items()
-        )
-        dynamic = (
-            f"{vehicles} placed with seed {dyn.get('seed')} on {len(dyn.get('roads', []))} roads "
-            f"({dyn.get('roads_from')}): {roads}"
-        )
-    return {
-        "city": city.get("city"),
-        "quadrant": city.get("quadrant", ""),
-        "crs": fp.get("crs"),
-        "rect": ", ".join(_fmt(v) for v in city.get("quadrant_rect_m", [])),
-        "box": _fmt(fp.get("box", {})),
-        "source": fp.get("source"),
-        "retrieved_utc": fp.get("retrieved_utc"),
-        "content_hash": str(fp.get("content_hash", ""))[:16],
-        "counts": ", ".join(f"{n} {_PLURALS.get(k, k) if n != 1 else k}" for k, n in (fp.get("counts") or {}).items()),
-        "report": "; ".join(
-            f"{k} {_fmt(v)}"
-            for k, v in sorted(report.items())
-            if k not in ("skipped", "skipped_ids") and v not in ({}, [], None)
-        )
-        + (f"; skipped {_fmt(skipped)}" if skipped else ""),
-        "tx_paper": tx.get("paper_m"),
-        "tx_placed": tx.get("placed_m"),
-        "tx_moved": tx.get("moved_m", 0),
-        "clearance": tx.get("clearance_m"),
-        "dynamic": dynamic,
-    }
 
 
 def render_version_card(

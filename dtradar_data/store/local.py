@@ -27,7 +27,7 @@ from dtradar_data.core.errors import (
 from dtradar_data.core.files import sha256_file
 from dtradar_data.core.ids import HASH_RE, MOVING_VARIANT, DatasetId
 from dtradar_data.core.record import VersionRecord
-from dtradar_data.core.schema import cell_schema, path_schema
+from dtradar_data.core.schema import cell_schema, meta_transmitters, path_schema
 from dtradar_data.store.catalog import as_id
 from dtradar_data.store.versions import Refs, one_revision, read_refs, resolve_revision
 
@@ -194,7 +194,7 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
     if verify:
         _check_hash(vdir, P.CELLS_FILE, meta)
     moving = _is_moving(meta)
-    table = read_table(vdir / P.CELLS_FILE, cell_schema(moving))
+    table = read_table(vdir / P.CELLS_FILE, cell_schema(moving, meta_transmitters(meta)))
     paths_table = None
     if paths:
         if not (vdir / P.PATHS_FILE).is_file():
@@ -204,7 +204,7 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
             )
         if verify:
             _check_hash(vdir, P.PATHS_FILE, meta)
-        paths_table = read_table(vdir / P.PATHS_FILE, path_schema(moving))
+        paths_table = read_table(vdir / P.PATHS_FILE, path_schema(moving, meta_transmitters(meta)))
     refs = read_refs(P.refs_path(did.scene, did.variant))
     meta["tag"] = refs.tag_of(version)  # tags live in refs.json; handed to consumers for logging
     grid = meta.get("grid", {})
@@ -241,7 +241,8 @@ def verify_dir(vdir: Path) -> list[str]:
         elif f.stat().st_size != int(rec.get("bytes", -1)) or sha256_file(f) != rec.get("sha256"):
             problems.append(f"{fname}: sha256 differs from meta.json (changed or damaged)")
     moving = _is_moving(meta)
-    for fname, schema in ((P.CELLS_FILE, cell_schema(moving)), (P.PATHS_FILE, path_schema(moving))):
+    k = meta_transmitters(meta)
+    for fname, schema in ((P.CELLS_FILE, cell_schema(moving, k)), (P.PATHS_FILE, path_schema(moving, k))):
         if (vdir / fname).is_file():
             try:
                 read_table(vdir / fname, schema)

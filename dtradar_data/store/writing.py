@@ -36,7 +36,13 @@ from dtradar_data.core.errors import CorruptDatasetError, DtradarError, SchemaMi
 from dtradar_data.core.files import json_safe, sha256_file, waiting_lock
 from dtradar_data.core.ids import DATASET_VARIANTS, HASH_RE, SCENE_RE, DatasetId
 from dtradar_data.core.record import RECORD_FORMAT
-from dtradar_data.core.schema import MOVING_SCHEMA_VERSION, SCHEMA_VERSION, cell_schema, path_schema
+from dtradar_data.core.schema import (
+    MOVING_SCHEMA_VERSION,
+    SCHEMA_VERSION,
+    cell_schema,
+    meta_transmitters,
+    path_schema,
+)
 from dtradar_data.store.card import render_version_card
 from dtradar_data.store.catalog import as_id
 from dtradar_data.store.local import (
@@ -312,10 +318,16 @@ def _conformed_tables(
     did: DatasetId, cells: pa.Table, paths: pa.Table | None, meta: dict[str, Any], is_moving: bool
 ) -> tuple[pa.Table, pa.Table | None]:
     """The cells checked to be the grid and the paths (if any), both in their schema and sorted as stored."""
-    cells = _check_grid(conform(cells, cell_schema(is_moving), f"cells table of {did.name}"), meta)
+    k = meta_transmitters(meta)
+    cells = _check_grid(conform(cells, cell_schema(is_moving, k), f"cells table of {did.name}"), meta)
     if paths is not None:
-        keys = [("iy", "ascending"), ("ix", "ascending"), ("path", "ascending")]
-        paths = conform(paths, path_schema(is_moving), f"paths table of {did.name}").sort_by(
+        keys = [
+            ("iy", "ascending"),
+            ("ix", "ascending"),
+            *([("tx", "ascending")] if k > 1 else []),
+            ("path", "ascending"),
+        ]
+        paths = conform(paths, path_schema(is_moving, k), f"paths table of {did.name}").sort_by(
             [("t", "ascending"), *keys] if is_moving else keys
         )
     return cells, paths

@@ -43,7 +43,6 @@ from dtradar_data.scenes.fields import (
 )
 from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS
 from dtradar_data.scenes.names import check_user_scene_name
-from dtradar_data.scenes.transmitters import check_one_transmitter
 
 FORMAT = 1
 
@@ -115,6 +114,9 @@ class CityRt(SceneFileModel):
 
 class Quadrant(SceneFileModel):
     tx_m: Vec3
+    more_tx_m: list[Vec3] = Field(default_factory=list, max_length=15)
+    """Further transmitters of the quadrant (a deployment of several), each placed clear of the buildings as
+    ``tx_m`` is; transmitter 0 is ``tx_m``."""
 
 
 class RoadModel(SceneFileModel):
@@ -166,7 +168,11 @@ def read_city_file(path: str | Path) -> CityDocument:
 
 
 def parse_city(data: dict[str, Any], *, origin: str = "<city>") -> CityDocument:
-    check_one_transmitter(data, origin)  # the quadrants' tx_m place one array each
+    if isinstance(data.get("tx"), list):  # the quadrants place the arrays; [tx] is what they share
+        raise SceneFileError(
+            f"{origin}: [[tx]] (an array of tables): a city's [tx] is the one array every transmitter of it has",
+            hint="write [tx] once; place a quadrant's transmitters with [quadrants.qN] tx_m (and more_tx_m)",
+        )
     try:
         return CityDocument.model_validate(data)
     except ValidationError as exc:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -140,10 +141,13 @@ def city_spec(
     area = quadrant_rect(quadrant, hx, hy)
     buildings = [f.polygon() for f in fp.of_kind("building")]
     paper = doc.quadrants[quadrant].tx_m
-    tx_xy = place_transmitter(
-        paper[:2], [b for b in buildings if b.intersects(area.buffer(50))], area, doc.tx.clearance_m
-    )
+    near = [b for b in buildings if b.intersects(area.buffer(50))]
+    tx_xy = place_transmitter(paper[:2], near, area, doc.tx.clearance_m)
     tx = _transmitter(doc, grid, (tx_xy[0], tx_xy[1], paper[2]))
+    more_tx = []
+    for k, asked in enumerate(doc.quadrants[quadrant].more_tx_m, start=1):  # each placed as tx_m is
+        xy = place_transmitter(asked[:2], near, area, doc.tx.clearance_m)
+        more_tx.append(replace(_transmitter(doc, grid, (xy[0], xy[1], asked[2])), name=f"tx{k}"))
     objects = [_ground(doc, hx, hy)]
     prisms = _prisms(doc, fp)
     provenance: dict[str, Any] = {
@@ -158,6 +162,15 @@ def city_spec(
             "clearance_m": doc.tx.clearance_m,
         },
     }
+    if more_tx:
+        provenance["more_tx"] = [
+            {
+                "asked_m": list(a),
+                "placed_m": list(t.position_m),
+                "moved_m": round(math.dist(a[:2], t.position_m[:2]), 3),
+            }
+            for a, t in zip(doc.quadrants[quadrant].more_tx_m, more_tx)
+        ]
     description = doc.scene.description
     if variant == "dynamic":
         vehicles, provenance["dynamic"], more = _dynamic_vehicles(doc.dynamic, buildings, area)
@@ -174,6 +187,7 @@ def city_spec(
         attribution=fp.attribution,
         grid=grid,
         tx=tx,
+        more_tx=tuple(more_tx),
         rx_height_m=doc.robot.rx_height_m,
         robot_height_m=doc.robot.robot_height_m,
         objects=tuple(objects),

@@ -78,6 +78,7 @@ class GridModel(SceneFileModel):
 
 
 class TxModel(SceneFileModel):
+    name: str | None = None
     position_m: Vec3
     look_at_m: Vec3 | None = None
     num_rows: PosInt = 8
@@ -134,7 +135,8 @@ class RoomDocument(SceneFileModel):
     scene: SceneMeta
     room: RoomModel
     grid: GridModel
-    tx: TxModel
+    tx: TxModel | list[TxModel]
+    """One ``[tx]`` table, or one ``[[tx]]`` table per transmitter (the first is transmitter 0)."""
     robot: RobotModel
     kinds: dict[Annotated[str, BeforeValidator(name_check("kind name", allow_dash=False))], KindDefaults] = {}
     objects: list[dict[str, Any]]

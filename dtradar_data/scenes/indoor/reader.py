@@ -39,7 +39,7 @@ from dtradar_data.scenes.indoor.document import (
 from dtradar_data.scenes.model import Box, Room, SceneSpec, TxSpec
 from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MovingScene
 from dtradar_data.scenes.moving_section import moving_scene_from_section
-from dtradar_data.scenes.transmitters import check_one_transmitter, check_transmitter_clear
+from dtradar_data.scenes.transmitters import check_transmitter_clear, check_transmitter_tables, tx_label, tx_tables
 
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
 _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
@@ -93,7 +93,7 @@ class _Reader(DocumentErrors):
         fmt = self.data.get("format")
         if "format" in self.data and fmt != FORMAT:
             raise self.fail("format", f"unsupported format {fmt!r}", f"this dtradar reads format = {FORMAT}")
-        check_one_transmitter(self.data, self.origin)  # [[tx]] would read as "must be a table"
+        check_transmitter_tables(self.data, self.origin)  # before pydantic, whose errors would not name them
         try:
             return RoomDocument.model_validate(self.data)
         except ValidationError as exc:
@@ -127,7 +127,8 @@ class _Reader(DocumentErrors):
         doc = self.document()
         room, structure = self.room(doc.room)
         grid = self.grid(doc.grid, room)
-        tx = self.tx(doc.tx, room)
+        tables = tx_tables(doc.tx)
+        tx, *more_tx = (self.tx(t, room, "[tx]" if len(tables) == 1 else tx_label(k, t)) for k, t in enumerate(tables))
         for key in ("rx_height_m", "robot_height_m"):
             h = getattr(doc.robot, key)
             if h >= room.height_m:
@@ -174,6 +175,7 @@ class _Reader(DocumentErrors):
             attribution=meta.attribution,
             grid=grid,
             tx=tx,
+            more_tx=tuple(more_tx),
             rx_height_m=doc.robot.rx_height_m,
             robot_height_m=doc.robot.robot_height_m,
             objects=tuple(boxes),
@@ -231,17 +233,17 @@ class _Reader(DocumentErrors):
             )
         return grid
 
-    def tx(self, t: TxModel, room: Room) -> TxSpec:
+    def tx(self, t: TxModel, room: Room, where: str = "[tx]") -> TxSpec:
         pos = t.position_m
         if not (0 < pos[0] < room.width_m and 0 < pos[1] < room.length_m and 0 < pos[2] < room.height_m):
             raise self.fail(
-                "[tx]",
+                where,
                 f"position_m {list(pos)} is outside the room "
                 f"(0..{room.width_m:g}, 0..{room.length_m:g}, 0..{room.height_m:g} m)",
                 "put the transmitter inside the room, e.g. just below the ceiling",
             )
         if t.look_at_m is not None and np.allclose(t.look_at_m, pos):
-            raise self.fail("[tx]", "look_at_m equals position_m", "point the array at another point, e.g. the floor")
+            raise self.fail(where, "look_at_m equals position_m", "point the array at another point, e.g. the floor")
         return TxSpec(
             position_m=pos,
             look_at_m=t.look_at_m,
@@ -250,6 +252,7 @@ class _Reader(DocumentErrors):
             pattern=t.pattern,
             polarization=t.polarization,
             power_dbm=t.power_dbm,
+            name=t.name,
         )
 
     def obj(self, raw: Any, loc: tuple, kinds: dict[str, dict[str, Any]]) -> Box:

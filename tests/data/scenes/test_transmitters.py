@@ -1,4 +1,4 @@
-"""A scene's transmitter: one [tx] table per scene file, and never inside an object, a wall, a building or a mover's
+"""A scene's transmitters: one [tx] table or several [[tx]] tables per scene file, and never inside an object, a wall, a building or a mover's
 path. Each mistake is a SceneFileError naming the file and what to do, raised when the scene is named (no tracer)."""
 
 from __future__ import annotations
@@ -54,14 +54,32 @@ def test_the_room_as_written_loads_and_its_transmitter_is_in_no_object():
     assert object_at(spec, (3.0, 2.0, 0.5)) == "table_01"
 
 
-def test_several_tx_tables_are_refused_with_how_many_their_names_and_one_dataset_per_transmitter():
+def test_several_tx_tables_load_as_transmitter_zero_and_the_more_tx_in_file_order_with_their_names():
+    tx = [{"name": "ap1", "position_m": [1.0, 1.0, 2.9]}, {"name": "ap2", "position_m": [5.0, 3.0, 2.9]}]
+    spec = parse_room(room(tx=tx), "blueprint")
+    assert [t.name for t in spec.transmitters] == ["ap1", "ap2"]
+    assert spec.tx.position_m == (1.0, 1.0, 2.9) and spec.more_tx[0].position_m == (5.0, 3.0, 2.9)
+    assert spec.to_dict()["more_tx"][0]["name"] == "ap2"
+
+
+def test_two_transmitters_of_one_name_are_refused_naming_it():
     tx = [{"name": "ap1", "position_m": [1.0, 1.0, 2.9]}, {"name": "ap1", "position_m": [5.0, 3.0, 2.9]}]
-    text = refused(room(tx=tx), "2 [[tx]] tables", "'ap1', 'ap1'", "ap1 more than once", "one transmitter per scene")
-    assert "one dataset" in text and "per transmitter" in text
+    refused(room(tx=tx), "name 'ap1' is given to more than one transmitter", "its own name")
 
 
-def test_a_single_tx_block_in_double_brackets_says_to_write_single_brackets():
-    refused(room(tx=[{"position_m": [3.0, 2.0, 2.9]}]), "[[tx]] block", "write [tx] (single brackets)")
+def test_a_single_tx_block_in_double_brackets_is_the_same_scene_as_single_brackets():
+    single = parse_room(room(tx=[{"position_m": [3.0, 2.0, 2.9]}]), "blueprint")
+    assert single.digest() == parse_room(room(), "blueprint").digest()
+    assert "more_tx" not in single.to_dict() and "name" not in single.to_dict()["tx"]
+
+
+def test_a_second_transmitter_inside_an_object_is_refused_naming_which_transmitter():
+    tx = [{"position_m": [1.0, 1.0, 2.9]}, {"name": "low", "position_m": [3.2, 2.1, 0.5]}]
+    refused(room(tx=tx), "[[tx]] 'low'", "inside 'table_01'")
+
+
+def test_an_entry_of_the_tx_array_that_is_not_a_table_is_refused():
+    refused(room(tx=[{"position_m": [1.0, 1.0, 2.9]}, 3]), "tx[1] is 3, not a table")
 
 
 def test_an_empty_tx_array_says_a_scene_needs_a_transmitter():
@@ -99,11 +117,11 @@ def test_a_mover_tall_enough_to_hold_the_transmitter_may_not_walk_through_it():
 def test_a_city_file_with_tx_blocks_is_refused_before_its_quadrants_are_read():
     data = tomllib.loads(scene_file("dallas-q1").read_text())
     data["tx"] = [data["tx"], data["tx"]]
-    with pytest.raises(SceneFileError, match=r"city\.toml: 2 \[\[tx\]\] tables"):
+    with pytest.raises(SceneFileError, match=r"(?s)city\.toml: \[\[tx\]\].*more_tx_m"):
         parse_city(data, origin="city.toml")
 
 
-def test_an_xml_scene_file_with_tx_blocks_is_refused(tmp_path):
+def test_an_xml_scene_file_with_tx_blocks_loads_every_transmitter_and_refuses_one_tx_option(tmp_path):
     toml = tmp_path / "canyon.toml"
     toml.write_text("""format = 1
 [scene]
@@ -122,8 +140,11 @@ position_m = [0.0, 0.0, 20.0]
 [[tx]]
 position_m = [10.0, 0.0, 20.0]
 """)
-    with pytest.raises(SceneFileError, match=r"2 \[\[tx\]\] tables.*one transmitter per scene"):
-        load_scene_spec(toml, "blueprint")
+    spec = load_scene_spec(toml, "blueprint")
+    assert [t.position_m for t in spec.transmitters] == [(0.0, 0.0, 20.0), (10.0, 0.0, 20.0)]
+    assert spec.more_tx[0].look_at_m == spec.tx.look_at_m  # both look at the grid's centre
+    with pytest.raises(SceneFileError, match=r"--tx places one transmitter, and this scene has 2"):
+        load_scene_spec(toml, "blueprint", tx=(1.0, 0.0, 20.0))
 
 
 def test_the_built_in_rooms_and_quadrants_keep_their_transmitters_clear():
