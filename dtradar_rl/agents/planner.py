@@ -3,7 +3,8 @@
 What a user would pick without learning. At every step each robot
 
 1. **localises** from the radio features of its cell alone: the nearest fingerprint (the 8 z-scored radio features
-   of the observation: AoA, AoD, coefficient, delay, phase) among the free cells of the *blueprint* table
+   of the observation: AoA, AoD, coefficient, delay, phase; of every transmitter on a twin with several, 0 where one
+   has no path) among the free cells of the *blueprint* table with radio features from at least one transmitter
    (restricting the match to the believed cell's neighbours, a tracking filter, was measured worse: 0.81 against
    0.84 on the cubicle's dynamic twin, as one wrong belief then never recovers);
 2. **senses**: a neighbour whose radio features are missing (has-radio flag 0) is occupied; so is the cell a move
@@ -57,9 +58,10 @@ from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import flag_columns
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.moving_masks import background
-from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
+from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations, check_transmitters
 
-#: Observation columns of the cell's own radio features (``neighbors`` preset).
+#: Observation columns of the cell's own radio features (``neighbors`` preset) with one transmitter; with several,
+#: :attr:`~dtradar_rl.task.observations.ObservationTable.radio_columns` (every transmitter's).
 RADIO_COLUMNS = slice(2, len(PAPER_COLUMNS))
 #: Replans run one compiled breadth-first search per robot (scipy) when they are few or the grid is large, else one
 #: frontier propagation for all robots at once (torch, one step per step of distance). Measured on one core (same
@@ -89,11 +91,13 @@ class FingerprintPlanner:
         self.device = torch.device(device)
         table = build_observations(blueprint, "neighbors", self.normalizer)
         raw = blueprint.grid(list(self.normalizer.columns)).reshape(self.mdp.num_cells, -1)
-        has_radio = self.mdp.free & np.isfinite(raw[:, RADIO_COLUMNS]).all(1)
+        has_radio = self.mdp.free & np.asarray(table.has_radio, bool)  # from any transmitter
         t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=self.device)
+        #: the observation columns of a fingerprint: the cell's radio features of every transmitter
+        self.radio_columns = _columns(table.radio_columns, self.device)
         #: fingerprints of the blueprint's free cells with radio features, and which cells they are
         self.cells = t(np.flatnonzero(has_radio), torch.long)
-        self.fingerprints = t(table.cell_part[has_radio][:, RADIO_COLUMNS])
+        self.fingerprints = t(table.cell_part[has_radio][:, table.radio_columns])
         # every cell's (x, y) as an observation shows a target there (the table blanks blocked cells; a dynamic
         # twin's target may sit on one of them)
         xy = [self.normalizer.columns.index(c) for c in PAPER_COLUMNS[:2]]
@@ -136,7 +140,7 @@ class FingerprintPlanner:
             self._start(obs.shape[0])
         n = obs.shape[0]
         rows = torch.arange(n, device=self.device)
-        fp = obs[:, RADIO_COLUMNS]
+        fp = obs[:, self.radio_columns]
         gap = torch.cdist(fp, self.fingerprints)  # [n, fingerprints]
         cell = self.cells[gap.argmin(1)]
         target = torch.cdist(obs[:, -2:], self.positions).argmin(1)
@@ -317,6 +321,7 @@ class MoverGuard:
     risk. A robot a mover stands on reads its own cell blank and is left alone (it cannot tell where it is)."""
 
     def __init__(self, ds: Dataset, normalizer: Normalizer, device: str | torch.device = "cpu"):
+        check_transmitters(normalizer, ds)
         static = background(ds)
         mdp = GridMDP.from_dataset(static)
         raw = static.grid(list(normalizer.columns)).reshape(mdp.num_cells, -1).astype(np.float64)
@@ -339,6 +344,14 @@ class MoverGuard:
         action = action.reshape(-1).clone()
         action[near] = torch.where(least, q.reshape(-1, 4)[near], -torch.inf).argmax(1)
         return action.reshape(shape)
+
+
+def _columns(cols: list[int], device: torch.device) -> slice | torch.Tensor:
+    """``cols`` as a slice where they are a run (one transmitter: a view, as the planner always read them), else an
+    index tensor."""
+    if cols == list(range(cols[0], cols[-1] + 1)):
+        return slice(cols[0], cols[-1] + 1)
+    return torch.as_tensor(cols, dtype=torch.long, device=device)
 
 
 def planner_for_scene(scene: str, device: str = "cpu") -> FingerprintPlanner:

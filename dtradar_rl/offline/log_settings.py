@@ -52,7 +52,11 @@ def check_compatible(logged: LoggedDataset, cfg: TwinConfig, ds: Dataset) -> Non
     stored = meta.get("normalizer")
     if stored and not problems:
         fitted = Normalizer.fit(ds)
-        if not np.allclose(stored["mean"], fitted.mean, rtol=1e-5) or not np.allclose(
+        if tuple(stored.get("columns", fitted.columns)) != fitted.columns:  # another count of transmitters
+            problems.append(
+                f"its feature normaliser holds {len(stored['columns'])} columns, the twin's {len(fitted.columns)}"
+            )
+        elif not np.allclose(stored["mean"], fitted.mean, rtol=1e-5) or not np.allclose(
             stored["std"], fitted.std, rtol=1e-5
         ):
             problems.append("its feature normaliser differs from the one fitted on the twin")

@@ -6,7 +6,9 @@ with radio features whose 8 z-scored radio features (AoA, AoD, coefficient, dela
 normaliser) are nearest, in Euclidean distance, to the features sensed on the robot's cell. Without measurement noise
 this is a fixed map ``true cell -> believed cell`` per twin (:func:`localisation`), so a table policy composed with it
 is again a table, which :mod:`dtradar_rl.tabular.evaluation` evaluates exactly. A free cell without any propagation
-path senses nothing (all features missing, 0 after normalisation) and is matched like any other fingerprint.
+path senses nothing (all features missing, 0 after normalisation) and is matched like any other fingerprint. On a
+twin with several transmitters a fingerprint holds every transmitter's 8 features (transmitter 0's first, as the
+observation orders them; 0 where one has no path), and a cell has radio features when any transmitter reaches it.
 """
 
 from __future__ import annotations
@@ -19,20 +21,29 @@ from scipy.spatial import cKDTree
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.task.grid_mdp import ACTION_DELTAS, GridMDP
 from dtradar_rl.task.moving_masks import background
-from dtradar_rl.task.observations import RADIO_FEATURES, Normalizer
+from dtradar_rl.task.observations import RADIO_FEATURES, Normalizer, check_transmitters, radio_columns
 
-#: The normalised columns a fingerprint holds (the radio features, no position).
+#: The normalised columns a fingerprint holds (the radio features, no position) with one transmitter; with several,
+#: :func:`fingerprint_columns`.
 FINGERPRINT_COLUMNS: tuple[str, ...] = RADIO_FEATURES
 
 
+def fingerprint_columns(normalizer: Normalizer) -> tuple[str, ...]:
+    """The normalised columns of a fingerprint: every transmitter's radio features, transmitter 0's first."""
+    return tuple(c for k in range(normalizer.transmitters) for c in radio_columns(k))
+
+
 def fingerprints(ds: Dataset, normalizer: Normalizer) -> tuple[np.ndarray, np.ndarray]:
-    """``(float32[H*W, 8] features, bool[H*W] has_radio)``: every cell's z-scored radio features (0 where missing)
-    and whether the cell is free with every feature present."""
+    """``(float32[H*W, 8K] features, bool[H*W] has_radio)``: every cell's z-scored radio features of its ``K``
+    transmitters (0 where missing) and whether the cell is free with every feature of at least one present."""
     ds = background(ds)
-    cols = [normalizer.columns.index(c) for c in FINGERPRINT_COLUMNS]
+    check_transmitters(normalizer, ds)
+    names = fingerprint_columns(normalizer)
+    cols = [normalizer.columns.index(c) for c in names]
     raw = ds.grid(list(normalizer.columns)).reshape(-1, len(normalizer.columns)).astype(np.float64)
     free = ~np.asarray(ds.blocked, bool).ravel()
-    has_radio = free & np.isfinite(raw[:, [normalizer.columns.index(c) for c in FINGERPRINT_COLUMNS]]).all(1)
+    per_tx = np.isfinite(raw[:, cols]).reshape(len(raw), -1, len(RADIO_FEATURES)).all(2)  # [cells, K]
+    has_radio = free & per_tx.any(1)
     return normalizer.apply(raw)[:, cols], has_radio
 
 
@@ -148,4 +159,12 @@ class Tracker:
         return np.where(ok, out, self.glob[cells])
 
 
-__all__ = ["FINGERPRINT_COLUMNS", "Ambiguity", "Tracker", "ambiguity", "fingerprints", "localisation"]
+__all__ = [
+    "FINGERPRINT_COLUMNS",
+    "Ambiguity",
+    "Tracker",
+    "ambiguity",
+    "fingerprint_columns",
+    "fingerprints",
+    "localisation",
+]

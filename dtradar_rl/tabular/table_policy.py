@@ -5,8 +5,9 @@ move, or one distribution over the four moves, per ``(cell, target)`` of the blu
 cell, so :class:`TablePolicy` acts in two lookups from the observation alone:
 
 1. **where am I**: the believed cell, by the nearest blueprint fingerprint (:class:`Localiser`): the 8 z-scored radio
-   features of the observation's own cell against those of the blueprint's free cells with radio features, the same
-   k-d tree query as :func:`~dtradar_rl.tabular.fingerprints.localisation`, so on a twin without measurement noise
+   features of the observation's own cell (of every transmitter, on a twin with several) against those of the
+   blueprint's free cells with radio features, the same k-d tree query as
+   :func:`~dtradar_rl.tabular.fingerprints.localisation`, so on a twin without measurement noise
    the believed cell of a robot on cell ``c`` is exactly ``localisation(blueprint, twin)[c]`` (tested), and under
    measurement noise it is the nearest fingerprint of what the receiver measured. ``localise="oracle"`` reads the
    robot's own ``x, y`` instead (the true cell): what a table would reach if localisation never failed;
@@ -43,12 +44,13 @@ from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.tabular.fingerprints import fingerprints
 from dtradar_rl.tabular.solver import TooLargeError
 from dtradar_rl.task.moving_masks import background
-from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations
+from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations, own_radio_columns
 from dtradar_rl.task.twins import load_dataset
 
 #: The observation preset of a table policy: the robot's position and radio features, and its target's position.
 OBS_PRESET = "goal"
-#: The observation columns of the robot's own radio features (``goal`` and ``neighbors`` presets) and of its position.
+#: The observation columns of the robot's own radio features (``goal`` and ``neighbors`` presets; one transmitter:
+#: with several, :func:`~dtradar_rl.task.observations.own_radio_columns`) and of its position.
 RADIO_COLUMNS = slice(2, len(PAPER_COLUMNS))
 POSITION_COLUMNS = slice(0, 2)
 #: How a table policy finds the robot's cell: by fingerprint (what it senses) or the true cell (an oracle).
@@ -93,6 +95,8 @@ class Localiser:
         self.localise = localise
         self.num_cells = int(np.prod(blueprint.shape))
         ref, radio = fingerprints(blueprint, self.normalizer)
+        k = self.normalizer.transmitters  # the fingerprint's observation columns: every transmitter's features
+        self._radio = RADIO_COLUMNS if k == 1 else own_radio_columns(OBS_PRESET, k)
         #: the blueprint cells a fingerprint can name (free, with radio features), in cell order
         self.cells = np.flatnonzero(radio)
         if self.cells.size == 0:
@@ -112,12 +116,12 @@ class Localiser:
         o = _numpy(obs)
         if self.localise == "oracle":
             return self._positions.query(o[:, POSITION_COLUMNS].astype(np.float64))[1].astype(np.int64)
-        return self.cells[self._fingerprints.query(o[:, RADIO_COLUMNS].astype(np.float64))[1]]
+        return self.cells[self._fingerprints.query(o[:, self._radio].astype(np.float64))[1]]
 
     def hears(self, obs: torch.Tensor | np.ndarray) -> np.ndarray:
         """``bool[n]``: the robot senses radio features on its cell (a free cell no path reaches reads all 0, the
         normalised value of a missing feature; its nearest fingerprint says nothing about where it is)."""
-        return (_numpy(obs)[:, RADIO_COLUMNS] != 0).any(1)
+        return (_numpy(obs)[:, self._radio] != 0).any(1)
 
     def targets(self, obs: torch.Tensor | np.ndarray) -> np.ndarray:
         """``int64[n]``: the target cell of each robot (its ``x, y`` are the observation's last two columns)."""

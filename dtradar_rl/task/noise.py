@@ -25,7 +25,9 @@ target's are not perturbed, and neither are the has-radio flags: a receiver know
 :class:`RadioNoise` applies a model to the observations of one :class:`~dtradar_rl.task.observations.ObservationTable`
 (the robot's own cell and, with the ``neighbors`` preset, its four neighbours): both environments draw one set of
 errors per robot at every reset and step, from their own seeded generator (never the one that samples pairs, so
-``none`` changes nothing), and apply it whenever they observe.
+``none`` changes nothing), and apply it whenever they observe. On a twin with several transmitters each further
+transmitter's features of the robot's cell are one more group of errors, drawn and applied as transmitter 0's (a
+receiver estimates each transmitter's path on its own), and only where that transmitter has a path.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import numpy as np
 import torch
 
 from dtradar_data.core.errors import unknown_name
-from dtradar_rl.task.observations import RADIO_FEATURES, Normalizer, ObservationTable
+from dtradar_rl.task.observations import RADIO_FEATURES, Normalizer, ObservationTable, radio_columns
 
 #: Offset of a noise generator's seed from its env's seed (a separate stream from pair sampling).
 NOISE_SEED_OFFSET = 7919
@@ -92,20 +94,30 @@ class RadioNoise:
         self.model, self.device = model, torch.device(device)
         names = table.names
         col = {c: k for k, c in enumerate(normalizer.columns)}
-        radio = [col[c] for c in RADIO_FEATURES]
         dev = self.device
-        self.mean = torch.as_tensor(np.asarray(normalizer.mean)[radio], dtype=torch.float64, device=dev)
-        self.std = torch.as_tensor(np.asarray(normalizer.std)[radio], dtype=torch.float64, device=dev)
-        self.sigma = torch.as_tensor(model.sigmas(), dtype=torch.float64, device=dev)
-        # The observed cells: the robot's own (its radio columns) and each neighbour's (prefixed, with a flag).
-        groups, flags = [[names.index(c) for c in RADIO_FEATURES]], [-1]
+        # The observed cells: the robot's own (its radio columns) and each neighbour's (prefixed, with a flag), then
+        # the robot's own for each further transmitter (its tx{k}_ columns; group 0's presence is transmitter 0's).
+        groups, flags, tx = [[names.index(c) for c in RADIO_FEATURES]], [-1], [0]
         for act in [n.split(":")[0] for n in names if n.endswith(":has_radio")]:
             groups.append([names.index(f"{act}:{c}") for c in RADIO_FEATURES])
             flags.append(names.index(f"{act}:has_radio"))
+            tx.append(0)
+        for k in range(1, table.transmitters):
+            groups.append([names.index(c) for c in radio_columns(k)])
+            flags.append(-1)
+            tx.append(k)
+        # the statistics of each group's columns, [G, 8] (a neighbour's are transmitter 0's)
+        stats = [[col[c] for c in radio_columns(k)] for k in tx]
+        self.mean = torch.as_tensor(np.asarray(normalizer.mean)[stats], dtype=torch.float64, device=dev)
+        self.std = torch.as_tensor(np.asarray(normalizer.std)[stats], dtype=torch.float64, device=dev)
+        self.sigma = torch.as_tensor(model.sigmas(), dtype=torch.float64, device=dev)
         self.columns = torch.as_tensor(groups, dtype=torch.long, device=dev)  # [G, 8]
         self.flag_columns = flags
-        #: ``bool[cells]``: the cell has radio features (the own-cell group's presence; neighbours carry a flag)
-        self.has_radio = torch.as_tensor(table.has_radio, dtype=torch.bool, device=dev)
+        #: the own-cell groups (flag -1) and their transmitters: they read :attr:`heard`, the neighbours their flag
+        self._own = [g for g, f in enumerate(flags) if f < 0]
+        heard = table.has_radio[:, None] if table.heard_by is None else table.heard_by
+        #: ``bool[cells, K]``: the cell has transmitter k's radio features (the own-cell groups' presence)
+        self.heard = torch.as_tensor(heard[:, [tx[g] for g in self._own]], dtype=torch.bool, device=dev)
         self.k = {c: i for i, c in enumerate(RADIO_FEATURES)}
 
     @property
@@ -136,8 +148,9 @@ class RadioNoise:
         raw[..., k["phase_rad"]] = (
             torch.remainder(raw[..., k["phase_rad"]] + e[..., 6] + math.pi, 2 * math.pi) - math.pi
         )
+        own = self.heard[cells]  # [n, own groups]
         present = torch.stack(
-            [self.has_radio[cells]] + [obs[:, f] > 0.5 for f in self.flag_columns[1:]], dim=1
+            [own[:, self._own.index(g)] if f < 0 else obs[:, f] > 0.5 for g, f in enumerate(self.flag_columns)], dim=1
         )  # [n, G]
         noisy = ((raw - self.mean) / self.std).to(obs.dtype)
         z_new = torch.where(present[..., None], noisy, z.to(obs.dtype))

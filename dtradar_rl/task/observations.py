@@ -33,6 +33,25 @@ step the snapshot before is the periodic world's, which is what a sensor running
 static twin both blocks are the static map (a static and a moving twin's observations keep one width, so one agent
 acts on both). The flags are 0/1 like the neighbours' (not normalised). R = 1 adds nothing: the tables are the
 ones above, byte for byte.
+
+Several transmitters (a twin with ``K > 1``, ``Dataset.transmitters``)
+-----------------------------------------------------------------------
+Transmitter 0's features keep every column above. For each further transmitter ``k = 1..K-1`` the cell part gets,
+after the preset's columns (10, or 46 with ``neighbors``) and before the wider ring's flags (so every offset above,
+:attr:`ObservationTable.ring_columns` included, stays where it is), the robot cell's 8 radio features of transmitter
+``k`` (``tx{k}_aoa_az_rad`` ... ``tx{k}_phase_rad``, z-scored by the normaliser like the others, 0 where missing)
+and a flag ``tx{k}_has_path`` (1: transmitter ``k`` has a path to the cell; not normalised). Dimensions:
+``paper`` 10 + 9(K-1), ``goal`` 12 + 9(K-1), ``neighbors`` 48 + 9(K-1) + 2(2R(R+1) - 4) (:func:`obs_dim`).
+
+Every has-radio flag (the neighbours', the ring's, :attr:`ObservationTable.has_radio`) means *free and a path from
+at least one transmitter*: a street that only transmitter 1 reaches reads as free, not as a wall, which is why a
+twin has several transmitters. A neighbour carries transmitter 0's features only (0 where transmitter 0 does not
+reach it, its flag still 1 when another one does): the flag is what the agent, the shield, the memory and the
+planner read of a neighbour, and the robot learns every transmitter's features on the cells it stands on, so the
+neighbours' copies would cost 9 columns per neighbour and transmitter (36 per transmitter) for a feature no
+consumer reads. The normaliser's columns (:func:`observation_columns`) name the transmitters, so a model keeps
+their number: a twin with another count is refused (:func:`check_transmitters`). K = 1 changes nothing: the tables
+are the ones above, byte for byte.
 """
 
 from __future__ import annotations
@@ -44,6 +63,7 @@ import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidSettingError, unknown_name
+from dtradar_data.core.schema import tx_column
 from dtradar_rl.task.grid_mdp import ACTION_DELTAS
 
 #: The paper's ten inputs, in order (see the module docstring for the tenth).
@@ -62,6 +82,58 @@ PAPER_COLUMNS: tuple[str, ...] = (
 RADIO_FEATURES: tuple[str, ...] = PAPER_COLUMNS[2:]
 OBS_PRESETS: tuple[str, ...] = ("paper", "goal", "neighbors")
 OBS_DIMS: dict[str, int] = {"paper": 10, "goal": 12, "neighbors": 10 + 4 * (len(RADIO_FEATURES) + 1) + 2}
+#: The flag column of transmitter ``k >= 1`` (:func:`tx_names`).
+HAS_PATH = "has_path"
+
+
+def radio_columns(k: int) -> tuple[str, ...]:
+    """The table (and normaliser) columns of transmitter ``k``'s radio features: :data:`RADIO_FEATURES` for 0."""
+    return tuple(tx_column(c, k) for c in RADIO_FEATURES)
+
+
+def observation_columns(ds: Dataset | int) -> tuple[str, ...]:
+    """The normaliser's columns for a twin (or a count of transmitters): :data:`PAPER_COLUMNS`, then the radio
+    features of transmitters 1..K-1 (:func:`radio_columns`); a one-transmitter twin's are :data:`PAPER_COLUMNS`."""
+    k = ds if isinstance(ds, (int, np.integer)) else ds.transmitters
+    return PAPER_COLUMNS + tuple(c for j in range(1, int(k)) for c in radio_columns(j))
+
+
+def tx_names(k: int) -> tuple[str, ...]:
+    """The cell-part columns transmitter ``k >= 1`` adds: its 8 radio features and its has-path flag."""
+    return radio_columns(k) + (tx_column(HAS_PATH, k),)
+
+
+def preset_cell_columns(preset: str) -> int:
+    """The cell-part columns of ``preset`` before any further transmitter's (10, or 46 with ``neighbors``)."""
+    return len(PAPER_COLUMNS) + (4 * (len(RADIO_FEATURES) + 1) if check_preset(preset) == "neighbors" else 0)
+
+
+def own_radio_columns(preset: str, transmitters: int = 1) -> list[int]:
+    """Observation columns of the robot cell's radio features of every transmitter, transmitter 0's first: the
+    fingerprint a planner or table policy localises by (``[2, ..., 9]`` with one transmitter)."""
+    base, width = preset_cell_columns(preset), len(RADIO_FEATURES) + 1
+    out = list(range(2, len(PAPER_COLUMNS)))
+    for k in range(1, transmitters):
+        out += range(base + (k - 1) * width, base + (k - 1) * width + len(RADIO_FEATURES))
+    return out
+
+
+def obs_dim(preset: str, transmitters: int = 1, sense_radius: int = 1) -> int:
+    """The observation's width (module docstring): :data:`OBS_DIMS` plus 9 per further transmitter plus the ring."""
+    ring = 2 * len(ring_offsets(check_sense_radius(sense_radius, preset)))
+    return OBS_DIMS[check_preset(preset)] + (len(RADIO_FEATURES) + 1) * (transmitters - 1) + ring
+
+
+def check_transmitters(normalizer: Normalizer, ds: Dataset) -> int:
+    """``K``, the transmitters of ``ds``, or :class:`InvalidSettingError` when the normaliser (a model's) was fitted
+    on a twin with another count: its network takes the features of as many transmitters as it was trained with."""
+    have, want = ds.transmitters, normalizer.transmitters
+    if have != want:
+        raise InvalidSettingError(
+            f"the model (its feature normaliser) observes {want} transmitter(s), {ds.name} has {have}",
+            hint=f"train a model on a twin with {have} transmitter(s) for this one, or use it on a twin with {want}",
+        )
+    return have
 
 
 def check_preset(name: str) -> str:
@@ -114,8 +186,10 @@ class Normalizer:
     std: tuple[float, ...]
 
     @classmethod
-    def fit(cls, ds: Dataset, columns: tuple[str, ...] = PAPER_COLUMNS) -> Normalizer:
-        """Statistics of ``ds`` (of a moving twin: over the free cells of every snapshot)."""
+    def fit(cls, ds: Dataset, columns: tuple[str, ...] | None = None) -> Normalizer:
+        """Statistics of ``ds`` (of a moving twin: over the free cells of every snapshot); ``columns`` default to
+        :func:`observation_columns` (every transmitter's features)."""
+        columns = observation_columns(ds) if columns is None else columns
         if ds.is_moving:
             snaps = [ds.snapshot(k) for k in range(ds.snapshots)]
             values = np.concatenate([s.grid(list(columns)).reshape(-1, len(columns)) for s in snaps])
@@ -132,6 +206,14 @@ class Normalizer:
             means.append(m)
             stds.append(s if s > 1e-12 * max(1.0, abs(m)) and s > 0 else 1.0)
         return cls(tuple(columns), tuple(means), tuple(stds))
+
+    @property
+    def transmitters(self) -> int:
+        """The transmitters whose features it normalises (1 + those with :func:`radio_columns` among its columns)."""
+        k = 1
+        while radio_columns(k)[0] in self.columns:
+            k += 1
+        return k
 
     def apply(self, values: np.ndarray) -> np.ndarray:
         """Normalise ``[..., F]`` values in ``self.columns`` order; NaN becomes 0."""
@@ -157,7 +239,8 @@ class ObservationTable:
     cell_part: np.ndarray  # float32[T*H*W, Dc]
     target_part: np.ndarray  # float32[H*W, Dt]
     names: tuple[str, ...]
-    #: ``bool[T*H*W]``: the cell is free and has radio features (the neighbours' has-radio flags read this)
+    #: ``bool[T*H*W]``: the cell is free and has radio features from at least one transmitter (the neighbours'
+    #: has-radio flags read this)
     has_radio: np.ndarray | None = None
     #: the normaliser the tables were built with (measurement noise perturbs the raw values behind them)
     normalizer: Normalizer | None = None
@@ -165,6 +248,18 @@ class ObservationTable:
     snapshots: int = 1
     #: cells sensed around the robot: 1 = the four neighbours; R > 1 appends the wider ring's flags (module docstring)
     sense_radius: int = 1
+    #: ``bool[T*H*W, K]``: the cell is free and transmitter ``k`` has a path to it (measurement noise perturbs only
+    #: a transmitter's features that exist); None: column 0 is :attr:`has_radio` (one transmitter)
+    heard_by: np.ndarray | None = None
+
+    @property
+    def transmitters(self) -> int:
+        return 1 if self.heard_by is None else int(self.heard_by.shape[1])
+
+    @property
+    def radio_columns(self) -> list[int]:
+        """The columns of the robot cell's radio features of every transmitter (:func:`own_radio_columns`)."""
+        return own_radio_columns(self.preset, self.transmitters)
 
     @property
     def ring_columns(self) -> slice:
@@ -195,6 +290,7 @@ def build_observations(ds: Dataset, preset: str, normalizer: Normalizer, sense_r
     snapshot); the target part is the static one (a target's position does not change when a mover covers it)."""
     check_preset(preset)
     radius = check_sense_radius(sense_radius, preset)
+    check_transmitters(normalizer, ds)
     table = _build_moving(ds, preset, normalizer) if ds.is_moving else _build_static(ds, preset, normalizer)
     return table if radius == 1 else _with_ring(table, ds.shape, radius)
 
@@ -226,7 +322,7 @@ def _build_static(ds: Dataset, preset: str, normalizer: Normalizer) -> Observati
     raw = ds.grid(list(normalizer.columns)).reshape(n, -1).astype(np.float64)
     blocked = np.asarray(ds.blocked, bool).ravel()
     raw[blocked] = np.nan
-    z = normalizer.apply(raw)  # [n, 10], 0 where missing
+    z = normalizer.apply(raw)  # [n, F], 0 where missing
     col = {c: k for k, c in enumerate(normalizer.columns)}
     paper = z[:, [col[c] for c in PAPER_COLUMNS]]
     names = list(PAPER_COLUMNS)
@@ -236,7 +332,15 @@ def _build_static(ds: Dataset, preset: str, normalizer: Normalizer) -> Observati
         target = paper[:, :2].copy()
         tnames = ["target_x_m", "target_y_m"]
     parts = [paper]
-    has_radio = (~blocked & np.isfinite(raw[:, [col[c] for c in RADIO_FEATURES]]).all(1)).astype(np.float32)
+    # per transmitter: free with all its radio features; the has-radio flag is any of them (module docstring)
+    heard = np.stack(
+        [
+            ~blocked & np.isfinite(raw[:, [col[c] for c in radio_columns(k)]]).all(1)
+            for k in range(normalizer.transmitters)
+        ],
+        1,
+    )
+    has_radio = heard.any(1).astype(np.float32)
     if preset == "neighbors":
         radio = paper[:, 2:]
         iy, ix = np.divmod(np.arange(n), w)
@@ -247,9 +351,18 @@ def _build_static(ds: Dataset, preset: str, normalizer: Normalizer) -> Observati
             flag = np.where(inside, has_radio[j], 0.0).astype(np.float32)
             parts += [radio[j] * flag[:, None], flag[:, None]]
             names += [f"{act}:{c}" for c in RADIO_FEATURES] + [f"{act}:has_radio"]
+    for k in range(1, heard.shape[1]):  # the robot cell's features of each further transmitter, and its flag
+        parts += [z[:, [col[c] for c in radio_columns(k)]], heard[:, k, None].astype(np.float32)]
+        names += tx_names(k)
     cell_part = np.ascontiguousarray(np.concatenate(parts, 1), np.float32)
     return ObservationTable(
-        preset, cell_part, np.ascontiguousarray(target), tuple(names + tnames), has_radio > 0.5, normalizer
+        preset,
+        cell_part,
+        np.ascontiguousarray(target),
+        tuple(names + tnames),
+        has_radio > 0.5,
+        normalizer,
+        heard_by=heard if heard.shape[1] > 1 else None,
     )
 
 
@@ -257,6 +370,7 @@ def _build_moving(ds: Dataset, preset: str, normalizer: Normalizer) -> Observati
     snaps = [_build_static(ds.snapshot(k), preset, normalizer) for k in range(ds.snapshots)]
     n = snaps[0].target_part.shape[0]
     has_radio = np.concatenate([s.has_radio for s in snaps])
+    heard_by = None if snaps[0].heard_by is None else np.concatenate([s.heard_by for s in snaps])
     # a target's part from a snapshot where its cell is free (a blocked cell's part is blanked)
     free = np.stack([~np.asarray(ds.snapshot(k).blocked, bool).ravel() for k in range(ds.snapshots)])
     first_free = free.argmax(0)
@@ -269,4 +383,5 @@ def _build_moving(ds: Dataset, preset: str, normalizer: Normalizer) -> Observati
         has_radio,
         normalizer,
         snapshots=len(snaps),
+        heard_by=heard_by,
     )
