@@ -70,6 +70,12 @@ def _check_parents(specs: list, config: BuildConfig) -> None:
             f"(this build traces {', '.join(s.name for s in specs)} in full)",
             hint="drop --differential",
         )
+    several = [s.name for s in dynamic if s.more_tx]
+    if several:  # its retrace mask follows one transmitter's paths
+        raise InvalidSettingError(
+            f"--differential re-traces twins with one transmitter, and {several[0]} has several",
+            hint="drop --differential: the dynamic twin is then traced in full (every transmitter at once)",
+        )
     traced_first = {s.scene for s in specs if s.variant == "blueprint"}
     for spec in dynamic:
         if spec.scene not in traced_first:

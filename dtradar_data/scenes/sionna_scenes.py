@@ -39,6 +39,24 @@ SIONNA_DEFAULTS: dict[str, dict[str, Any]] = {
         "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
         "tx": {"position_m": [40.0, 90.0, 20.0]},  # in the square north of the Neues Rathaus
     },
+    "munich_cells": {  # Munich's grid with five more transmitters: see dtradar_data.scenes.placement
+        "xml": "munich",
+        "title": "Sionna Munich (Frauenkirche), six transmitters",
+        "description": "Sionna RT's bundled twin of central Munich around the Frauenkirche and Marienplatz, "
+        "covered as a deployment would cover it: the Munich twin's transmitter and five more, 20 m up, each "
+        "placed where it sees the most street cells no other sees (greedy line-of-sight coverage on the floor plan, "
+        "200 m range; python -m dtradar_data.scenes.placement sionna:munich --keep --max-sites 6 --range-m 200 "
+        "--clearance-cells 0 --height-m 20).",
+        "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
+        "tx": [
+            {"name": "marienplatz-north", "position_m": [40.0, 90.0, 20.0]},  # the Munich twin's own
+            {"name": "south-east", "position_m": [102.5, -157.5, 20.0]},
+            {"name": "south-west", "position_m": [-67.5, -87.5, 20.0]},
+            {"name": "north-east", "position_m": [127.5, 177.5, 20.0]},
+            {"name": "south", "position_m": [-37.5, -172.5, 20.0]},
+            {"name": "west", "position_m": [-112.5, 42.5, 20.0]},
+        ],
+    },
     "etoile": {
         "title": "Sionna Paris Etoile",
         "description": "Sionna RT's bundled twin of the Place Charles de Gaulle (Arc de Triomphe), Paris.",
@@ -89,8 +107,15 @@ def sionna_key(scene: str) -> str:
 
 
 def sionna_xml(key: str) -> Path:
-    """The bundled XML of one Sionna scene, found through package metadata (importing sionna is ``rt``'s job)."""
+    """The bundled XML of one Sionna scene, found through package metadata (importing sionna is ``rt``'s job); a
+    twin of another's geometry (``munich_cells``) names the scene it is built on (``"xml"``)."""
+    key = SIONNA_DEFAULTS.get(key, {}).get("xml", key)
     return installed_file(SIONNA_DIST, f"sionna/rt/scenes/{key}/{key}.xml", f"the scene sionna:{key}")
+
+
+def sionna_base(key: str) -> str:
+    """The bundled scene whose XML ``key`` traces: itself, or the one a twin of it is built on."""
+    return SIONNA_DEFAULTS.get(key, {}).get("xml", key)
 
 
 def sionna_version() -> str:

@@ -145,6 +145,12 @@ def tx_pose_error(spec: SceneSpec, *, offset_m: float = 0.5, angle_deg: float = 
     """
     check_tx_pose_error(offset_m, angle_deg, seed)
     _refuse_a_pose_twin(spec)
+    if spec.more_tx:  # which of them would be off, and by one draw or one each, is not settled
+        raise InvalidSettingError(
+            f"--tx-pose-error: {spec.name} has {len(spec.transmitters)} transmitters, and a pose error is drawn "
+            "for a twin with one in this version",
+            hint="drop --tx-pose-error, or build the pose twin of a one-transmitter scene",
+        )
     pose = _draw_pose(spec, offset_m, angle_deg, seed)
     record = _record(spec, offset_m, angle_deg, seed, pose)
     return dataclasses.replace(

@@ -48,6 +48,7 @@ from dtradar_data.scenes.sionna_scenes import (
     SIONNA_PREFIX,
     dataset_scene_name,
     is_sionna_name,
+    sionna_base,
     sionna_key,
     sionna_version,
     sionna_xml,
@@ -266,17 +267,18 @@ def load_sionna_spec(scene: str, variant: str, *, grid=None, tx=None, cell_m=Non
     """A bundled Sionna scene (``sionna:munich`` or ``sionna-munich``) with its defaults or the given overrides."""
     key = sionna_key(scene)
     d = SIONNA_DEFAULTS[key]
+    base = sionna_base(key)  # munich_cells traces munich's XML
     doc = _parse(
         {
             "scene": {
                 "name": dataset_scene_name(SIONNA_PREFIX + key),
                 "title": d["title"],
                 "description": d["description"],
-                "source": f"sionna-rt {sionna_version()}: sionna/rt/scenes/{key}/{key}.xml",
+                "source": f"sionna-rt {sionna_version()}: sionna/rt/scenes/{base}/{base}.xml",
                 "licence": SIONNA_LICENCE,
                 "attribution": SIONNA_ATTRIBUTION,
             },
-            "xml": {"path": SIONNA_PREFIX + key},
+            "xml": {"path": SIONNA_PREFIX + base},
             "grid": d["grid"],
             "tx": d["tx"],
         },
@@ -284,7 +286,7 @@ def load_sionna_spec(scene: str, variant: str, *, grid=None, tx=None, cell_m=Non
     )
     return _spec(
         doc,
-        lambda: mesh_scene(sionna_xml(key), SIONNA_PREFIX + key),
+        lambda: mesh_scene(sionna_xml(key), SIONNA_PREFIX + base),
         variant,
         grid=grid,
         tx=tx,
