@@ -2,17 +2,21 @@
 the memory window rebuilt from it is what the memory env shows along the same moves, and a tiny offline run trains
 on it and acts on the twin."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from dtradar_data.core.errors import SchemaMismatchError
 from dtradar_rl.envs.memory import MemoryGymEnv
 from dtradar_rl.evaluation.evaluate import evaluate
 from dtradar_rl.offline.config import OfflineConfig
+from dtradar_rl.offline.log_settings import check_compatible
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.memory_senses import MemorySenses
 from dtradar_rl.offline.trainer import train_offline
 from dtradar_rl.task.grid_mdp import GridMDP
-from dtradar_rl.task.observations import Normalizer, obs_dim, observation_columns
+from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, obs_dim, observation_columns
 
 #: The scene the log is named after (the twin itself is passed in: a two-transmitter synthetic twin has no name to
 #: load it by).
@@ -78,3 +82,12 @@ def test_a_tiny_offline_run_trains_on_a_two_transmitter_log_and_acts_on_the_twin
     assert result.policy.normalizer.transmitters == 2 and result.logged["source"]
     metrics, _ = evaluate(result.policy, two_tx, pairs=10)
     assert 0.0 <= metrics.success_rate <= 1.0
+
+
+def test_a_log_whose_normaliser_holds_another_count_of_transmitters_is_refused(store, two_tx):
+    check_compatible(store, OfflineConfig(**LOG), two_tx)  # the log of this very twin fits
+    norm = store.meta["normalizer"]
+    one = {k: v[: len(PAPER_COLUMNS)] for k, v in norm.items()}  # what a one-transmitter twin's log would hold
+    forged = dataclasses.replace(store, meta={**store.meta, "normalizer": one})
+    with pytest.raises(SchemaMismatchError, match="normaliser holds 10 columns, the twin's 18"):
+        check_compatible(forged, OfflineConfig(**LOG), two_tx)
