@@ -27,22 +27,28 @@ class InsufficientResourcesError(DtradarError, MemoryError):
     """The build would run out of memory or disk; nothing was traced."""
 
 
-def estimate_memory(settings: RTSettings) -> int:
-    return BASE_BYTES + BYTES_PER_BUFFERED_PATH * settings.max_num_paths_per_src + BYTES_PER_CELL * settings.batch_size
+def estimate_memory(settings: RTSettings, transmitters: int = 1) -> int:
+    """Bytes one trace holds: the candidate-path buffer is per source, so it grows with the transmitters."""
+    buffered = BYTES_PER_BUFFERED_PATH * settings.max_num_paths_per_src * transmitters
+    return BASE_BYTES + buffered + BYTES_PER_CELL * settings.batch_size
 
 
-def check_resources(name: str, free_cells: int, settings: RTSettings, work_dir: Path, *, per_path: bool) -> None:
+def check_resources(
+    name: str, free_cells: int, settings: RTSettings, work_dir: Path, *, per_path: bool, transmitters: int = 1
+) -> None:
     """Raise :class:`InsufficientResourcesError` when the build cannot fit in this machine's memory or disk."""
-    need = estimate_memory(settings)
+    need = estimate_memory(settings, transmitters)
     have = available_memory()
     if have is not None and need > have:
         raise InsufficientResourcesError(
             f"{name}: tracing needs about {need / 2**30:.1f} GiB of memory (a path buffer of "
-            f"{settings.max_num_paths_per_src:.0e} paths, batches of {settings.batch_size} cells); "
+            f"{settings.max_num_paths_per_src:.0e} paths per transmitter, {transmitters} transmitter(s), batches of "
+            f"{settings.batch_size} cells); "
             f"{have / 2**30:.1f} GiB are available",
-            hint="lower --rt.max-num-paths-per-src (fewer weak paths kept) or --rt.batch-size, or free memory",
+            hint="lower --rt.max-num-paths-per-src (fewer weak paths kept) or --rt.batch-size, use fewer "
+            "transmitters, or free memory",
         )
-    disk_need = free_cells * (DISK_BYTES_PER_FREE_CELL if per_path else DISK_BYTES_PER_FREE_CELL // 20)
+    disk_need = free_cells * transmitters * (DISK_BYTES_PER_FREE_CELL if per_path else DISK_BYTES_PER_FREE_CELL // 20)
     probe = next(p for p in (work_dir, *work_dir.parents) if p.exists())
     disk_have = shutil.disk_usage(probe).free
     if disk_need > disk_have:

@@ -53,7 +53,14 @@ def build_static(config: BuildConfig) -> list[Dataset]:
         scene_config(config, spec).check_scene(spec)
         check_transmitter_in_mesh(spec)  # an XML scene's own shapes: read for the occupancy below anyway
         cfg = scene_config(config, spec)
-        check_resources(spec.name, int((~occupancy(spec)).sum()), cfg.rt, work_root(), per_path=cfg.per_path)
+        check_resources(
+            spec.name,
+            int((~occupancy(spec)).sum()),
+            cfg.rt,
+            work_root(),
+            per_path=cfg.per_path,
+            transmitters=len(spec.transmitters),
+        )
     if config.executor == "ray" and not (config.differential and all(s.variant == "dynamic" for s in specs)):
         check_ray_address(config.ray_address)
     with executor_session(config):

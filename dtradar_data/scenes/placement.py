@@ -117,7 +117,7 @@ def _main(argv: list[str] | None = None) -> None:
             print(f"tx{k}: the scene's own, {list(spec.tx.position_m)}")
             continue
         iy, ix = divmod(s, blocked.shape[1])
-        print(f"[[tx]] name = \"tx{k}\" position_m = [{xs[ix]:.1f}, {ys[iy]:.1f}, {a.height_m:.1f}]")
+        print(f'[[tx]] name = "tx{k}" position_m = [{xs[ix]:.1f}, {ys[iy]:.1f}, {a.height_m:.1f}]')
 
 
 if __name__ == "__main__":
