@@ -1,5 +1,6 @@
-"""A scene's transmitters: one [tx] table or several [[tx]] tables per scene file, and never inside an object, a wall, a building or a mover's
-path. Each mistake is a SceneFileError naming the file and what to do, raised when the scene is named (no tracer)."""
+"""A scene's transmitters: one [tx] table or several [[tx]] tables per scene file, and never inside an object, a
+wall, a building or a mover's path. Each mistake is a SceneFileError naming the file and what to do, raised when the
+scene is named (no tracer)."""
 
 from __future__ import annotations
 
