@@ -147,11 +147,11 @@ def _draw_grid(ax, spec: SceneSpec) -> None:
 
 
 def _draw_tx(ax, spec: SceneSpec, *, label: str) -> None:
-    """The transmitter of ``spec`` as a gold star above everything else."""
-    tx = spec.tx.position_m
+    """The transmitters of ``spec`` as gold stars above everything else."""
+    txs = np.array([t.position_m for t in spec.transmitters])
     ax.plot(
-        [tx[0]],
-        [tx[1]],
+        txs[:, 0],
+        txs[:, 1],
         marker="*",
         markersize=14,
         color="gold",
@@ -187,7 +187,7 @@ def _extent(spec: SceneSpec) -> tuple[float, float, float, float]:
         corners = [np.array([[gx0, gy0], [gx1, gy1]])]
     else:
         corners = [c for _, c in footprints(spec)]
-    pts = np.vstack(corners + [np.array([spec.tx.position_m[:2]])])
+    pts = np.vstack(corners + [np.array([t.position_m[:2] for t in spec.transmitters])])
     pad = 0.02 * float(max(np.ptp(pts[:, 0]), np.ptp(pts[:, 1])))
     return pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad
 

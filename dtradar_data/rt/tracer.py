@@ -343,7 +343,8 @@ class RayTracer:
         settings: RTSettings | None = None,
         precoding_vec=None,
     ) -> np.ndarray:
-        """Path gain (linear) on a horizontal plane with RadioMapSolver: ``float64[ny, nx]`` (row 0 = lowest y).
+        """Path gain (linear) on a horizontal plane with RadioMapSolver: ``float64[ny, nx]`` (row 0 = lowest y); with
+        several transmitters, the strongest transmitter's at each point.
         ``settings``: the interactions, depth and seed (default this tracer's); ``precoding_vec``: Sionna's
         ``(real, imag)`` precoding of the TX ports (default its own: every port 1/sqrt(N))."""
         rt, mi = self.rt, self.mi
@@ -364,7 +365,8 @@ class RayTracer:
             diffraction=s.diffraction,
             seed=s.seed,
         )
-        return np.asarray(rm.path_gain, dtype=np.float64)[0]
+        gain = np.asarray(rm.path_gain, dtype=np.float64)  # [transmitters, ny, nx]
+        return gain[0] if len(gain) == 1 else gain.max(axis=0)  # several: the strongest one's (the best server)
 
     def close(self) -> None:
         if self._tmp is not None:

@@ -9,8 +9,9 @@ size, and it is what planning tools do first.
 
 Line of sight on the plan is a lower bound on what the ray tracer finds: reflections and diffraction reach around
 corners. It ignores heights (a transmitter above the roofs sees more); sites are for transmitters below the
-roofline, on lamp posts or façades. Used to place the transmitters of ``sionna:munich_cells``
-(:mod:`dtradar_data.scenes.sionna_scenes`); ``python -m dtradar_data.scenes.placement sionna:munich`` prints them.
+roofline, on lamp posts or façades. Used to place the transmitters of ``sionna:munich_cells`` and
+``dallas-cells-q3``; ``python -m dtradar_data.scenes.placement sionna:munich`` prints sites, and ``--heard-in`` a
+built twin places the next ones where its trace found no path (a second round, measured rather than modelled).
 """
 
 from __future__ import annotations
@@ -48,9 +49,11 @@ def place_sites(
     max_sites: int = 16,
     clearance_cells: int = 1,
     start: tuple[int, ...] = (),
+    covered: np.ndarray | None = None,
 ) -> tuple[list[int], float]:
     """Greedy sites (flat cell indices, in the order picked) and the share of free cells they see; ``start`` are
-    sites already there (an existing transmitter), kept first.
+    sites already there (an existing transmitter), kept first; ``covered`` (``bool[H, W]``) the cells reached some
+    other way (a traced twin's cells with a path: the next sites go where the ray tracer found none).
 
     Candidates are the free cells whose every cell within ``clearance_cells`` (a square) is free too, so that a
     transmitter stands in the open, not against a wall."""
@@ -66,7 +69,7 @@ def place_sites(
     if len(candidates) == 0:
         raise ValueError(f"no free cell has {clearance_cells} free cell(s) around it: lower clearance_cells")
     seen = visibility(blocked, candidates, range_cells=range_cells) & free[None, :]
-    covered = np.zeros(h * w, bool)
+    covered = np.zeros(h * w, bool) if covered is None else np.asarray(covered, bool).ravel().copy()
     sites: list[int] = [int(c) for c in start]
     if sites:
         covered |= (visibility(blocked, np.array(sites), range_cells=range_cells) & free[None, :]).any(axis=0)
@@ -95,6 +98,7 @@ def _main(argv: list[str] | None = None) -> None:
     p.add_argument("--max-sites", type=int, default=16)
     p.add_argument("--clearance-cells", type=int, default=1)
     p.add_argument("--keep", action="store_true", help="keep the scene's own transmitter as the first site")
+    p.add_argument("--heard-in", help="a built dataset of the scene: place where its trace found no path")
     a = p.parse_args(argv)
     spec = load_scene_spec(a.scene, "blueprint")
     blocked = occupancy(spec)
@@ -103,6 +107,11 @@ def _main(argv: list[str] | None = None) -> None:
     if a.keep:
         ix, iy = spec.grid.index_of(*spec.tx.position_m[:2])
         start = (iy * blocked.shape[1] + ix,)
+    covered = None
+    if a.heard_in:
+        from dtradar_data import load
+
+        covered = load(a.heard_in).heard() & ~blocked
     sites, share = place_sites(
         blocked,
         range_cells=a.range_m / spec.grid.cell_m,
@@ -110,6 +119,7 @@ def _main(argv: list[str] | None = None) -> None:
         max_sites=a.max_sites,
         clearance_cells=a.clearance_cells,
         start=start,
+        covered=covered,
     )
     print(f"{len(sites)} sites see {share:.3f} of {int((~blocked).sum())} free cells in line of sight")
     for k, s in enumerate(sites):

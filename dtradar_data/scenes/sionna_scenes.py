@@ -39,23 +39,34 @@ SIONNA_DEFAULTS: dict[str, dict[str, Any]] = {
         "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
         "tx": {"position_m": [40.0, 90.0, 20.0]},  # in the square north of the Neues Rathaus
     },
-    "munich_cells": {  # Munich's grid with five more transmitters: see dtradar_data.scenes.placement
+    "munich_cells": {  # Munich's grid with nine more transmitters: see dtradar_data.scenes.placement
         "xml": "munich",
-        "title": "Sionna Munich (Frauenkirche), six transmitters",
+        "title": "Sionna Munich (Frauenkirche), ten transmitters",
         "description": "Sionna RT's bundled twin of central Munich around the Frauenkirche and Marienplatz, "
-        "covered as a deployment would cover it: the Munich twin's transmitter and five more, 20 m up, each "
-        "placed where it sees the most street cells no other sees (greedy line-of-sight coverage on the floor plan, "
-        "200 m range; python -m dtradar_data.scenes.placement sionna:munich --keep --max-sites 6 --range-m 200 "
-        "--clearance-cells 0 --height-m 20).",
+        "covered as a deployment would cover it: the Munich twin's transmitter and nine more, 20 m above the "
+        "streets, placed in two rounds of greedy coverage (dtradar_data.scenes.placement): five where each sees "
+        "the most street cells in line of sight that no other sees (200 m range), then four where the ray-traced "
+        "twin of the first six left cells without a path.",
         "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
         "tx": [
             {"name": "marienplatz-north", "position_m": [40.0, 90.0, 20.0]},  # the Munich twin's own
+            # round 1: python -m dtradar_data.scenes.placement sionna:munich --keep --max-sites 6 --range-m 200
+            #   --clearance-cells 0 --height-m 20
             {"name": "south-east", "position_m": [102.5, -157.5, 20.0]},
             {"name": "south-west", "position_m": [-67.5, -87.5, 20.0]},
             {"name": "north-east", "position_m": [127.5, 177.5, 20.0]},
             {"name": "south", "position_m": [-37.5, -172.5, 20.0]},
             {"name": "west", "position_m": [-112.5, 42.5, 20.0]},
+            # round 2, over the cells the first six's trace left silent (2 859 of 3 069 heard):
+            #   python -m dtradar_data.scenes.placement sionna:munich --heard-in <that twin> --max-sites 4 ...
+            {"name": "north-west-corner", "position_m": [-192.5, 197.5, 20.0]},
+            {"name": "east", "position_m": [187.5, 2.5, 20.0]},
+            {"name": "north-west", "position_m": [-157.5, 137.5, 20.0]},
+            {"name": "east-south", "position_m": [157.5, -12.5, 20.0]},
         ],
+        # ten path buffers of 10^7 would need ~20 GB; a buffer that fills is re-traced in halves (batch-
+        # independent tracing), so a smaller one costs time, not paths
+        "rt": {"max_num_paths_per_src": 2_000_000},
     },
     "etoile": {
         "title": "Sionna Paris Etoile",

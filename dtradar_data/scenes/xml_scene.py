@@ -157,6 +157,7 @@ def _spec(
     tx: tuple | None,
     cell_m: float | None,
     origin: str,
+    rt: dict | None = None,
 ) -> SceneSpec:
     g = doc.grid
     if grid is not None:
@@ -193,7 +194,7 @@ def _spec(
         objects=(),
         base=base,
         provenance={"xml": base.xml, "xml_path": base.path},
-        rt_defaults=dict(OUTDOOR_RT_DEFAULTS) if base.xml.startswith("sionna:") else {},
+        rt_defaults={**OUTDOOR_RT_DEFAULTS, **(rt or {})} if base.xml.startswith("sionna:") else {},
     )
 
 
@@ -292,6 +293,7 @@ def load_sionna_spec(scene: str, variant: str, *, grid=None, tx=None, cell_m=Non
         tx=tx,
         cell_m=cell_m,
         origin=f"sionna:{key}",
+        rt=d.get("rt"),
     )
 
 
