@@ -72,7 +72,8 @@ class Policy:
 
     def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
         """Greedy actions. ``shield=True`` (``neighbors`` preset only) never picks a move into a neighbour that
-        the twin shows without radio features (blocked or off the grid), unless every move is such.
+        the twin shows without radio features from any transmitter (blocked or off the grid), unless every move is
+        such.
 
         Loop escape (agents trained with ``memory_visits`` and ``escape_after`` = k > 0): a robot standing on a
         cell it has already stood on k times this episode (its memory's ``visits_here``) takes a random move

@@ -5,11 +5,12 @@ oscillates (the failure behind most of the blueprint -> dynamic gap). Here each 
 episode, two maps of the grid:
 
 * ``sensed``: cells it has sensed as occupied: a neighbour whose radio features are missing (has-radio flag 0 in the
-  ``neighbors`` observation; an augmented obstacle reads the same, see :mod:`dtradar_rl.envs.batched`) or off the grid;
+  ``neighbors`` observation: no path from any transmitter; an augmented obstacle reads the same, see
+  :mod:`dtradar_rl.envs.batched`) or off the grid;
 * ``visited``: cells it has stood on;
 * ``bumped`` (with ``memory_bumps``): cells it tried to move into and could not: the feedback of a bumper or of
-  wheel odometry. A free street cell that no ray reached reads as "no radio" like an obstacle, so only a bump tells
-  the two apart;
+  wheel odometry. A free street cell that no ray of any transmitter reached reads as "no radio" like an obstacle,
+  so only a bump tells the two apart (a twin with several transmitters leaves fewer such cells);
 * ``visits`` (with ``memory_visits``): how many times it has stood on each cell; the observation gets one more
   column, ``visits_here``: the earlier stands on the cell it stands on now (capped at :data:`VISITS_CAP`). A
   policy that finds itself back on a cell it already left twice is in a loop: the default agent then takes a
