@@ -115,6 +115,59 @@ class CheckCmd:
         return 0
 
 
+@dataclass(frozen=True)
+class PlaceCmd:
+    """Print transmitter sites for a scene's blueprint as [[tx]] tables: greedy line-of-sight coverage of its free
+    cells (dtradar_data.scenes.placement), each site where it sees the most cells no other site sees."""
+
+    scene: str
+    """A built-in scene, sionna:<name> or a scene file."""
+    range_m: float = 150.0
+    """How far a site sees, metres."""
+    height_m: float = 10.0
+    """The transmitters' height above the ground, metres (printed; line of sight on the plan ignores it)."""
+    coverage: float = 0.99
+    """Stop once this share of the free cells is seen."""
+    max_sites: int = 16
+    """Stop after this many sites (the kept one included)."""
+    clearance_cells: int = 1
+    """A site's cells within this many cells (a square) must all be free: 0 allows a site against a wall."""
+    keep: bool = False
+    """Keep the scene's own transmitter as the first site."""
+    heard_in: str | None = None
+    """A built dataset of the scene: its cells with a path count as covered, so the sites go where its trace found
+    none (a second round)."""
+
+    def run(self) -> int:
+        from dtradar_data.geometry.occupancy import occupancy
+        from dtradar_data.publish.loading import load
+        from dtradar_data.scenes import load_scene_spec
+        from dtradar_data.scenes.placement import place_sites
+
+        spec = load_scene_spec(self.scene, "blueprint")
+        blocked = occupancy(spec)
+        xs, ys = spec.grid.centres()
+        start = ()
+        if self.keep:
+            ix, iy = spec.grid.index_of(*spec.tx.position_m[:2])
+            start = (iy * blocked.shape[1] + ix,)
+        covered = load(self.heard_in).heard() & ~blocked if self.heard_in else None
+        sites, share = place_sites(
+            blocked,
+            range_cells=self.range_m / spec.grid.cell_m,
+            coverage=self.coverage,
+            max_sites=self.max_sites,
+            clearance_cells=self.clearance_cells,
+            start=start,
+            covered=covered,
+        )
+        print(f"# {len(sites)} sites: {share:.3f} of {int((~blocked).sum())} free cells seen or heard")
+        for k, site in enumerate(sites[len(start) :], start=len(start)):
+            iy, ix = divmod(site, blocked.shape[1])
+            print(f'[[tx]]\nname = "tx{k}"\nposition_m = [{xs[ix]:.1f}, {ys[iy]:.1f}, {self.height_m:.1f}]')
+        return 0
+
+
 def run_build(cfg: BuildConfig) -> int:
     for ds in builder.build(cfg):
         tag = ds.meta.get("tag")
@@ -138,12 +191,14 @@ def _parse_and_run(argv: list[str]) -> int:
         "publish": PublishCmd,
         "pull": PullCmd,
         "check": CheckCmd,
+        "place": PlaceCmd,
     }
     cfg = parse_command(
         commands,
         argv,
         prog="python -m dtradar_data",
-        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull. " + DEBUG_HELP,
+        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull, place. "
+        + DEBUG_HELP,
     )
     return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()
 

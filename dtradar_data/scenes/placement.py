@@ -10,8 +10,9 @@ size, and it is what planning tools do first.
 Line of sight on the plan is a lower bound on what the ray tracer finds: reflections and diffraction reach around
 corners. It ignores heights (a transmitter above the roofs sees more); sites are for transmitters below the
 roofline, on lamp posts or façades. Used to place the transmitters of ``sionna:munich_cells`` and
-``dallas-cells-q3``; ``python -m dtradar_data.scenes.placement sionna:munich`` prints sites, and ``--heard-in`` a
-built twin places the next ones where its trace found no path (a second round, measured rather than modelled).
+``dallas-cells-q3``; ``python -m dtradar_data place sionna:munich`` prints sites (``dtradar_data.cli.PlaceCmd``), and
+``--heard-in`` a built twin places the next ones where its trace found no path (a second round, measured rather than
+modelled).
 """
 
 from __future__ import annotations
@@ -82,53 +83,3 @@ def place_sites(
         sites.append(int(candidates[best]))
         covered |= seen[best]
     return sites, float(covered.sum() / total)
-
-
-def _main(argv: list[str] | None = None) -> None:
-    import argparse
-
-    from dtradar_data.geometry.occupancy import occupancy
-    from dtradar_data.scenes import load_scene_spec
-
-    p = argparse.ArgumentParser(description="Greedy line-of-sight transmitter sites of a twin's blueprint.")
-    p.add_argument("scene")
-    p.add_argument("--range-m", type=float, default=150.0, help="how far a site sees")
-    p.add_argument("--height-m", type=float, default=10.0, help="the transmitters' height above the ground")
-    p.add_argument("--coverage", type=float, default=0.99)
-    p.add_argument("--max-sites", type=int, default=16)
-    p.add_argument("--clearance-cells", type=int, default=1)
-    p.add_argument("--keep", action="store_true", help="keep the scene's own transmitter as the first site")
-    p.add_argument("--heard-in", help="a built dataset of the scene: place where its trace found no path")
-    a = p.parse_args(argv)
-    spec = load_scene_spec(a.scene, "blueprint")
-    blocked = occupancy(spec)
-    xs, ys = spec.grid.centres()
-    start = ()
-    if a.keep:
-        ix, iy = spec.grid.index_of(*spec.tx.position_m[:2])
-        start = (iy * blocked.shape[1] + ix,)
-    covered = None
-    if a.heard_in:
-        from dtradar_data import load
-
-        covered = load(a.heard_in).heard() & ~blocked
-    sites, share = place_sites(
-        blocked,
-        range_cells=a.range_m / spec.grid.cell_m,
-        coverage=a.coverage,
-        max_sites=a.max_sites,
-        clearance_cells=a.clearance_cells,
-        start=start,
-        covered=covered,
-    )
-    print(f"{len(sites)} sites see {share:.3f} of {int((~blocked).sum())} free cells in line of sight")
-    for k, s in enumerate(sites):
-        if k < len(start):
-            print(f"tx{k}: the scene's own, {list(spec.tx.position_m)}")
-            continue
-        iy, ix = divmod(s, blocked.shape[1])
-        print(f'[[tx]] name = "tx{k}" position_m = [{xs[ix]:.1f}, {ys[iy]:.1f}, {a.height_m:.1f}]')
-
-
-if __name__ == "__main__":
-    _main()

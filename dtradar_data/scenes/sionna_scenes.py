@@ -50,7 +50,7 @@ SIONNA_DEFAULTS: dict[str, dict[str, Any]] = {
         "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
         "tx": [
             {"name": "marienplatz-north", "position_m": [40.0, 90.0, 20.0]},  # the Munich twin's own
-            # round 1: python -m dtradar_data.scenes.placement sionna:munich --keep --max-sites 6 --range-m 200
+            # round 1: python -m dtradar_data place sionna:munich --keep --max-sites 6 --range-m 200
             #   --clearance-cells 0 --height-m 20
             {"name": "south-east", "position_m": [102.5, -157.5, 20.0]},
             {"name": "south-west", "position_m": [-67.5, -87.5, 20.0]},
@@ -58,7 +58,7 @@ SIONNA_DEFAULTS: dict[str, dict[str, Any]] = {
             {"name": "south", "position_m": [-37.5, -172.5, 20.0]},
             {"name": "west", "position_m": [-112.5, 42.5, 20.0]},
             # round 2, over the cells the first six's trace left silent (2 859 of 3 069 heard):
-            #   python -m dtradar_data.scenes.placement sionna:munich --heard-in <that twin> --max-sites 4 ...
+            #   python -m dtradar_data place sionna:munich --heard-in <that twin> --max-sites 4 ...
             {"name": "north-west-corner", "position_m": [-192.5, 197.5, 20.0]},
             {"name": "east", "position_m": [187.5, 2.5, 20.0]},
             {"name": "north-west", "position_m": [-157.5, 137.5, 20.0]},
