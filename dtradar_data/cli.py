@@ -120,7 +120,7 @@ class PlaceCmd:
     """Print transmitter sites for a scene's blueprint as [[tx]] tables: greedy line-of-sight coverage of its free
     cells (dtradar_data.scenes.placement), each site where it sees the most cells no other site sees."""
 
-    scene: str
+    scene: tyro.conf.Positional[str]
     """A built-in scene, sionna:<name> or a scene file."""
     range_m: float = 150.0
     """How far a site sees, metres."""
