@@ -9,7 +9,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -148,6 +148,10 @@ bench-rt:
 # Per-cell PathSolver gain against Sionna's RadioMapSolver, each ablation side by side -> results/bench_radiomap/
 bench-radiomap:
 	$(PY) bench/bench_radiomap.py --scene $(SCENE) $(ARGS)
+
+# Tracing time and memory per transmitter: a twin with its first 1..N transmitters, side by side -> results/bench_transmitters.*
+bench-transmitters:
+	$(PY) bench/bench_transmitters.py $(ARGS)
 
 # Our DQN against Stable-Baselines3 DQN on the same twins, side by side -> results/bench_rl.*
 bench-rl:
