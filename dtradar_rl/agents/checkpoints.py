@@ -93,7 +93,7 @@ def save_checkpoint(
             "format": CHECKPOINT_FORMAT,
             "kind": "model",
             "config": json.dumps(cfg.to_dict()),
-            "arch": {"in_dim": len(obs_names), "hidden": list(cfg.hidden), "n_actions": 4},
+            "arch": {"in_dim": len(obs_names), "hidden": list(cfg.hidden), "n_actions": q.net[-1].out_features},
             "obs": {"preset": cfg.obs, "names": list(obs_names)},
             "normalizer": normalizer.to_dict(),
             "dataset": twin_record(ds),

@@ -318,7 +318,8 @@ class MoverGuard:
     """:func:`predicted_risk` for a learned policy on a moving twin: it locates each robot by the position in its
     observation (the cell whose ``x_m, y_m`` are nearest), tells movers from walls by the twin's static map, and
     makes a robot with a mover next to it take the least risky move, the policy's Q-values ordering moves of equal
-    risk. A robot a mover stands on reads its own cell blank and is left alone (it cannot tell where it is)."""
+    risk. A robot a mover stands on reads its own cell blank and is left alone (it cannot tell where it is). A policy
+    with the wait action (five Q-values) may wait: rated as a wall bump (the robot stays) off the plan."""
 
     def __init__(self, ds: Dataset, normalizer: Normalizer, device: str | torch.device = "cpu"):
         check_transmitters(normalizer, ds)
@@ -340,9 +341,11 @@ class MoverGuard:
             return action
         flags = flat[near][:, self.flags] > 0.5  # what the plain shield allows is the policy's "plan"
         risk = predicted_risk(movers[near], walls[near], off_plan=~flags)
+        if q.shape[-1] > 4:  # the wait: a robot that stays, as a wall bump does, and off the plan as one is
+            risk = torch.cat([risk, torch.full_like(risk[:, :1], RISK_WALL + RISK_OFF_PLAN)], 1)
         least = risk <= risk.min(1, keepdim=True).values + 1e-6
         action = action.reshape(-1).clone()
-        action[near] = torch.where(least, q.reshape(-1, 4)[near], -torch.inf).argmax(1)
+        action[near] = torch.where(least, q.reshape(-1, q.shape[-1])[near], -torch.inf).argmax(1)
         return action.reshape(shape)
 
 

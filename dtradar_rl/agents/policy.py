@@ -25,7 +25,7 @@ ESCAPE_SEED = 0
 
 
 class QNetwork(nn.Module):
-    """``obs -> [Linear, ReLU] x len(hidden) -> Linear -> 4 action values``."""
+    """``obs -> [Linear, ReLU] x len(hidden) -> Linear -> n_actions action values`` (4 moves; 5 with the wait)."""
 
     def __init__(self, in_dim: int, hidden: tuple[int, ...], n_actions: int = 4):
         super().__init__()
@@ -88,6 +88,8 @@ class Policy:
             if shield:
                 flags = obs[..., self.shield_columns()] > 0.5
                 allowed = flags | ~flags.any(-1, keepdim=True)
+                if self.wait_action:  # a wait enters no cell: the shield never refuses it
+                    allowed = torch.cat([allowed, torch.ones_like(allowed[..., :1])], -1)
             stuck = self._stuck(obs)
             if stuck is not None and bool(stuck.all()):  # every robot escapes: the values are not needed
                 return self._escape_moves(obs, allowed)
@@ -114,13 +116,26 @@ class Policy:
         return visits_here >= k
 
     def _escape_moves(self, obs: torch.Tensor, allowed: torch.Tensor | None) -> torch.Tensor:
-        """One seeded random move per robot: uniform, or with the shield uniform among the ``allowed`` ones."""
+        """One seeded random move per robot: uniform, or with the shield uniform among the ``allowed`` ones (a move,
+        never the wait: staying does not leave a loop)."""
         if self.escape_gen is None:
             self.escape_gen = _escape_generator(obs.device)
+        if allowed is not None:
+            allowed = allowed[..., :4]
         if allowed is None:
             return torch.randint(4, obs.shape[:-1], generator=self.escape_gen, device=obs.device)
         score = torch.rand(allowed.shape, generator=self.escape_gen, device=obs.device)
         return torch.where(allowed, score, -1.0).argmax(-1)
+
+    @property
+    def wait_action(self) -> bool:
+        """Whether the policy has the fifth action, wait (configs from before the setting: no)."""
+        return bool(getattr(self.config, "wait_action", False))
+
+    @property
+    def clock(self) -> str:
+        """The schedule's phase the policy observes (:mod:`dtradar_rl.task.clock`; older configs: none)."""
+        return str(getattr(self.config, "clock", "none"))
 
     @property
     def escape_after(self) -> int:
@@ -156,6 +171,8 @@ class Policy:
             memory_visits=getattr(self.config, "memory_visits", False),
             obs=self.obs_preset,
             sense_radius=self.sense_radius,
+            clock=self.clock,
+            wait_action=self.wait_action,
             normalizer=self.normalizer,
             **kwargs,
         )
@@ -166,7 +183,7 @@ class Policy:
         return int(getattr(self.config, "sense_radius", 1))
 
     def observations(self, ds: Dataset):
-        return build_observations(ds, self.obs_preset, self.normalizer, self.sense_radius)
+        return build_observations(ds, self.obs_preset, self.normalizer, self.sense_radius, self.clock)
 
 
 def _relink(module: QNetwork, _incompatible_keys) -> None:

@@ -12,8 +12,10 @@ every robot (terminal ones included, which is what a replay buffer needs) and th
 
 
 Its parts live beside it, one job each: random pairs and the checks of explicit cells and snapshots
-(:mod:`dtradar_rl.envs.batched_resets`), obstacle augmentation (:mod:`dtradar_rl.envs.batched_augmentation`) and the
-fast path of the common case (:mod:`dtradar_rl.envs.batched_fast`), mixed into :class:`BatchedNavEnv`.
+(:mod:`dtradar_rl.envs.batched_resets`), obstacle augmentation (:mod:`dtradar_rl.envs.batched_augmentation`), the
+fast path of the common case (:mod:`dtradar_rl.envs.batched_fast`) and the rules of a move, the optional wait action
+(``wait_action=True``: action 4 stays on the cell) and the movers' (:mod:`dtradar_rl.envs.batched_moves`), mixed into
+:class:`BatchedNavEnv`.
 
 Moving twins
 ------------
@@ -37,6 +39,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError
 from dtradar_rl.envs.batched_augmentation import AUG_POTENTIALS, MAX_DISTANCE_TABLE, AugmentationMixin
 from dtradar_rl.envs.batched_fast import FAST_TABLE_MAX, FastPathMixin
+from dtradar_rl.envs.batched_moves import MovesMixin
 from dtradar_rl.envs.batched_resets import ResetChecksMixin
 from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP, NoConnectedPairError, check_max_steps
 from dtradar_rl.task.noise import ERRORS, NOISE_SEED_OFFSET, NoiseModel, RadioNoise, noise_model
@@ -46,7 +49,7 @@ from dtradar_rl.task.rewards import check_reward, potential_kind, reward_fn
 __all__ = ["AUG_POTENTIALS", "FAST_TABLE_MAX", "MAX_DISTANCE_TABLE", "BatchedNavEnv"]
 
 
-class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
+class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin, MovesMixin):
     """``num_envs`` independent navigation episodes on one grid, stepped together as torch tensors."""
 
     def __init__(
@@ -65,12 +68,14 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
         aug_potential: str = "replan",
         noise: str | NoiseModel = "none",
         fast_path: bool = True,
+        wait_action: bool = False,
     ):
         self._check_arguments(mdp, num_envs, aug_obstacles, aug_obstacle_size, aug_potential)
         self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
         self._init_snapshots(mdp, obs_table)
         self._init_settings(reward, max_steps, device, seed)
         self._init_tables(mdp, obs_table)
+        self._init_moves(mdp, wait_action)
         cells = self._init_components(mdp)
         self._init_pool(mdp, cells, target_pool, seed)
         self._init_episodes(mdp)
@@ -211,13 +216,15 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
         obs: str = "goal",
         normalizer: Normalizer | None = None,
         sense_radius: int = 1,
+        clock: str = "none",
         **kwargs,
     ) -> BatchedNavEnv:
         """Build from a dataset; ``normalizer`` defaults to statistics of ``ds`` itself; ``sense_radius`` widens the
-        ``neighbors`` observation (:func:`~dtradar_rl.task.observations.build_observations`)."""
+        ``neighbors`` observation and ``clock`` appends the schedule's phase
+        (:func:`~dtradar_rl.task.observations.build_observations`)."""
         check_preset(obs)
         normalizer = normalizer or Normalizer.fit(ds)
-        table = build_observations(ds, obs, normalizer, sense_radius)
+        table = build_observations(ds, obs, normalizer, sense_radius, clock)
         return cls(GridMDP.from_dataset(ds), table, num_envs, **kwargs)
 
     @property
@@ -387,31 +394,24 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin):
     def step(self, actions: torch.Tensor):
         """Move every robot; returns ``(next_obs, reward, terminated, truncated, info)`` (no auto-reset).
 
-        ``info``: ``collision`` (bool[N]: the move failed), ``is_success`` (= terminated), ``steps`` (steps taken
-        this episode); on a moving twin also ``mover_collision`` (the failed move aimed at a mover), ``mover_hit`` (a
-        mover walked onto the robot) and ``t`` (each robot's snapshot now).
+        ``actions``: 0..3 (the moves), and 4 (wait) with ``wait_action``. ``info``: ``collision`` (bool[N]: the move
+        failed), ``is_success`` (= terminated), ``steps`` (steps taken this episode); on a moving twin also
+        ``mover_collision`` (the failed move aimed at a mover), ``mover_hit`` (a mover walked onto the robot) and
+        ``t`` (each robot's snapshot now).
         """
         a = actions.to(self.device, torch.long)
         if self._fast_step and a.shape == self.cell.shape and (a.device.type != "cpu" or self._valid_actions(a)):
             return self._step_fast(a)
         cell = self.cell
-        nxt = self.next_cell[cell, a]
-        collision = self.collides[cell, a]
+        nxt, collision = self._moves(cell, a)
         if self.aug_obstacles:  # a move into an extra obstacle collides: the robot stays
             hit = self.extra.gather(1, nxt[:, None]).squeeze(1)
             nxt = torch.where(hit, cell, nxt)
             collision = collision | hit
         penalised = collision
         if self.moving:  # the next snapshot's blocked mask: a mover there refuses the move; one may walk onto us
-            t1 = self.t_next[self.t]
-            now, base = self.t * self.mdp.num_cells, t1 * self.mdp.num_cells
-            swap = self.covered[now + nxt] & self.covered[base + cell]  # a mover coming the other way
-            mover_collision = (self.covered[base + nxt] | swap) & ~collision
-            nxt = torch.where(mover_collision, cell, nxt)
-            mover_hit = self.covered[base + nxt]
-            collision = collision | mover_collision
+            nxt, collision, mover_collision, mover_hit = self._mover_rules(cell, nxt, collision, a)
             penalised = collision | mover_hit
-            self.t = t1
         reached = nxt == self.target
         reward = self._reward(cell, nxt, self.target, self.tpool, penalised, reached)
         self.cell = nxt

@@ -16,9 +16,9 @@ reads precomputed tables instead of evaluating the rules op by op:
   and the start read from a ``[pool, largest component]`` table of ``members[first + j + (j >= rank)]``.
 
 Everything else (moving twins, augmentation, explicit cells, a table over :data:`FAST_TABLE_MAX` entries, actions
-outside 0..3) takes the general path, which ``fast_path=False`` forces; a test checks that both give the same
-trajectories bit for bit (observations, rewards, terminations, info, state, random streams). Measured figures are in
-:meth:`BatchedNavEnv._step_fast`.
+outside 0..3, the wait action) takes the general path, which ``fast_path=False`` forces; a test checks that both
+give the same trajectories bit for bit (observations, rewards, terminations, info, state, random streams). Measured
+figures are in :meth:`BatchedNavEnv._step_fast`.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ class FastPathMixin:
             pairs = dt == 2 and dc % 2 == 0 and dev.type == "cpu"  # (a CPU kernel's cost; elsewhere the slice)
             self._obs_target = self.target_part.view(torch.int64).reshape(-1) if pairs else None
         #: ``step`` reads the next cell, the collision and the reward with one flat index ``(target, cell, action)``
-        self._fast_step = plain and p * n * 4 <= FAST_TABLE_MAX
+        self._fast_step = plain and not self.wait_action and p * n * 4 <= FAST_TABLE_MAX  # its tables: 4 moves
         if self._fast_step:
             #: ``long[cells, 4]``: ``4 * cell + action``, indexed like ``next_cell`` (off a CPU: no host sync)
             self._keys = torch.arange(n * 4, device=dev).view(n, 4)

@@ -177,10 +177,11 @@ class MemoryNavEnv(BatchedNavEnv):
         obs: str = "neighbors",
         normalizer: Normalizer | None = None,
         sense_radius: int = 1,
+        clock: str = "none",
         **kwargs,
     ) -> MemoryNavEnv:
         normalizer = normalizer or Normalizer.fit(ds)
-        table = build_observations(ds, obs, normalizer, sense_radius)
+        table = build_observations(ds, obs, normalizer, sense_radius, clock)
         return cls(GridMDP.from_dataset(ds), table, num_envs, **kwargs)
 
     @property

@@ -95,14 +95,16 @@ class DtradarNavEnv(gym.Env):
 
     ## Actions
     ``Discrete(4)``: ``0: X-`` (one cell towards -x), ``1: X+``, ``2: Y-``, ``3: Y+``. A move into a blocked cell
-    or off the grid is a collision: the robot stays where it was.
+    or off the grid is a collision: the robot stays where it was. With ``wait_action=True``: ``Discrete(5)``, and
+    ``4: wait`` stays on the cell (never a collision; on a moving twin still a mover hit when a mover walks onto the
+    robot; rewarded as a step that ends where it began, without the collision penalty).
 
     ## Moving twins
     On a moving twin (snapshots in time, :mod:`dtradar_rl.task.grid_mdp`) step ``n`` of an episode is in snapshot
     ``(t0 + n) mod T``: a move into a cell a mover covers at the next snapshot is a collision too (the robot stays,
     ``info["mover_collision"]``), a mover walking onto the robot is a *mover hit* (the robot stays,
     ``info["mover_hit"]``, charged the collision penalty), and the robot observes its cell (and neighbours) as they
-    are in its snapshot. There is no wait action: the robot waits only by bumping.
+    are in its snapshot. Without the wait action the robot waits only by bumping.
 
     ## Observations
     ``Box(low, high, (D,), float32)`` (bounds: the range of the lookup tables), z-scored features of the
@@ -111,7 +113,8 @@ class DtradarNavEnv(gym.Env):
     ``goal`` (D = 12: paper + target x, y), ``neighbors`` (D = 48: paper + radio features and a has-radio flag of
     the four neighbouring cells + target x, y). ``neighbors`` with ``sense_radius`` R > 1 adds, before the target,
     the has-radio flags of the cells at Manhattan distance 2..R in this snapshot and in the one before
-    (``2 · (2R(R+1) - 4)`` columns).
+    (``2 · (2R(R+1) - 4)`` columns). ``clock="sincos"`` appends the phase of a moving twin's schedule, ``cos`` and
+    ``sin`` of ``2π t / T``, after them (:mod:`dtradar_rl.task.clock`).
 
     ## Rewards
     Chosen by name (:mod:`dtradar_rl.task.rewards`). ``paper``: ``-(dx² + dy²)`` (cell units, distance to the target
@@ -140,7 +143,8 @@ class DtradarNavEnv(gym.Env):
     ``"rgb_array"``; ``noise``: measurement noise level (``"none"``, ``"realistic"``, ``"2x"``; see
     :mod:`dtradar_rl.task.noise`), drawn anew at every reset and step from a generator seeded by ``reset(seed=...)``;
     ``sense_radius``: cells sensed around the robot (1: the four neighbours; more: ``neighbors`` only, see
-    :mod:`dtradar_rl.task.observations`).
+    :mod:`dtradar_rl.task.observations`); ``clock``: ``"none"`` or ``"sincos"`` (the schedule's phase);
+    ``wait_action``: add action 4, wait.
 
     ## Info
     ``cell`` and ``target`` (ix, iy), ``collision``, ``is_success``, ``distance`` (breadth-first steps from the
@@ -149,7 +153,7 @@ class DtradarNavEnv(gym.Env):
 
     ## Version History
     * v0: initial version; the ``noise`` argument (default ``"none"``: unchanged) and ``sense_radius`` (default 1:
-      unchanged) added later.
+      unchanged), ``clock`` (default ``"none"``) and ``wait_action`` (default False: unchanged) added later.
     """
 
     metadata = {"render_modes": ["ansi", "rgb_array"], "render_fps": 4}
@@ -164,6 +168,8 @@ class DtradarNavEnv(gym.Env):
         render_mode: str | None = None,
         noise: str | NoiseModel = "none",
         sense_radius: int = 1,
+        clock: str = "none",
+        wait_action: bool = False,
     ):
         ds = load_dataset(dataset) if isinstance(dataset, str) else dataset
         self.dataset_name = ds.name
@@ -172,14 +178,15 @@ class DtradarNavEnv(gym.Env):
             normalizer = Normalizer.from_dict(normalizer)
         self.normalizer = normalizer or Normalizer.fit(ds)
         self.mdp = GridMDP.from_dataset(ds)
-        self.table = build_observations(ds, obs, self.normalizer, sense_radius)
+        self.table = build_observations(ds, obs, self.normalizer, sense_radius, clock)
         self.moving = isinstance(self.mdp, MovingGridMDP)
         self.snapshots = self.mdp.snapshots if self.moving else 1
         self.max_steps = check_max_steps(max_steps) or self.mdp.max_steps
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise InvalidCoordinatesError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
-        self.action_space = spaces.Discrete(len(ACTIONS))
+        self.wait_action = bool(wait_action)
+        self.action_space = spaces.Discrete(len(ACTIONS) + int(self.wait_action))
         # Observations come from the lookup tables, so their exact range is known: bound the space by it.
         lows = np.concatenate([self.table.cell_part.min(0), self.table.target_part.min(0)]).astype(np.float32)
         highs = np.concatenate([self.table.cell_part.max(0), self.table.target_part.max(0)]).astype(np.float32)
@@ -310,8 +317,8 @@ class DtradarNavEnv(gym.Env):
         # int() would have turned into moves; a bool is an int to Python but never a meant action.
         if isinstance(action, (bool, np.bool_)) or not self.action_space.contains(action):
             raise InvalidActionError(
-                f"action {action!r} ({type(action).__name__}) is not an integer in 0..3 "
-                f"({', '.join(f'{i} = {a}' for i, a in enumerate(ACTIONS))})",
+                f"action {action!r} ({type(action).__name__}) is not an integer in 0..{self.action_space.n - 1} "
+                f"({', '.join(f'{i} = {a}' for i, a in enumerate(ACTIONS + ('wait',) * self.wait_action))})",
                 hint="pass an int, a numpy integer or a 0-d integer array",
             )
         if self._dist is None:

@@ -9,7 +9,8 @@ time in :mod:`dtradar_rl.task.space_time`.
 Conventions
 -----------
 * A *cell index* is ``c = iy * nx + ix`` (row-major, the order of the per-cell table).
-* Free cells are states. Actions are ``0: X-``, ``1: X+``, ``2: Y-``, ``3: Y+`` (one cell per step).
+* Free cells are states. Actions are ``0: X-``, ``1: X+``, ``2: Y-``, ``3: Y+`` (one cell per step), and with the
+  wait action ``4: wait`` (:data:`WAIT`: the robot stays, no collision).
 * A move into a blocked cell or off the grid is a **collision**: the robot stays where it was.
 * A moving twin (snapshots in time) is a :class:`MovingGridMDP`: a :class:`GridMDP` over its static map plus what
   moves (below); :meth:`GridMDP.from_dataset` returns one for it (so both classes live here: the static MDP builds
@@ -68,6 +69,8 @@ from dtradar_rl.task.space_time import distance_tables, shortest_path_in_time
 ACTIONS: tuple[str, ...] = ("X-", "X+", "Y-", "Y+")
 #: ``(dx, dy)`` of each action, in cells.
 ACTION_DELTAS = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]], dtype=np.int64)
+#: The wait action (an option of the environments, ``wait_action=True``): stay on the cell, no collision.
+WAIT = len(ACTIONS)
 
 
 class NoConnectedPairError(DtradarError, ValueError):
@@ -271,7 +274,9 @@ class GridMDP:
 
     # -- stepping (numpy; the reference the batched torch env is tested against) --------------------------------
     def step(self, cell: int, action: int) -> tuple[int, bool]:
-        """``(next cell, collided)`` for one move."""
+        """``(next cell, collided)`` for one move (:data:`WAIT`: the same cell, no collision)."""
+        if action == WAIT:
+            return int(cell), False
         return int(self.next_cell[cell, action]), bool(self.collides[cell, action])
 
     def d2(self, cell, target):
@@ -355,6 +360,8 @@ class MovingGridMDP(GridMDP):
         snapshot ``t`` (the rules of the module docstring)."""
         t = int(t) % self.snapshots
         t1 = (t + 1) % self.snapshots
+        if action == WAIT:  # nothing is entered, so no collision; a mover may still walk onto the robot
+            return int(cell), t1, False, False, bool(self.covered[t1, cell])
         nxt = int(self.next_cell[cell, action])
         wall = bool(self.collides[cell, action])
         swap = bool(self.covered[t, nxt] and self.covered[t1, cell])

@@ -34,6 +34,9 @@ static twin both blocks are the static map (a static and a moving twin's observa
 acts on both). The flags are 0/1 like the neighbours' (not normalised). R = 1 adds nothing: the tables are the
 ones above, byte for byte.
 
+The clock (``clock="sincos"``, any preset: :mod:`dtradar_rl.task.clock`) appends the phase of the movers' schedule,
+``cos`` and ``sin`` of ``2π t / T``, as the cell part's last two columns, after the ring's (a static twin: ``(1, 0)``).
+
 Several transmitters (a twin with ``K > 1``, ``Dataset.transmitters``)
 -----------------------------------------------------------------------
 Transmitter 0's features keep every column above. For each further transmitter ``k = 1..K-1`` the cell part gets,
@@ -64,6 +67,7 @@ import numpy as np
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidSettingError, unknown_name
 from dtradar_data.core.schema import tx_column
+from dtradar_rl.task.clock import clock_columns, with_clock
 from dtradar_rl.task.grid_mdp import ACTION_DELTAS
 
 #: The paper's ten inputs, in order (see the module docstring for the tenth).
@@ -118,10 +122,12 @@ def own_radio_columns(preset: str, transmitters: int = 1) -> list[int]:
     return out
 
 
-def obs_dim(preset: str, transmitters: int = 1, sense_radius: int = 1) -> int:
-    """The observation's width (module docstring): :data:`OBS_DIMS` plus 9 per further transmitter plus the ring."""
+def obs_dim(preset: str, transmitters: int = 1, sense_radius: int = 1, clock: str = "none") -> int:
+    """The observation's width (module docstring): :data:`OBS_DIMS` plus 9 per further transmitter plus the ring plus
+    the clock's columns."""
     ring = 2 * len(ring_offsets(check_sense_radius(sense_radius, preset)))
-    return OBS_DIMS[check_preset(preset)] + (len(RADIO_FEATURES) + 1) * (transmitters - 1) + ring
+    extra = (len(RADIO_FEATURES) + 1) * (transmitters - 1) + ring + clock_columns(clock)
+    return OBS_DIMS[check_preset(preset)] + extra
 
 
 def check_transmitters(normalizer: Normalizer, ds: Dataset) -> int:
@@ -251,6 +257,8 @@ class ObservationTable:
     #: ``bool[T*H*W, K]``: the cell is free and transmitter ``k`` has a path to it (measurement noise perturbs only
     #: a transmitter's features that exist); None: column 0 is :attr:`has_radio` (one transmitter)
     heard_by: np.ndarray | None = None
+    #: the clock's columns at the cell part's end (:mod:`dtradar_rl.task.clock`; "none": no columns)
+    clock: str = "none"
 
     @property
     def transmitters(self) -> int:
@@ -265,7 +273,7 @@ class ObservationTable:
     def ring_columns(self) -> slice:
         """The cell-part columns of the wider ring's flags (now, then the snapshot before); empty at radius 1."""
         k = 2 * len(ring_offsets(self.sense_radius))
-        dc = self.cell_part.shape[1]
+        dc = self.cell_part.shape[1] - clock_columns(self.clock)  # the clock's columns come after the ring's
         return slice(dc - k, dc)
 
     @property
@@ -282,9 +290,12 @@ class ObservationTable:
         return np.concatenate([self.cell_part[rows], self.target_part[target]], axis=-1)
 
 
-def build_observations(ds: Dataset, preset: str, normalizer: Normalizer, sense_radius: int = 1) -> ObservationTable:
+def build_observations(
+    ds: Dataset, preset: str, normalizer: Normalizer, sense_radius: int = 1, clock: str = "none"
+) -> ObservationTable:
     """The lookup tables of ``preset`` on ``ds``, normalised with ``normalizer`` (fitted on the training twin), with
-    the flags of the cells up to ``sense_radius`` away (``neighbors``; module docstring).
+    the flags of the cells up to ``sense_radius`` away (``neighbors``; module docstring) and the ``clock``'s phase
+    columns last (:mod:`dtradar_rl.task.clock`; ``"none"``: none).
 
     On a moving twin: the tables of every snapshot stacked (each cell and its neighbours as they are in that
     snapshot); the target part is the static one (a target's position does not change when a mover covers it)."""
@@ -292,7 +303,7 @@ def build_observations(ds: Dataset, preset: str, normalizer: Normalizer, sense_r
     radius = check_sense_radius(sense_radius, preset)
     check_transmitters(normalizer, ds)
     table = _build_moving(ds, preset, normalizer) if ds.is_moving else _build_static(ds, preset, normalizer)
-    return table if radius == 1 else _with_ring(table, ds.shape, radius)
+    return with_clock(table if radius == 1 else _with_ring(table, ds.shape, radius), clock)
 
 
 def _with_ring(table: ObservationTable, shape: tuple[int, int], radius: int) -> ObservationTable:

@@ -17,6 +17,12 @@ gymnasium env, the batched torch env and the tabular solvers share one definitio
                signal; the policy itself still sees only its observation. Being potential-based it leaves the
                shortest-path objective unchanged, and it makes every step informative, so it trains fastest;
                it is the tuned default.
+
+The wait action (an option of the environments: the robot stays on its cell) is rewarded by the same function as
+any step, with the cell after the step the one before and no collision: it keeps the distance, so under ``paper`` and
+``scaled`` it pays the distance term like a bump does, and under the shaped rewards it earns 0 (the potential does
+not change), i.e. a step that costs time (the target's bonus comes one step later) like a bump, without the
+collision penalty. A mover walking onto the waiting robot is still a mover hit, charged the collision penalty.
 """
 
 from __future__ import annotations

@@ -16,6 +16,7 @@ from typing import Any
 
 from dtradar_data.core.errors import unknown_name
 from dtradar_rl.envs.batched import AUG_POTENTIALS
+from dtradar_rl.task.clock import check_clock
 from dtradar_rl.task.config import INDOOR_SCENES, ConfigError, TwinConfig, flag
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import run_dir
@@ -49,6 +50,12 @@ class DQNConfig(TwinConfig):
     """cells the robot senses around it: 1 = its four neighbours; R > 1 also observes whether each cell at Manhattan
     distance 2..R has radio features, now and one snapshot before, so a mover is seen coming (needs --obs neighbors;
     see dtradar_rl.task.observations)"""
+    wait_action: bool = False
+    """a fifth action, wait (stay on the cell: no collision, still hit by a mover walking onto the robot), besides the
+    four moves; without it the robot waits only by bumping (see dtradar_rl.envs.batched_moves)"""
+    clock: str = "none"
+    """the phase of a moving twin's periodic schedule in the observation: none, or sincos (cos and sin of 2 pi t/T,
+    the cell part's last two columns; constant on a static twin; see dtradar_rl.task.clock)"""
     escape_after: int = 2
     """loop escape when acting (needs --memory-visits): a robot standing on a cell for the (k+1)-th time this episode
     takes a random move, so a greedy policy cannot repeat a cycle until the step limit (0 = off)"""
@@ -182,6 +189,7 @@ class DQNConfig(TwinConfig):
                 hint="use --obs neighbors, or --sense-radius 1",
             )
         noise_model(self.noise)
+        check_clock(self.clock)
         if self.pair not in PAIR_MODES:
             raise unknown_name("pair mode (--pair)", self.pair, PAIR_MODES)
         if (self.start is None) != (self.target is None):

@@ -144,7 +144,7 @@ def _set_up(
     normalizer = normalizer or Normalizer.fit(ds)
     pair = training_pair(cfg, ds)
     env = _make_env(cfg, ds, normalizer, pair, device)
-    q = QNetwork(env.obs_dim, cfg.hidden).to(device)
+    q = QNetwork(env.obs_dim, cfg.hidden, env.num_actions).to(device)
     if init is not None:
         q.load_state_dict(init)
     q_target = copy.deepcopy(q)
@@ -195,6 +195,8 @@ def _make_env(
         memory_visits=cfg.memory_visits,
         obs=cfg.obs,
         sense_radius=cfg.sense_radius,
+        clock=cfg.clock,
+        wait_action=cfg.wait_action,
         normalizer=normalizer,
         reward=cfg.reward,
         max_steps=cfg.max_steps or (pair.cap if pair else None),
@@ -237,7 +239,7 @@ def _act(run: RunState, obs: torch.Tensor, eps: float) -> torch.Tensor:
     with torch.no_grad():
         greedy = run.q(obs).argmax(1)
     explore = torch.rand(n, generator=run.gen, device=device) < eps
-    random_actions = torch.randint(4, (n,), generator=run.gen, device=device)
+    random_actions = torch.randint(run.env.num_actions, (n,), generator=run.gen, device=device)
     return torch.where(explore, random_actions, greedy)
 
 

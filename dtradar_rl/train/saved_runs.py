@@ -38,6 +38,8 @@ RESUME_FAMILY: tuple[str, ...] = (
     "preset",
     "obs",
     "sense_radius",
+    "clock",
+    "wait_action",
     "reward",
     "hidden",
     "num_envs",
@@ -60,10 +62,12 @@ def load_policy(path: str | Path, device: str = "cpu") -> Policy:
     try:
         cfg = DQNConfig.from_dict(json.loads(state["config"]))
         if training_state:  # last.pt: no architecture record; the weights and the config give it
-            arch = {"in_dim": int(state["q"]["net.0.weight"].shape[1]), "hidden": list(cfg.hidden), "n_actions": 4}
+            arch = {"in_dim": int(state["q"]["net.0.weight"].shape[1]), "hidden": list(cfg.hidden)}
+            arch["n_actions"] = int(state["q"][f"net.{2 * len(cfg.hidden)}.weight"].shape[0])
             preset = cfg.obs
         else:
             arch, preset = state["arch"], state["obs"]["preset"]
+        _check_actions(path, arch, cfg)
         q = QNetwork(arch["in_dim"], tuple(arch["hidden"]), arch["n_actions"]).to(device)
         q.load_state_dict(state["q"])
         normalizer = Normalizer.from_dict(state["normalizer"])
@@ -101,6 +105,18 @@ def load_policy(path: str | Path, device: str = "cpu") -> Policy:
             "kind": TRAINING_STATE if training_state else "model",
         },
     )
+
+
+def _check_actions(path: str | Path, arch: dict[str, Any], cfg: DQNConfig) -> None:
+    """:class:`CheckpointError` when the saved network's action count is not its config's (4 moves, 5 with
+    ``wait_action``): acting with it would give the env actions it does not have, or drop one it was trained on."""
+    want = 4 + int(cfg.wait_action)
+    if int(arch["n_actions"]) != want:
+        raise CheckpointError(
+            f"{path}: the network has {arch['n_actions']} actions, its config ({flag('wait_action')}="
+            f"{cfg.wait_action}) {want}",
+            hint="train again; a checkpoint edited by hand cannot be repaired",
+        )
 
 
 def is_training_state(state: dict[str, Any]) -> bool:

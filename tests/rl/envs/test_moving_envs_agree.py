@@ -1,6 +1,6 @@
 """On a moving twin the batched env and the gymnasium env agree step for step (observations at each robot's
-snapshot, rewards, collisions, mover collisions and hits, the snapshot); ``t0`` is checked like the other reset
-options; a static twin's envs are untouched."""
+snapshot, rewards, collisions, mover collisions and hits, the snapshot), with and without the wait action and the
+clock; ``t0`` is checked like the other reset options; a static twin's envs are untouched."""
 
 import math
 
@@ -29,13 +29,20 @@ def _episodes(env, n, seed=0):
 
 
 @pytest.mark.parametrize(
-    "obs,reward,noise",
-    [("goal", "paper", "none"), ("neighbors", "geodesic", "none"), ("neighbors", "euclidean", "realistic")],
+    "obs,reward,noise,extra",
+    [
+        ("goal", "paper", "none", {}),
+        ("neighbors", "geodesic", "none", {}),
+        ("neighbors", "euclidean", "realistic", {}),
+        ("goal", "paper", "none", {"wait_action": True}),
+        ("neighbors", "geodesic", "none", {"wait_action": True, "clock": "sincos"}),
+        ("neighbors", "scaled", "realistic", {"wait_action": True, "clock": "sincos"}),
+    ],
 )
-def test_batched_and_gymnasium_envs_agree_step_for_step_on_a_moving_twin(moving, obs, reward, noise):
+def test_batched_and_gymnasium_envs_agree_step_for_step_on_a_moving_twin(moving, obs, reward, noise, extra):
     norm = Normalizer.fit(moving)
     n = 16
-    kw = dict(obs=obs, reward=reward, normalizer=norm, max_steps=STEPS, noise=noise)
+    kw = dict(obs=obs, reward=reward, normalizer=norm, max_steps=STEPS, noise=noise, **extra)
     batched = BatchedNavEnv.from_dataset(moving, n, seed=3, **kw)
     eps = _episodes(batched, n)
     batched.reset_where(torch.ones(n, dtype=torch.bool), starts=eps[:, 0], targets=eps[:, 1], t0=eps[:, 2])
@@ -48,8 +55,10 @@ def test_batched_and_gymnasium_envs_agree_step_for_step_on_a_moving_twin(moving,
     rng = np.random.default_rng(0)
     done = np.zeros(n, bool)
     seen = {"mover_collision": 0, "mover_hit": 0}
+    actions_count = 5 if extra.get("wait_action") else 4
+    assert batched.num_actions == envs[0].action_space.n == actions_count
     for _ in range(STEPS):
-        actions = rng.integers(0, 4, n)
+        actions = rng.integers(0, actions_count, n)
         obs_b, rew_b, term_b, trunc_b, info_b = batched.step(torch.as_tensor(actions))
         for i, e in enumerate(envs):
             if done[i]:
@@ -69,9 +78,10 @@ def test_batched_and_gymnasium_envs_agree_step_for_step_on_a_moving_twin(moving,
     assert seen["mover_collision"] > 0 and seen["mover_hit"] > 0  # the test did meet movers
 
 
-def test_memory_envs_agree_step_for_step_on_a_moving_twin(moving):
+@pytest.mark.parametrize("extra", [{}, {"wait_action": True, "clock": "sincos", "sense_radius": 3}])
+def test_memory_envs_agree_step_for_step_on_a_moving_twin(moving, extra):
     n = 8
-    kw = dict(obs="neighbors", reward="geodesic", max_steps=STEPS, memory_radius=2, memory_bumps=True)
+    kw = dict(obs="neighbors", reward="geodesic", max_steps=STEPS, memory_radius=2, memory_bumps=True, **extra)
     norm = Normalizer.fit(moving)
     batched = MemoryNavEnv.from_dataset(
         moving, n, normalizer=norm, seed=1, **{k: v for k, v in kw.items() if k != "obs"}
@@ -87,12 +97,13 @@ def test_memory_envs_agree_step_for_step_on_a_moving_twin(moving):
     rng = np.random.default_rng(2)
     done = np.zeros(n, bool)
     for _ in range(STEPS):
-        actions = rng.integers(0, 4, n)
-        obs_b, _, term_b, trunc_b, _ = batched.step(torch.as_tensor(actions))
+        actions = rng.integers(0, batched.num_actions, n)
+        obs_b, rew_b, term_b, trunc_b, _ = batched.step(torch.as_tensor(actions))
         for i, e in enumerate(envs):
             if not done[i]:
-                o, _, te, tr, _ = e.step(actions[i])
+                o, r, te, tr, _ = e.step(actions[i])
                 np.testing.assert_allclose(obs_b[i].numpy(), o, rtol=1e-6)
+                assert rew_b[i].item() == pytest.approx(r, rel=1e-5, abs=1e-5)
                 done[i] = te or tr
 
 
