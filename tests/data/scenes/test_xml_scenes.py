@@ -20,15 +20,20 @@ def canyon_copy(tmp_path: Path) -> Path:
     return dst / "simple_street_canyon.xml"
 
 
-def test_the_five_sionna_scenes_are_listed_and_resolve_to_their_bundled_xml():
-    assert sionna_scene_names() == SIONNA
+def test_the_five_sionna_scenes_and_the_munich_deployment_are_listed_and_resolve_to_their_bundled_xml():
+    assert sionna_scene_names() == sorted([*SIONNA, "sionna:munich_cells"])
     assert {s.replace(":", "-") for s in SIONNA} <= set(available_scenes())
-    for name in SIONNA:
+    for name in [*SIONNA, "sionna:munich_cells"]:
         spec = load_scene_spec(name, "blueprint")
-        assert spec.scene == name.replace(":", "-") and spec.base.xml == name
+        assert spec.scene == name.replace(":", "-") and spec.base.xml == name.removesuffix("_cells")
         assert Path(spec.base.path).is_file() and len(spec.base.ground) == 1
         assert spec.grid.nx * spec.grid.ny <= 6400
         assert build_targets(name) == [(name, "blueprint")]
+    cells, munich = (load_scene_spec(n, "blueprint") for n in ("sionna:munich_cells", "sionna:munich"))
+    assert len(cells.transmitters) == 10 and cells.tx == munich.tx.__class__(
+        **{**vars(munich.tx), "name": cells.tx.name}
+    )
+    assert cells.base == munich.base and cells.grid == munich.grid
 
 
 def test_a_sionna_scene_named_with_a_dash_is_the_same_scene():
