@@ -69,13 +69,14 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin, MovesMix
         noise: str | NoiseModel = "none",
         fast_path: bool = True,
         wait_action: bool = False,
+        mover_penalty: float = 1.0,
     ):
         self._check_arguments(mdp, num_envs, aug_obstacles, aug_obstacle_size, aug_potential)
         self.mdp, self.obs_table, self.num_envs = mdp, obs_table, int(num_envs)
         self._init_snapshots(mdp, obs_table)
         self._init_settings(reward, max_steps, device, seed)
         self._init_tables(mdp, obs_table)
-        self._init_moves(mdp, wait_action)
+        self._init_moves(mdp, wait_action, mover_penalty)
         cells = self._init_components(mdp)
         self._init_pool(mdp, cells, target_pool, seed)
         self._init_episodes(mdp)
@@ -411,7 +412,7 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin, MovesMix
         penalised = collision
         if self.moving:  # the next snapshot's blocked mask: a mover there refuses the move; one may walk onto us
             nxt, collision, mover_collision, mover_hit = self._mover_rules(cell, nxt, collision, a)
-            penalised = collision | mover_hit
+            penalised = self._mover_penalised(collision, mover_collision, mover_hit)
         reached = nxt == self.target
         reward = self._reward(cell, nxt, self.target, self.tpool, penalised, reached)
         self.cell = nxt

@@ -10,6 +10,12 @@ like any move; on a moving twin a wait is never a mover collision (it enters not
 mover walks onto the waiting robot. Its reward is the twin's own reward of a step that ends where it began without a
 collision (:mod:`dtradar_rl.task.rewards`). With the option off (the default) the tables are the four-column ones
 and every op of a step is the one it was.
+
+The movers' penalty (``mover_penalty``, a training setting): a step with a mover collision or a mover hit is charged
+``mover_penalty`` times the reward's collision penalty instead of once (1, the default: as a wall bump, the same
+ops). With the shaped rewards one collision costs about what one step off the shortest path does, so an agent may
+take a risky move rather than wait or step aside; a larger penalty makes meeting a mover dearer than the time lost
+to avoid it. Evaluation counts the events, not the reward, so it reads the same agent either way.
 """
 
 from __future__ import annotations
@@ -23,10 +29,12 @@ from dtradar_rl.task.grid_mdp import ACTIONS, WAIT, GridMDP
 class MovesMixin:
     """Where the actions of :class:`~dtradar_rl.envs.batched.BatchedNavEnv` lead (its attributes, its step)."""
 
-    def _init_moves(self, mdp: GridMDP, wait_action: bool) -> None:
+    def _init_moves(self, mdp: GridMDP, wait_action: bool, mover_penalty: float = 1.0) -> None:
         """The move tables the general step reads: ``next_cell``/``collides``, with a wait column when asked."""
         #: whether action 4 (stay on the cell) is one of the env's actions
         self.wait_action = bool(wait_action)
+        #: the collision penalty of a step that meets a mover, in units of the reward's (module docstring)
+        self.mover_penalty = float(mover_penalty)
         if not self.wait_action:
             self._step_cell, self._step_collides = self.next_cell, self.collides
             return
@@ -57,3 +65,12 @@ class MovesMixin:
         mover_hit = self.covered[base + nxt]
         self.t = t1
         return nxt, collision | mover_collision, mover_collision, mover_hit
+
+    def _mover_penalised(self, collision, mover_collision, mover_hit) -> torch.Tensor:
+        """The collision term of a moving twin's step: 1 for a wall bump, ``mover_penalty`` for meeting a mover
+        (bools while it is 1, so the reward's ops are the ones they were)."""
+        penalised = collision | mover_hit
+        if self.mover_penalty == 1.0:
+            return penalised
+        met = mover_collision | mover_hit
+        return torch.where(met, torch.full_like(penalised, self.mover_penalty, dtype=torch.float32), penalised.float())

@@ -144,7 +144,8 @@ class DtradarNavEnv(gym.Env):
     :mod:`dtradar_rl.task.noise`), drawn anew at every reset and step from a generator seeded by ``reset(seed=...)``;
     ``sense_radius``: cells sensed around the robot (1: the four neighbours; more: ``neighbors`` only, see
     :mod:`dtradar_rl.task.observations`); ``clock``: ``"none"`` or ``"sincos"`` (the schedule's phase);
-    ``wait_action``: add action 4, wait.
+    ``wait_action``: add action 4, wait; ``mover_penalty``: the collision penalty of a step that meets a mover, in
+    units of the reward's (default 1; see :mod:`dtradar_rl.envs.batched_moves`).
 
     ## Info
     ``cell`` and ``target`` (ix, iy), ``collision``, ``is_success``, ``distance`` (breadth-first steps from the
@@ -170,6 +171,7 @@ class DtradarNavEnv(gym.Env):
         sense_radius: int = 1,
         clock: str = "none",
         wait_action: bool = False,
+        mover_penalty: float = 1.0,
     ):
         ds = load_dataset(dataset) if isinstance(dataset, str) else dataset
         self.dataset_name = ds.name
@@ -186,6 +188,7 @@ class DtradarNavEnv(gym.Env):
             raise InvalidCoordinatesError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
         self.wait_action = bool(wait_action)
+        self.mover_penalty = float(mover_penalty)  # dtradar_rl.envs.batched_moves: a training setting
         self.action_space = spaces.Discrete(len(ACTIONS) + int(self.wait_action))
         # Observations come from the lookup tables, so their exact range is known: bound the space by it.
         lows = np.concatenate([self.table.cell_part.min(0), self.table.target_part.min(0)]).astype(np.float32)
@@ -329,6 +332,8 @@ class DtradarNavEnv(gym.Env):
             self._cell, self._t, wall, mover_collision, mover_hit = self.mdp.step_at(before, self._t, action)
             collision = wall or mover_collision
             penalised = collision or mover_hit
+            if self.mover_penalty != 1.0:
+                penalised = self.mover_penalty if (mover_collision or mover_hit) else float(penalised)
         else:
             self._cell, collision = self.mdp.step(before, action)
             penalised = collision

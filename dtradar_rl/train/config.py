@@ -53,6 +53,10 @@ class DQNConfig(TwinConfig):
     wait_action: bool = False
     """a fifth action, wait (stay on the cell: no collision, still hit by a mover walking onto the robot), besides the
     four moves; without it the robot waits only by bumping (see dtradar_rl.envs.batched_moves)"""
+    mover_penalty: float = 1.0
+    """the collision penalty of a step with a mover collision or a mover hit, in units of the reward's collision
+    penalty (1 = as a wall bump); larger makes meeting a mover dearer than the time lost to avoid it (training only;
+    see dtradar_rl.envs.batched_moves)"""
     clock: str = "none"
     """the phase of a moving twin's periodic schedule in the observation: none, or sincos (cos and sin of 2 pi t/T,
     the cell part's last two columns; constant on a static twin; see dtradar_rl.task.clock)"""
@@ -161,6 +165,8 @@ class DQNConfig(TwinConfig):
                 f"--expert-weight must be >= 0 and --expert-margin > 0, got {self.expert_weight} and "
                 f"{self.expert_margin}"
             )
+        if not self.mover_penalty >= 0:
+            raise ConfigError(f"--mover-penalty must be >= 0, got {self.mover_penalty}", hint="1 = as a wall bump")
         if self.max_grad_norm < 0:
             raise ConfigError(f"--max-grad-norm must be >= 0 (0 = off), got {self.max_grad_norm}")
         self.check_within(0, 1, "gamma", open_interval=True)

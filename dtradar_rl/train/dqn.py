@@ -197,6 +197,7 @@ def _make_env(
         sense_radius=cfg.sense_radius,
         clock=cfg.clock,
         wait_action=cfg.wait_action,
+        mover_penalty=cfg.mover_penalty,
         normalizer=normalizer,
         reward=cfg.reward,
         max_steps=cfg.max_steps or (pair.cap if pair else None),

@@ -41,6 +41,7 @@ RESUME_FAMILY: tuple[str, ...] = (
     "clock",
     "wait_action",
     "reward",
+    "mover_penalty",
     "hidden",
     "num_envs",
     "memory_radius",

@@ -37,6 +37,8 @@ def _episodes(env, n, seed=0):
         ("goal", "paper", "none", {"wait_action": True}),
         ("neighbors", "geodesic", "none", {"wait_action": True, "clock": "sincos"}),
         ("neighbors", "scaled", "realistic", {"wait_action": True, "clock": "sincos"}),
+        ("neighbors", "geodesic", "none", {"wait_action": True, "mover_penalty": 4.0}),
+        ("goal", "paper", "none", {"mover_penalty": 0.5}),
     ],
 )
 def test_batched_and_gymnasium_envs_agree_step_for_step_on_a_moving_twin(moving, obs, reward, noise, extra):

@@ -132,3 +132,22 @@ def test_the_batched_env_waits_on_a_static_twin_as_the_gymnasium_env_does():
                 assert rew_b[i].item() == pytest.approx(r, abs=1e-6)
                 assert bool(info_b["collision"][i]) == info["collision"]
                 done[i] = te
+
+
+def test_the_movers_penalty_charges_a_step_that_meets_a_mover_and_leaves_a_wall_bump_as_it_was(moving):
+    mdp = MovingGridMDP.from_dataset(moving)
+    t, c = next(
+        (t, int(c))
+        for t in range(mdp.snapshots)
+        for c in np.flatnonzero(mdp.free_at(t))
+        if mdp.step_at(int(c), t, WAIT)[4]
+    )  # a mover walks onto a robot waiting on c
+    target = next(int(x) for x in mdp.pair_cells() if x != c and mdp.connected(x, c))
+    options = {"start": mdp.xy(c), "target": mdp.xy(target), "t0": t}
+    rewards = {}
+    for penalty in (1.0, 4.0):
+        env = DtradarNavEnv(moving, reward="geodesic", wait_action=True, mover_penalty=penalty)
+        env.reset(options=options)
+        _, rewards[penalty], _, _, info = env.step(WAIT)
+        assert info["mover_hit"]
+    assert rewards[4.0] == pytest.approx(rewards[1.0] - 3.0)

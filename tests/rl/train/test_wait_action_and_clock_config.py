@@ -73,3 +73,11 @@ def test_a_checkpoint_whose_action_count_is_not_its_configs_is_refused(tmp_path)
     torch.save(state, bad)
     with pytest.raises(CheckpointError, match="4 actions, its config \\(--wait-action=True\\) 5"):
         load_policy(bad)
+
+
+def test_the_movers_penalty_is_one_by_default_and_never_negative():
+    from dtradar_rl.task.config import ConfigError
+
+    assert config_for().mover_penalty == 1.0
+    with pytest.raises(ConfigError, match="--mover-penalty must be >= 0"):
+        config_for(mover_penalty=-1.0)
