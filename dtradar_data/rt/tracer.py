@@ -298,7 +298,9 @@ class RayTracer:
         a = a_re + 1j * a_im
         if self.settings.synthetic_array:
             # a: [rx, rx_ant, tx, tx_ant, P]; geometry: [rx, tx, P]; interactions: [D, rx, tx, P]
-            a = a[:, :, k, :, :]
+            # contiguous, as transmitter 0 of a one-transmitter call is: numpy's mean sums a strided view in another
+            # order, and a cell's gain would change in its last bit with the transmitters beside it
+            a = np.ascontiguousarray(a[:, :, k, :, :])
             ref = a[:, 0, 0, :]
             gain = np.mean(np.abs(a) ** 2, axis=(1, 2))
 
@@ -308,7 +310,7 @@ class RayTracer:
             inter = np.asarray(paths.interactions)[:, :, k, :]
         else:
             # a: [rx, rx_ant, tx, tx_ant, P]; geometry: [rx, rx_ant, tx, tx_ant, P]: use the reference ports
-            a = a[:, :, k, :, :]
+            a = np.ascontiguousarray(a[:, :, k, :, :])
             ref = a[:, 0, 0, :]
             gain = np.mean(np.abs(a) ** 2, axis=(1, 2))
 
