@@ -16,14 +16,11 @@ were, read nearly alike. ``"none"`` (the default) adds nothing: the tables are b
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from dtradar_data.core.errors import unknown_name
-
-if TYPE_CHECKING:
-    from dtradar_rl.task.observations import ObservationTable
 
 CLOCKS: tuple[str, ...] = ("none", "sincos")
 CLOCK_NAMES: dict[str, tuple[str, ...]] = {"none": (), "sincos": ("clock_cos", "clock_sin")}
@@ -41,7 +38,7 @@ def clock_columns(name: str) -> int:
     return len(CLOCK_NAMES[check_clock(name)])
 
 
-def with_clock(table: ObservationTable, name: str) -> ObservationTable:
+def with_clock(table: Any, name: str) -> Any:  # an ObservationTable (observations imports this module)
     """``table`` with clock ``name``'s columns appended to its cell part (module docstring); ``"none"``: ``table``."""
     if check_clock(name) == "none":
         return table
