@@ -79,10 +79,12 @@ pull:
 	$(PY) -m dtradar_data pull $(NAME) $(ARGS)
 
 # Train the default agent on $(SCENE)'s blueprint twin -> runs/$(SCENE)/dqn/model.pt (ARGS="--preset paper" etc.);
-# VARIANT=moving trains it among the movers of the moving twin, sensing the cells up to 4 away (--sense-radius 4)
-# -> runs/$(SCENE)/dqn-moving/model.pt
+# VARIANT=moving trains it among the movers of the moving twin with $(MOVING_ARGS) -> runs/$(SCENE)/dqn-moving/model.pt:
+# the best measured among movers (docs/navigation.md, "Waiting, the clock and the mover penalty"): the cells up to 4
+# away sensed, a wait action, the schedule's phase, a 4x mover penalty, 1.2 M steps.
+MOVING_ARGS ?= --sense-radius 4 --wait-action --clock sincos --mover-penalty 4 --total-env-steps 1200000
 train:
-	$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving --sense-radius 4 --out runs/$(SCENE)/dqn-moving) $(ARGS)
+	$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving $(MOVING_ARGS) --out runs/$(SCENE)/dqn-moving) $(ARGS)
 
 # Evaluate runs/$(SCENE)/dqn/model.pt on the blueprint and dynamic twins, beside the classical planner; VARIANT=moving
 # adds the moving twin, and the agent trained among movers (runs/$(SCENE)/dqn-moving) when there is one -> runs/$(SCENE)/eval-moving
