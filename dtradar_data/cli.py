@@ -151,7 +151,16 @@ class PlaceCmd:
         if self.keep:
             ix, iy = spec.grid.index_of(*spec.tx.position_m[:2])
             start = (iy * blocked.shape[1] + ix,)
-        covered = load(self.heard_in).heard() & ~blocked if self.heard_in else None
+        covered = None
+        if self.heard_in:
+            heard = load(self.heard_in).heard()
+            if heard.shape != blocked.shape:
+                raise InvalidSettingError(
+                    f"--heard-in {self.heard_in} has a {heard.shape[1]} x {heard.shape[0]} grid and {self.scene} a "
+                    f"{blocked.shape[1]} x {blocked.shape[0]} one",
+                    hint="name a dataset built on this scene's grid (a twin of it with other transmitters)",
+                )
+            covered = heard & ~blocked
         sites, share = place_sites(
             blocked,
             range_cells=self.range_m / spec.grid.cell_m,
