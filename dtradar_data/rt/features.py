@@ -151,13 +151,12 @@ def cells_table(
         src = np.asarray(free_features[key])
         if src.shape[0] != free.sum():
             raise ValueError(f"feature {key!r} has {src.shape[0]} values for {int(free.sum())} free cells")
-        field = schema.field(key)
-        base = key.split("_", 1)[1] if key.startswith("tx") and key[2:3].isdigit() else key
-        if base == "num_paths":
+        field = schema.field(key)  # num_paths (int16) and los (bool) of every transmitter are not null
+        if pa.types.is_integer(field.type):
             full = np.zeros(n, np.int16)
             full[free] = src
             cols[key] = pa.array(full, pa.int16())
-        elif base == "los":
+        elif pa.types.is_boolean(field.type):
             full = np.zeros(n, bool)
             full[free] = src
             cols[key] = pa.array(full)
