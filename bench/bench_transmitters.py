@@ -26,6 +26,7 @@ import numpy as np
 
 def _trace(scene: str, k: int, out) -> None:
     """One process: the scene with its first ``k`` transmitters, traced whole; seconds, peak RSS, tx0's hash."""
+    from dtradar_data.core.schema import CELL_SCHEMA, tx_column
     from dtradar_data.geometry.occupancy import occupancy
     from dtradar_data.geometry.xml_meshes import ground_height
     from dtradar_data.pipeline.config import BuildConfig, scene_config
@@ -45,11 +46,11 @@ def _trace(scene: str, k: int, out) -> None:
     cells, _, blocked, tracer = trace_grid(spec, settings, None, per_path=False, progress=False, tracer=tracer)
     seconds = time.perf_counter() - t0
     tracer.close()
-    tx0 = [c for c in cells.column_names if not c.startswith("tx") or not c[2:3].isdigit()]
+    tx0 = CELL_SCHEMA.names  # transmitter 0's columns are the one-transmitter table's
     digest = hashlib.sha256(b"".join(cells.column(c).to_numpy(zero_copy_only=False).tobytes() for c in tx0))
     heard = np.zeros(len(cells), bool)
     for j in range(k):
-        heard |= cells.column("num_paths" if j == 0 else f"tx{j}_num_paths").to_numpy() > 0
+        heard |= cells.column(tx_column("num_paths", j)).to_numpy() > 0
     free = ~blocked.ravel()
     out.put(
         {
