@@ -26,10 +26,11 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import DtradarError, unknown_name
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import cross_matrix
+from dtradar_rl.experiments.paper_reach import reach_analysis
 from dtradar_rl.experiments.paper_report import render
 from dtradar_rl.experiments.paper_seeds import SeedJob, auto_workers, read_curves, run_seeds, summarize, train_or_reuse
 from dtradar_rl.task.config import Config, ConfigError, check_device, check_unique
-from dtradar_rl.task.pairs import paper_pair
+from dtradar_rl.task.pairs import ResolvedPair, paper_pair
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import check_scenes, is_synthetic, load_dataset
@@ -279,6 +280,8 @@ def _train_paper_agent(cfg: PaperConfig, twins: dict[str, Dataset], report: Repo
     for scene in dict.fromkeys(j.scene for j in jobs):
         mine = [r for r in rows if r["scene"] == scene]
         entry = _seed_summary(scene, mine, figs)
+        pair = ResolvedPair(**{k: tuple(v) if isinstance(v, list) else v for k, v in mine[0]["pair"].items()})
+        entry["reach"] = reach_analysis(twins[f"{scene}/blueprint"], pair)  # how far the protocol is, and why
         for variant in ("blueprint", "dynamic"):
             if variant in mine[0]["greedy"]:
                 report.inference.append(_greedy_paths(scene, variant, mine, twins, figs))

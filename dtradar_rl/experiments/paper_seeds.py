@@ -85,6 +85,7 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
     import torch
 
     from dtradar_rl.evaluation.fixed_pair import evaluate_pair
+    from dtradar_rl.experiments.paper_reach import closest_approach
     from dtradar_rl.task.twins import load_dataset
     from dtradar_rl.train.config import config_for
     from dtradar_rl.train.saved_runs import load_policy
@@ -120,6 +121,8 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
             "target": list(placed.target),
             "cap": placed.cap,
             "path": [int(c) for c in roll.paths[0]],
+            # how far a miss is: the nearest and the last breadth-first distance to the target on the way
+            **closest_approach(ds, roll.paths[0], placed.cells(ds.shape[1])[1]),
         }
     return {
         "scene": job.scene,
@@ -210,6 +213,7 @@ def summarize(scene: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "goal_met": ok >= needed(n),
         "greedy_reached": greedy,
         "trained_reached": sum(r["reached"] > 0 for r in rows),
+        "episodes_reached": sum(r["reached"] for r in rows),
         "min_steps": _spread([r["min_steps"] for r in rows]),
         "min_episode": _spread([r["min_episode"] for r in rows]),
         "first_within_10pct": _spread([r["first_within_10pct"] for r in rows]),

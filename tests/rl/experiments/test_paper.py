@@ -71,6 +71,13 @@ def test_a_tiny_paper_run_on_synthetic_tables_writes_every_file_of_the_report(tm
     assert all(r["episodes"] == 2 for r in training["runs"]) and training["episodes"] == 4
     assert {i["variant"]: len(i["seeds"]) for i in report["inference"]} == {"blueprint": 2, "dynamic": 2}
     assert "seeds reproducing the pair" in md and "Each seed:" in md
+    # how far and why: the pair's MDP solved, its hitting probabilities, each greedy run's nearest approach
+    reach = training["reach"]
+    assert reach["shortest"] == training["pair"]["shortest"] and reach["caps"][0] == training["pair"]["cap"]
+    assert set(reach["chains"]) == {"uniform", "eps_optimal"}
+    assert all(0.0 <= p <= 1.0 + 1e-9 for c in reach["chains"].values() for p in c["within"].values())
+    assert all("closest" in r["greedy"]["blueprint"] for r in training["runs"])
+    assert "How far, and why" in md and training["episodes_reached"] == sum(r["reached"] for r in training["runs"])
     assert "[paper" in capsys.readouterr().out  # progress while it runs
 
 
