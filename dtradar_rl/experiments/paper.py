@@ -68,6 +68,11 @@ class PaperConfig(Config):
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
     """seeds of the paper's agent: one training run per scene and seed, and the pair counts as reached when at least
     4 of 5 (80 %) of them reproduce it; the goal-conditioned agents of the cross matrix use the first seed only"""
+    max_steps: int = 0
+    """episode cap of the paper's agent (0 = a safety cap of 10 x the pair's shortest path); the paper's own
+    protocol, episodes until the target within its Table VII budget: --max-steps 600000 --total-env-steps 600000"""
+    total_env_steps: int = 0
+    """environment steps of each run of the paper's agent at most (0 = the preset's 10 M backstop)"""
     jobs: int = 0
     """training runs of the paper's agent at once, each in its own process (0 = one per core)"""
     cross: bool = True
@@ -90,7 +95,7 @@ class PaperConfig(Config):
 
     def check_ranges(self) -> None:
         super().check_ranges()
-        self.check_at_least(0, "episodes", "threads", "jobs")
+        self.check_at_least(0, "episodes", "threads", "jobs", "max_steps", "total_env_steps")
         self.check_at_least(1, "cross_steps", "cross_pairs")
         if not self.seeds:
             raise ConfigError("--seeds is empty", hint="e.g. --seeds 0 1 2 3 4")
@@ -261,6 +266,8 @@ def _train_paper_agent(cfg: PaperConfig, twins: dict[str, Dataset], report: Repo
             out=str(out / "train" / scene / "paper" / f"s{seed}"),
             variants=tuple(v for v in ("blueprint", "dynamic") if f"{scene}/{v}" in twins),
             episodes=cfg.episodes,
+            max_steps=cfg.max_steps,
+            total_env_steps=cfg.total_env_steps,
             threads=cfg.threads or 1,
             device=cfg.device,
             retrain=cfg.retrain,

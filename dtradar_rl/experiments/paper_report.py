@@ -188,6 +188,13 @@ def _reach(report) -> str:
     )
 
 
+def _cap(cfg: dict[str, Any]) -> str:
+    cap = cfg.get("max_steps") or 0
+    budget = cfg.get("total_env_steps") or 0
+    said = f"episodes capped at {cap:,} steps" if cap else "safety cap 10 × the shortest path"
+    return said + (f", at most {budget:,} environment steps per run" if budget else "")
+
+
 def _greedy(x: dict[str, Any] | None) -> str:
     if x is None:
         return "-"
@@ -384,8 +391,9 @@ def render(report) -> str:
         out.append(
             "## Table VI: training pairs, minimum steps and the episode they were reached, over seeds\n\n"
             "The paper's agent (`--preset paper`: 10 inputs, 5 × 256 ReLU, Huber loss, γ = 0.9, ε = 0.1, "
-            "the paper's reward), one pair per run, episodes until the target (safety cap 10 × the "
-            "shortest path), trained once per seed. *min steps* is the fewest decisions (collisions included) of a "
+            "the paper's reward), one pair per run, episodes until the target ("
+            + _cap(report.config)
+            + "), trained once per seed. *min steps* is the fewest decisions (collisions included) of a "
             "training episode that reached the target, with ε-greedy exploration on. A seed *reproduces the pair* "
             "when its training found a path within 10 % of the breadth-first optimum and its greedy policy reaches "
             f"the target on the blueprint; the goal is met when at least {round(100 * GOAL_FRACTION)} % of the seeds "

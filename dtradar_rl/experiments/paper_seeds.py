@@ -43,6 +43,8 @@ class SeedJob:
     out: str
     variants: tuple[str, ...]
     episodes: int = 0
+    max_steps: int = 0  # 0: the pair's safety cap
+    total_env_steps: int = 0  # 0: the preset's backstop
     threads: int = 1
     device: str = "cpu"
     retrain: bool = False
@@ -99,6 +101,8 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
         device=job.device,
         out=job.out,
         **({"episodes": job.episodes} if job.episodes else {}),
+        **({"max_steps": job.max_steps} if job.max_steps else {}),
+        **({"total_env_steps": job.total_env_steps} if job.total_env_steps else {}),
     )
     ckpt, reused = train_or_reuse(tcfg, twins["blueprint"], job.retrain, say=lambda m: None)
     policy = load_policy(ckpt, job.device)

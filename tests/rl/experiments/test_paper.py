@@ -1,6 +1,7 @@
 """`make paper` on tiny synthetic tables: every table and figure of the report is written, missing twins are named."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -168,3 +169,14 @@ def test_seeds_trained_side_by_side_in_processes_give_the_same_runs_as_one_after
         assert (tmp_path / "serial" / f"s{seed}" / "curves.csv").read_text() == (
             tmp_path / "parallel" / f"s{seed}" / "curves.csv"
         ).read_text()
+
+
+def test_the_paper_agent_takes_its_episode_cap_and_step_budget_from_the_report_options(tmp_path, root):
+    out = tmp_path / "paper"
+    args = ["paper", "--scenes", "synthetic-8x6", "--episodes", "50", "--seeds", "0", "--jobs", "1", "--no-cross"]
+    assert main([*args, "--max-steps", "7", "--total-env-steps", "60", "--threads", "1", "--out", str(out)]) == 0
+    run = json.loads((out / "report.json").read_text())["training"][0]["runs"][0]
+    saved = json.loads((Path(run["run"]) / "config.json").read_text())
+    assert saved["max_steps"] == 7 and saved["total_env_steps"] == 60
+    assert run["env_steps"] <= 60 + 7 and run["episodes"] < 50  # the budget ended it, not the episodes
+    assert "episodes capped at 7 steps, at most 60 environment steps per run" in (out / "report.md").read_text()
