@@ -128,6 +128,38 @@ def reach_analysis(ds: Dataset, pair: ResolvedPair, *, gamma: float = GAMMA, eps
     return {"dataset": ds.name, "version": ds.version, **out}
 
 
+def learned_chain(policy, ds: Dataset, start_cell: int, target_cell: int, cap: int, *, epsilon: float = EPSILON):
+    """A trained fixed-pair agent's own chain: its greedy move on every free cell (its observation of a static twin
+    depends on the cell alone), followed greedily from the start (as a greedy rollout goes) and ε-greedily (as its
+    training explored): ``{"greedy": follow_greedy(...), "within": {cap, 10 x cap: P(hit)}, "quantiles": ...}``."""
+    import torch
+
+    tab = TabularMDP.from_dataset(ds)
+    start, target = (int(x) for x in tab.states(np.array([start_cell, target_cell])))
+    comp = tab.mdp.component[tab.cells]
+    # an episode starts neither on its target nor where the target cannot be reached (the chain never goes there)
+    others = np.flatnonzero((comp == comp[target]) & (np.arange(tab.n) != target))
+    env = policy.env_for(ds, others.size, reward="paper")
+    env.reset_where(
+        torch.ones(others.size, dtype=torch.bool),
+        starts=tab.cells[others],
+        targets=np.full(others.size, int(target_cell)),
+    )
+    actions = np.zeros(tab.n, np.int64)
+    actions[others] = policy.act(env.observe()).cpu().numpy()
+    dist = tab.mdp.bfs_distances(int(target_cell))[tab.cells]
+    probs = np.full((tab.n, 4), epsilon / 4)
+    probs[np.arange(tab.n), actions] += 1.0 - epsilon
+    caps = (int(cap), 10 * int(cap))
+    h = hitting_times(transition_matrix(tab, probs, target), start, target, caps)
+    return {
+        "epsilon": epsilon,
+        "greedy": follow_greedy(tab, actions, start, target, dist),
+        "within": {str(c): h["within"].get(c) for c in caps},
+        "quantiles": {str(q): h["quantiles"][q] for q in QUANTILES},
+    }
+
+
 def closest_approach(ds: Dataset, path: list[int], target_cell: int) -> dict[str, int]:
     """The nearest and the last breadth-first distance to the target along a rollout's ``path`` (grid cells)."""
     from dtradar_rl.task.grid_mdp import GridMDP
@@ -145,6 +177,7 @@ __all__ = [
     "closest_approach",
     "follow_greedy",
     "hitting_times",
+    "learned_chain",
     "reach_analysis",
     "transition_matrix",
 ]

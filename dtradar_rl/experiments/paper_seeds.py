@@ -87,7 +87,7 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
     import torch
 
     from dtradar_rl.evaluation.fixed_pair import evaluate_pair
-    from dtradar_rl.experiments.paper_reach import closest_approach
+    from dtradar_rl.experiments.paper_reach import closest_approach, learned_chain
     from dtradar_rl.task.twins import load_dataset
     from dtradar_rl.train.config import config_for
     from dtradar_rl.train.saved_runs import load_policy
@@ -113,8 +113,10 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
     best = min(reached, key=lambda e: (e[3], e[0])) if reached else None
     near = next((e for e in reached if e[3] <= WITHIN * pair["shortest"]), None)
     greedy = {}
+    placed_on = {}
     for variant, ds in twins.items():
         r, placed, roll = evaluate_pair(policy, ds, device=job.device)
+        placed_on[variant] = placed
         greedy[variant] = {
             "reached": bool(r["success_rate"]),
             "steps": int(r["steps"]),
@@ -128,9 +130,13 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
             # how far a miss is: the nearest and the last breadth-first distance to the target on the way
             **closest_approach(ds, roll.paths[0], placed.cells(ds.shape[1])[1]),
         }
+    bp, placed = twins["blueprint"], placed_on["blueprint"]
+    # the trained agent's own chain on the blueprint: its greedy walk and how often ε-greedy (as in training) gets there
+    learned = learned_chain(policy, bp, *placed.cells(bp.shape[1]), placed.cap)
     return {
         "scene": job.scene,
         "seed": job.seed,
+        "learned": learned,
         "run": str(ckpt.parent),
         "reused": reused,
         "threads": int(stats.get("threads") or torch.get_num_threads()),  # stats of older runs lack it

@@ -78,6 +78,9 @@ def test_a_tiny_paper_run_on_synthetic_tables_writes_every_file_of_the_report(tm
     assert set(reach["chains"]) == {"uniform", "eps_optimal"}
     assert all(0.0 <= p <= 1.0 + 1e-9 for c in reach["chains"].values() for p in c["within"].values())
     assert all("closest" in r["greedy"]["blueprint"] for r in training["runs"])
+    for r in training["runs"]:  # the trained agent's chain walks greedily where its greedy rollout went
+        g, chain = r["greedy"]["blueprint"], r["learned"]["greedy"]
+        assert chain["reached"] == g["reached"] and chain["closest"] == g["closest"]
     assert "How far, and why" in md and training["episodes_reached"] == sum(r["reached"] for r in training["runs"])
     assert "[paper" in capsys.readouterr().out  # progress while it runs
 
