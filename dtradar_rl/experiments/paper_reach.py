@@ -27,9 +27,10 @@ from scipy.sparse import csr_matrix
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.tabular.solver import GAMMA, TabularMDP, solve
 from dtradar_rl.task.pairs import ResolvedPair
+from dtradar_rl.train.config import config_for
 
-#: The paper's constant exploration rate (its Table VII protocol; the ``paper`` preset's ``epsilon``).
-EPSILON = 0.1
+#: The paper's constant exploration rate: the ``paper`` preset's (its ``eps_start`` = ``eps_end``).
+EPSILON = config_for("paper").eps_end
 #: Hitting-time quantiles reported: the median episode and the cap that would bind in under 1 % of episodes.
 QUANTILES = (0.5, 0.99)
 #: Steps the hitting-time distribution is followed at most (a quantile beyond is reported as "more than").
@@ -69,6 +70,21 @@ def hitting_times(p: csr_matrix, start: int, target: int, caps: tuple[int, ...])
     return {"within": within, "quantiles": quantiles}
 
 
+def chain(
+    tab: TabularMDP, actions: np.ndarray | None, start: int, target: int, caps: tuple[int, ...], epsilon: float
+) -> dict[str, Any]:
+    """:func:`hitting_times` of ε-greedy on the moves ``actions[state]`` (``None``: the uniform random walk), with
+    its keys as strings, as ``report.json`` stores them."""
+    probs = np.full((tab.n, 4), 0.25 if actions is None else epsilon / 4)
+    if actions is not None:
+        probs[np.arange(tab.n), actions] += 1.0 - epsilon
+    h = hitting_times(transition_matrix(tab, probs, target), start, target, caps)
+    return {
+        "within": {str(c): h["within"].get(c) for c in caps},
+        "quantiles": {str(q): h["quantiles"][q] for q in QUANTILES},
+    }
+
+
 def follow_greedy(tab: TabularMDP, actions: np.ndarray, start: int, target: int, dist: np.ndarray) -> dict[str, Any]:
     """The deterministic policy ``actions[state]`` from ``start``: reached and in how many steps, else the loop it
     settles in and that loop's nearest geodesic distance to the target (``dist`` per state)."""
@@ -101,16 +117,10 @@ def analyse(
     greedy = sol.greedy()[0]
     dist = tab.mdp.bfs_distances(int(target_cell))[tab.cells]
     caps = (int(cap), 10 * int(cap))
-    uniform = np.full((tab.n, 4), 0.25)
-    eps_greedy = np.full((tab.n, 4), epsilon / 4)
-    eps_greedy[np.arange(tab.n), greedy] += 1.0 - epsilon
-    chains = {}
-    for name, probs in (("uniform", uniform), ("eps_optimal", eps_greedy)):
-        h = hitting_times(transition_matrix(tab, probs, target), start, target, caps)
-        chains[name] = {
-            "within": {str(c): h["within"].get(c) for c in caps},
-            "quantiles": {str(q): h["quantiles"][q] for q in QUANTILES},
-        }
+    chains = {
+        "uniform": chain(tab, None, start, target, caps, epsilon),
+        "eps_optimal": chain(tab, greedy, start, target, caps, epsilon),
+    }
     return {
         "gamma": gamma,
         "epsilon": epsilon,
@@ -148,15 +158,11 @@ def learned_chain(policy, ds: Dataset, start_cell: int, target_cell: int, cap: i
     actions = np.zeros(tab.n, np.int64)
     actions[others] = policy.act(env.observe()).cpu().numpy()
     dist = tab.mdp.bfs_distances(int(target_cell))[tab.cells]
-    probs = np.full((tab.n, 4), epsilon / 4)
-    probs[np.arange(tab.n), actions] += 1.0 - epsilon
     caps = (int(cap), 10 * int(cap))
-    h = hitting_times(transition_matrix(tab, probs, target), start, target, caps)
     return {
         "epsilon": epsilon,
         "greedy": follow_greedy(tab, actions, start, target, dist),
-        "within": {str(c): h["within"].get(c) for c in caps},
-        "quantiles": {str(q): h["quantiles"][q] for q in QUANTILES},
+        **chain(tab, actions, start, target, caps, epsilon),
     }
 
 
@@ -174,6 +180,7 @@ __all__ = [
     "HORIZON",
     "QUANTILES",
     "analyse",
+    "chain",
     "closest_approach",
     "follow_greedy",
     "hitting_times",
