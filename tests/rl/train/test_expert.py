@@ -62,6 +62,33 @@ def test_the_margin_loss_is_zero_once_expert_moves_lead_by_the_margin_and_ignore
     assert expert_margin_loss(q[2:], expert[2:], 1.0).item() == 0.0
 
 
+def test_the_wait_action_is_never_an_expert_move_and_trails_the_expert_by_the_margin():
+    # a fifth (wait) value beside four moves: the expert's four columns are padded with "not expert"
+    q = torch.tensor([[2.0, 0.5, 0.9, 0.0, 1.5], [2.0, 0.5, 0.9, 0.0, 0.5]])
+    expert = torch.tensor([[True, False, False, False], [True, False, False, False]])
+    # row 0: wait 1.5 + 1 = 2.5 over the expert's 2.0 -> 0.5; row 1: the expert leads everything by >= 1 -> 0
+    assert expert_margin_loss(q, expert, 1.0).item() == pytest.approx(0.25)
+
+
+def test_training_with_the_wait_action_and_the_expert_loss_runs(tmp_path):
+    cfg = config_for(
+        "tuned",
+        scene="synthetic-moving-12x8",
+        wait_action=True,
+        expert_weight=1.0,
+        total_env_steps=2_000,
+        num_envs=16,
+        learning_starts=128,
+        env_steps_per_update=8,
+        verbose=False,
+        threads=1,
+        checkpoint_every=0,
+        out=str(tmp_path / "wait-expert"),
+    )
+    res = train(cfg)
+    assert load_policy(res.checkpoint).q.net[-1].out_features == 5
+
+
 def test_the_expert_loss_needs_the_geodesic_reward_and_a_positive_margin():
     with pytest.raises(ConfigError, match="geodesic"):
         config_for("tuned", expert_weight=1.0, reward="scaled").validate()
