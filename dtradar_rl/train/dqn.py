@@ -384,7 +384,7 @@ def expert_margin_loss(q_all: torch.Tensor, expert: torch.Tensor, margin: float)
     ``max_a [Q(s, a) + margin * (a not expert)] - max_(a expert) Q(s, a)``, averaged over states with an expert move.
     Zero once every expert move's value leads every other move's by ``margin``; TD learning still sets the values.
     ``expert`` may have fewer columns than ``q_all``: the wait action (``--wait-action``'s fifth) never brings a robot
-    closer along a breadth-first path, so it is never an expert move and only has to trail the expert's by the margin."""
+    closer along a breadth-first path, so it is never an expert move and must trail the expert's by the margin."""
     if expert.shape[1] < q_all.shape[1]:
         pad = expert.new_zeros((expert.shape[0], q_all.shape[1] - expert.shape[1]))
         expert = torch.cat([expert, pad], dim=1)
