@@ -44,7 +44,8 @@ class SweepConfig(Config):
     seeds: tuple[int, ...] = (0, 1, 2)
     """training seeds"""
     preset: str = DEFAULT_PRESET
-    """training preset (memory-escape-noise, the default; memory-escape, tuned, robust, memory, paper)"""
+    """training preset (memory-escape-noise-margin, the default; memory-escape-noise, memory-escape, tuned, robust,
+    memory, paper)"""
     total_env_steps: int = 0
     """training budget per run (0 = the preset's)"""
     variants: tuple[str, ...] = ("blueprint", "dynamic")

@@ -1,7 +1,7 @@
 """Offline agents with the online default's senses: every logged step observed as the memory agent would observe it.
 
-The default online agent (``memory-escape-noise``) sees its ``neighbors`` observation followed by a window of what it
-has sensed and visited this episode and the count of its earlier stands on its cell
+The default online agent (``memory-escape-noise-margin``) sees its ``neighbors`` observation followed by a window of
+what it has sensed and visited this episode and the count of its earlier stands on its cell
 (:class:`~dtradar_rl.envs.memory.MemoryNavEnv`); a greedy policy that sees it can tell a dead end it already tried
 and leaves a loop by a random move (``escape_after``). Everything in that window follows from the episode's own
 cells and the has-radio flags it observed, none of it from the target, so a logged episode's memory observations

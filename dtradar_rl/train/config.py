@@ -1,5 +1,5 @@
-"""The online DQN's settings and its six presets (``memory-escape-noise``, the default; ``memory-escape``, ``tuned``,
-``robust``, ``memory``, ``paper``).
+"""The online DQN's settings and its seven presets (``memory-escape-noise-margin``, the default;
+``memory-escape-noise``, ``memory-escape``, ``tuned``, ``robust``, ``memory``, ``paper``).
 
 :class:`DQNConfig` extends :class:`~dtradar_rl.task.config.TwinConfig`; its field defaults are the default preset's
 settings (:data:`DEFAULT_PRESET`), so ``DQNConfig() == config_for()``, and each entry of :data:`PRESETS` lists how its
@@ -27,9 +27,10 @@ PAIR_MODES = ("random", "paper")
 
 @dataclass(frozen=True)
 class DQNConfig(TwinConfig):
-    """Deep Q-learning on the navigation MDP of one dataset (defaults: the default preset, ``memory-escape-noise``)."""
+    """Deep Q-learning on the navigation MDP of one dataset (defaults: the default preset,
+    ``memory-escape-noise-margin``)."""
 
-    preset: str = "memory-escape-noise"
+    preset: str = "memory-escape-noise-margin"
     """the preset these settings started from (see the command's description); recorded in config.json"""
     aug_obstacles: int = 10
     """obstacle augmentation: extra random obstacles per robot, redrawn at every episode reset, that collide and
@@ -103,9 +104,10 @@ class DQNConfig(TwinConfig):
     """final exploration rate"""
     eps_decay_fraction: float = 0.4
     """fraction of the budget over which exploration decays linearly from eps_start to eps_end"""
-    expert_weight: float = 0.0
-    """weight of a large-margin loss towards the training twin's breadth-first shortest moves (DQfD; 0 = off, plain
-    DQN). The twin's map is known, as the geodesic reward already uses it; make adapt uses it to fine-tune fast"""
+    expert_weight: float = 1.0
+    """weight of a large-margin loss towards the training twin's breadth-first shortest moves (DQfD's; 0 = off, plain
+    DQN). The twin's map is known in training, as the geodesic reward already uses it; the agent still acts from its
+    observation alone. On by default (the margin preset); make adapt uses it to fine-tune fast"""
     expert_margin: float = 1.0
     """margin by which the expert loss wants a shortest move's value above every other move's"""
     max_grad_norm: float = 10.0
@@ -215,14 +217,16 @@ class DQNConfig(TwinConfig):
         return self
 
 
-#: What ``tuned`` turns off of the default agent: the extra obstacles, the memory and its visit counts, the loop escape
-#: and the measurement noise. ``robust``, ``memory`` and ``paper`` start from it, as they were built on ``tuned``.
+#: What ``tuned`` turns off of the default agent: the extra obstacles, the memory and its visit counts, the loop escape,
+#: the measurement noise and the margin loss. ``robust``, ``memory`` and ``paper`` start from it, as they were built on
+#: ``tuned``.
 _TUNED: dict[str, Any] = {
     "aug_obstacles": 0,
     "memory_radius": 0,
     "memory_visits": False,
     "escape_after": 0,
     "noise": "none",
+    "expert_weight": 0.0,
 }
 
 #: Each preset's settings where they differ from :class:`DQNConfig`'s defaults (the default preset's).
@@ -234,10 +238,14 @@ PRESETS: dict[str, dict[str, Any]] = {
     # robust + a window of what the robot has sensed and visited (memory_radius 5), no visit count or escape.
     "memory": {**_TUNED, "aug_obstacles": 10, "memory_radius": 5},
     # The memory agent that counts its visits and leaves a cell it keeps coming back to, on exact features.
-    "memory-escape": {"noise": "none"},
-    # The default (DEFAULT_PRESET): memory-escape trained on noisy measurements (dtradar_rl.task.noise), so the
-    # features it learns to rely on are the ones a receiver measures well enough (docs: Navigation).
-    "memory-escape-noise": {},
+    "memory-escape": {"noise": "none", "expert_weight": 0.0},
+    # memory-escape trained on noisy measurements (dtradar_rl.task.noise), so the features it learns to rely on are
+    # the ones a receiver measures well enough: the default until the margin loss (docs: Navigation).
+    "memory-escape-noise": {"expert_weight": 0.0},
+    # The default (DEFAULT_PRESET): memory-escape-noise also told, in every state it visits in training, the moves of
+    # the training twin's breadth-first shortest path (DQfD's large-margin loss, --expert-weight 1), so it learns
+    # the shortest way in the same budget; it acts from its observation alone (docs: Navigation).
+    "memory-escape-noise-margin": {},
     # The paper's agent, on tuned's base. The episodes decide the paper's budget; total_env_steps is only a backstop
     # far above what they use.
     "paper": dict(
@@ -270,7 +278,7 @@ SAVED_DEFAULTS: dict[str, Any] = {**_TUNED, "preset": "tuned"}
 
 
 #: What ``make train`` trains without ``--preset``: the best agent measured on every twin (docs: Navigation).
-DEFAULT_PRESET = "memory-escape-noise"
+DEFAULT_PRESET = "memory-escape-noise-margin"
 
 
 def config_for(preset: str = DEFAULT_PRESET, **overrides) -> DQNConfig:

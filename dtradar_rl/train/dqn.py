@@ -4,7 +4,7 @@
     result = train(config_for("tuned", scene="synthetic", total_env_steps=100_000))
     result.checkpoint   # runs/synthetic/dqn/model.pt, with config.json, curves.csv and curves.png beside it
 
-Six presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`; the default is
+Seven presets (:data:`~dtradar_rl.train.config.PRESETS`, :func:`~dtradar_rl.train.config.config_for`; the default is
 :data:`~dtradar_rl.train.config.DEFAULT_PRESET`); what each reaches is measured in the docs (Navigation,
 Benchmarks), not here:
 
@@ -26,9 +26,12 @@ Benchmarks), not here:
            in its observation, and a loop escape when acting: a robot back on a cell for the third time takes a
            random move (:class:`~dtradar_rl.agents.policy.Policy`), so a deterministic cycle cannot last until the
            step limit.
-``memory-escape-noise`` (the default) ``memory-escape`` trained on noisy radio features
+``memory-escape-noise`` ``memory-escape`` trained on noisy radio features
            (:mod:`dtradar_rl.task.noise`, ``realistic``): as good as ``memory-escape`` without noise on every twin
            measured, and it keeps its path lengths under a receiver's measurement errors.
+``memory-escape-noise-margin`` (the default) ``memory-escape-noise`` with DQfD's large-margin loss towards the
+           training twin's breadth-first shortest moves (``expert_weight`` 1, :func:`expert_margin_loss`): told the
+           shortest way in the states it visits, it learns shorter paths in the same budget.
 
 The loop: every robot acts ε-greedily, the batch of transitions goes into a replay buffer, finished robots are
 reset; every ``env_steps_per_update`` environment steps one Huber-loss update on a random minibatch follows, with

@@ -21,6 +21,7 @@ FORMER_DEFAULTS = {
     "memory_visits": False,
     "escape_after": 0,
     "noise": "none",
+    "expert_weight": 0.0,
 }
 #: Fields added after the first checkpoints were written; a config.json of then has none of them.
 LATER_FIELDS = (*FORMER_DEFAULTS, "aug_obstacle_size", "aug_potential", "memory_bumps", "sense_radius")
