@@ -6,9 +6,9 @@
     result.policy        # a TablePolicy: the greedy move of every (believed cell, target)
 
 The same environment as the DQN's: :class:`~dtradar_rl.envs.batched.BatchedNavEnv` with ``num_envs`` robots on the
-training twin, random connected pairs, the ``geodesic`` reward and the same ``total_env_steps`` budget as the default
-preset (:data:`~dtradar_rl.train.config.DEFAULT_PRESET`: 256 robots, 600 K steps), without its obstacle augmentation,
-measurement noise or memory (a table has no room for them).
+training twin, random connected pairs, the ``geodesic`` reward and the paper's ``total_env_steps`` budget (the
+default DQN preset's, :data:`~dtradar_rl.train.config.DEFAULT_PRESET`: 256 robots, 600 K steps on a twin of up to
+1 200 free cells), without its obstacle augmentation, measurement noise or memory (a table has no room for them).
 
 The table is ``Q[believed cell, target cell, action]`` (float32, every cell of the grid in both axes, so a
 :class:`~dtradar_rl.tabular.table_policy.TablePolicy` reads it with no renumbering); one that would take more than
@@ -87,7 +87,8 @@ class QLearningConfig(JobConfig):
     num_envs: int = 256
     """robots stepped together in the batched environment (the DQN's default)"""
     total_env_steps: int = 600_000
-    """training budget in environment steps (all robots together); the DQN's default is 600K"""
+    """training budget in environment steps (all robots together); the paper's 600K (the default DQN's on a twin of
+    up to 1 200 free cells)"""
     gamma: float = 0.5
     """discount factor (the geodesic reward rewards every step along a shortest path, so a short horizon suffices)"""
     lr: float = 1.0

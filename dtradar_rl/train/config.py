@@ -10,7 +10,7 @@ measured in the docs (Navigation), not here.
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -67,8 +67,9 @@ class DQNConfig(TwinConfig):
     noise: str = "realistic"
     """measurement-noise augmentation: train on radio features as a receiver would measure them (none, realistic,
     2x; see dtradar_rl.task.noise), drawn anew at every step"""
-    total_env_steps: int = 600_000
-    """training budget in environment steps (all robots together); the paper's is 600K"""
+    total_env_steps: int = 0
+    """training budget in environment steps (all robots together); 0 = the twin's default (budget_for): the paper's
+    600K, or 500 steps per free cell of the training twin where that is more (a twin of over 1 200 free cells)"""
     episodes: int = 0
     """also stop after this many finished episodes (0 = no limit; the paper: 500 indoor, 80 outdoor)"""
     pair: str = "random"
@@ -139,7 +140,6 @@ class DQNConfig(TwinConfig):
         self.check_at_least(
             1,
             "sense_radius",
-            "total_env_steps",
             "batch_size",
             "buffer_size",
             "env_steps_per_update",
@@ -147,7 +147,14 @@ class DQNConfig(TwinConfig):
             "aug_obstacle_size",
         )
         self.check_at_least(
-            0, "episodes", "learning_starts", "aug_obstacles", "checkpoint_every", "memory_radius", "escape_after"
+            0,
+            "total_env_steps",
+            "episodes",
+            "learning_starts",
+            "aug_obstacles",
+            "checkpoint_every",
+            "memory_radius",
+            "escape_after",
         )
         for name in ("start", "target"):
             cell = getattr(self, name)
@@ -227,6 +234,7 @@ _TUNED: dict[str, Any] = {
     "escape_after": 0,
     "noise": "none",
     "expert_weight": 0.0,
+    "total_env_steps": 600_000,
 }
 
 #: Each preset's settings where they differ from :class:`DQNConfig`'s defaults (the default preset's).
@@ -238,13 +246,14 @@ PRESETS: dict[str, dict[str, Any]] = {
     # robust + a window of what the robot has sensed and visited (memory_radius 5), no visit count or escape.
     "memory": {**_TUNED, "aug_obstacles": 10, "memory_radius": 5},
     # The memory agent that counts its visits and leaves a cell it keeps coming back to, on exact features.
-    "memory-escape": {"noise": "none", "expert_weight": 0.0},
+    "memory-escape": {"noise": "none", "expert_weight": 0.0, "total_env_steps": 600_000},
     # memory-escape trained on noisy measurements (dtradar_rl.task.noise), so the features it learns to rely on are
     # the ones a receiver measures well enough: the default until the margin loss (docs: Navigation).
-    "memory-escape-noise": {"expert_weight": 0.0},
+    "memory-escape-noise": {"expert_weight": 0.0, "total_env_steps": 600_000},
     # The default (DEFAULT_PRESET): memory-escape-noise also told, in every state it visits in training, the moves of
     # the training twin's breadth-first shortest path (DQfD's large-margin loss, --expert-weight 1), so it learns
-    # the shortest way in the same budget; it acts from its observation alone (docs: Navigation).
+    # the shortest way in the same budget; it acts from its observation alone. Its budget grows with the twin
+    # (budget_for: 600K, or 500 steps per free cell where that is more) (docs: Navigation).
     "memory-escape-noise-margin": {},
     # The paper's agent, on tuned's base. The episodes decide the paper's budget; total_env_steps is only a backstop
     # far above what they use.
@@ -275,6 +284,28 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: they were the ``tuned`` preset's (every later feature off). :meth:`DQNConfig.from_dict` fills missing fields
 #: from here, so a checkpoint or ``config.json`` written before a field existed keeps what it meant.
 SAVED_DEFAULTS: dict[str, Any] = {**_TUNED, "preset": "tuned"}
+
+
+#: The paper's training budget (Table VII) and the steps per free cell of the training twin that the default budget
+#: gives a larger twin (:func:`budget_for`): 600K covers twins of up to 1 200 free cells (the cubicle has 592, the
+#: meeting room 1 282, the Dallas quadrants 1 527-1 968, Munich 3 069).
+PAPER_BUDGET = 600_000
+STEPS_PER_FREE_CELL = 500
+
+
+def budget_for(free_cells: int) -> int:
+    """The default training budget (``total_env_steps=0``) of a twin with ``free_cells`` free cells: the paper's
+    600K, or 500 steps per free cell where that is more. Measured: Munich (3 069 free cells) with the default preset
+    reaches SPL 0.898 in 600K steps and 0.953 in 1.2M (docs: Navigation)."""
+    return max(PAPER_BUDGET, STEPS_PER_FREE_CELL * int(free_cells))
+
+
+def with_budget(cfg: DQNConfig, free_cells: int) -> DQNConfig:
+    """``cfg`` with its budget resolved: ``total_env_steps=0`` becomes :func:`budget_for` of the training twin's free
+    cells; a budget given stays. Training saves the resolved config, so a run records the steps it was given."""
+    if cfg.total_env_steps:
+        return cfg
+    return replace(cfg, total_env_steps=budget_for(free_cells))
 
 
 #: What ``make train`` trains without ``--preset``: the best agent measured on every twin (docs: Navigation).

@@ -74,7 +74,7 @@ from dtradar_rl.task.pairs import ResolvedPair, training_pair
 from dtradar_rl.task.runs import held_out_folder
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.config import DQNConfig
+from dtradar_rl.train.config import DQNConfig, with_budget
 from dtradar_rl.train.replay import ReplayBuffer
 from dtradar_rl.train.run_state import RunState, restore_training_state, save_training_state
 from dtradar_rl.train.saved_runs import check_resumed_twin, check_run_folder
@@ -147,6 +147,9 @@ def _set_up(
     normalizer = normalizer or Normalizer.fit(ds)
     pair = training_pair(cfg, ds)
     env = _make_env(cfg, ds, normalizer, pair, device)
+    # The default budget (0) grows with the twin's free cells (the static map's on a moving twin); from here on the
+    # run, its checkpoints and config.json hold the steps it was given.
+    cfg = with_budget(cfg, int(env.mdp.free.sum()))
     q = QNetwork(env.obs_dim, cfg.hidden, env.num_actions).to(device)
     if init is not None:
         q.load_state_dict(init)
