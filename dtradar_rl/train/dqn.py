@@ -149,7 +149,7 @@ def _set_up(
     env = _make_env(cfg, ds, normalizer, pair, device)
     # The default budget (0) grows with the twin's free cells (the static map's on a moving twin); from here on the
     # run, its checkpoints and config.json hold the steps it was given.
-    cfg = with_budget(cfg, int(env.mdp.free.sum()))
+    cfg = with_budget(cfg, int(env.mdp.free.sum()), moving=ds.is_moving)
     q = QNetwork(env.obs_dim, cfg.hidden, env.num_actions).to(device)
     if init is not None:
         q.load_state_dict(init)

@@ -15,6 +15,8 @@ def test_the_default_budget_is_the_papers_up_to_1200_free_cells_then_500_steps_p
     assert budget_for(592) == budget_for(1_200) == 600_000  # the cubicle; the largest twin 600K covers
     assert budget_for(1_950) == 975_000  # Dallas Q3
     assert budget_for(3_069) == 1_534_500  # Munich
+    assert budget_for(592, moving=True) == 1_200_000  # the cubicle's movers
+    assert budget_for(1_950, moving=True) == 1_950_000  # Dallas Q3's
 
 
 def test_only_the_default_preset_has_the_growing_budget():
@@ -28,6 +30,7 @@ def test_only_the_default_preset_has_the_growing_budget():
 def test_a_budget_given_is_kept_and_the_default_one_is_resolved_from_the_free_cells():
     assert with_budget(config_for(total_env_steps=1234), 10_000).total_env_steps == 1234
     assert with_budget(config_for(), 3_069).total_env_steps == 1_534_500
+    assert with_budget(config_for(), 3_069, moving=True).total_env_steps == 3_069_000
 
 
 def test_a_negative_budget_is_refused_and_zero_means_the_default():
