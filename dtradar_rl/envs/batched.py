@@ -26,8 +26,9 @@ A step reads the blocked masks of this snapshot and the next, and the observatio
 ``[T, cells]`` tables (row ``t * cells + cell``); ``info`` adds ``mover_collision``, ``mover_hit`` and ``t``. Random
 pairs are connected on the static map; whether the movers leave the target reachable in time is not checked here (the
 evaluation's pairs are, :meth:`~dtradar_rl.task.grid_mdp.MovingGridMDP.sample_episodes`). The ``geodesic`` shaping
-and :meth:`BatchedNavEnv.shortest_moves` use the static map's breadth-first distance (movers ignored; still a
-potential, so the optimum is unchanged). On a static twin none of this runs: the step is the one above, op for op.
+uses the static map's breadth-first distance (movers ignored; still a potential, so the optimum is unchanged);
+:meth:`BatchedNavEnv.shortest_moves` the shortest paths in time, which meet no mover. On a static twin none of this
+runs: the step is the one above, op for op.
 """
 
 from __future__ import annotations
@@ -372,19 +373,22 @@ class BatchedNavEnv(FastPathMixin, AugmentationMixin, ResetChecksMixin, MovesMix
 
     def shortest_moves(self) -> torch.Tensor:
         """``bool[num_envs, 4]``: the moves that take each robot one cell closer to its target along a breadth-first
-        shortest path of the map the episode is played on (with obstacle augmentation, the robot's augmented grid).
+        shortest path of the map the episode is played on (with obstacle augmentation, the robot's augmented grid);
+        on a moving twin ``bool[num_envs, num_actions]``, the actions along a shortest path in time that meet no
+        mover (:meth:`_space_time_shortest_moves`).
 
         This is the twin's own answer, known because the table is: :mod:`dtradar_rl.train.dqn` uses it as the expert of
         a large-margin loss (``--expert-weight``), e.g. when fine-tuning on a changed twin
         (:mod:`dtradar_rl.experiments.adapt`). A robot with no such move (cut off from its target) gets an all-false
-        row. Needs the ``geodesic`` reward, whose distance tables it reads. On a moving twin: the static map's
-        moves (movers ignored)."""
+        row. Needs the ``geodesic`` reward, whose distance tables it reads."""
         if self.potential != "geodesic":
             raise InvalidCoordinatesError(
                 "shortest moves read the breadth-first distance tables of the geodesic "
                 f"reward; this env uses {self.reward_name!r}",
                 hint="use reward='geodesic'",
             )
+        if self.moving:
+            return self._space_time_shortest_moves()
         nxt = self.next_cell[self.cell]  # [N, 4]; a colliding move stays on the cell, so it never gets closer
         if self.aug_obstacles:
             here, there = self.adist.gather(1, self.cell[:, None]), self.adist.gather(1, nxt)

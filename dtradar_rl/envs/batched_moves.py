@@ -66,6 +66,32 @@ class MovesMixin:
         self.t = t1
         return nxt, collision | mover_collision, mover_collision, mover_hit
 
+    def _space_time_shortest_moves(self) -> torch.Tensor:
+        """``bool[num_envs, num_actions]`` on a moving twin: the actions along a shortest path in time from each
+        robot's ``(cell, snapshot)`` to its target (the search of :mod:`dtradar_rl.task.space_time` with free
+        waiting, whose tables are made for the target pool at the first call). An action is one when it neither
+        collides (a wall, an extra obstacle, a mover, a mover coming the other way) nor leaves the robot where a mover
+        walks onto it, and its ``(cell, next snapshot)`` is one step closer: the four moves, and the wait with
+        ``wait_action``. The extra obstacles are not in the search: a shortest move into one is left out, and a robot
+        they leave no shortest move gets an all-false row, as does one on its target."""
+        cells = self.mdp.num_cells
+        if getattr(self, "_st_dist", None) is None or self._st_dist.shape[0] < self.pool.numel():
+            tables = self.mdp.space_time_distances_many(self.pool.cpu().numpy(), "free")  # int32[P, T, cells]
+            # int16 rows of t * cells + cell: Dallas Q3's 1 950 targets x 50 snapshots take 0.7 GB, not 1.4
+            self._st_dist = self._tensor(tables.reshape(tables.shape[0], -1).astype(np.int16), torch.int16)
+        cell = self.cell[:, None].expand(-1, self.num_actions)
+        a = torch.arange(self.num_actions, device=self.cell.device).expand_as(cell)
+        nxt, collision = self._moves(cell, a)
+        if self.aug_obstacles:
+            collision = collision | self.extra.gather(1, nxt)
+        t = self.t[:, None]
+        now, base = t * cells, self.t_next[t] * cells
+        swap = self.covered[now + nxt] & self.covered[base + cell]  # a mover coming the other way
+        ok = ~collision & ~(self.covered[base + nxt] | swap)  # no collision, and no mover walks onto the robot
+        here = self._st_dist[self.tpool[:, None], now + cell].int()
+        there = self._st_dist[self.tpool[:, None], base + nxt].int()
+        return ok & (there >= 0) & (there == here - 1)
+
     def _mover_penalised(self, collision, mover_collision, mover_hit) -> torch.Tensor:
         """The collision term of a moving twin's step: 1 for a wall bump, ``mover_penalty`` for meeting a mover
         (bools while it is 1, so the reward's ops are the ones they were)."""

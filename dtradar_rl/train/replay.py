@@ -10,7 +10,7 @@ import torch
 
 class ReplayBuffer:
     """A ring buffer of transitions ``(obs, action, reward, next_obs, terminated, expert)`` as preallocated tensors
-    (``expert``: ``bool[4]``, the moves a breadth-first shortest path would take; kept, and allocated, only when
+    (``expert``: ``bool[4]`` or ``bool[5]``, the actions a shortest path would take; kept, and allocated, only when
     :meth:`add` is given them, else ``None``)."""
 
     def __init__(self, capacity: int, obs_dim: int, device: torch.device):
@@ -28,8 +28,8 @@ class ReplayBuffer:
         self.obs[idx], self.next_obs[idx] = obs, next_obs
         self.action[idx], self.reward[idx], self.terminated[idx] = action, reward, terminated.float()
         if expert is not None:
-            if self.expert is None:
-                self.expert = torch.zeros((self.capacity, 4), dtype=torch.bool, device=self.obs.device)
+            if self.expert is None:  # one column per expert action: 4 moves, 5 with a moving twin's wait
+                self.expert = torch.zeros((self.capacity, expert.shape[1]), dtype=torch.bool, device=self.obs.device)
             self.expert[idx] = expert
         self.ptr = (self.ptr + n) % self.capacity
         self.size = min(self.size + n, self.capacity)
@@ -66,7 +66,8 @@ class ReplayBuffer:
         for k in ("obs", "next_obs", "action", "reward", "terminated"):
             getattr(self, k)[:n] = s[k]
         if "expert" in s:
-            self.expert = torch.zeros((self.capacity, 4), dtype=torch.bool, device=self.obs.device)
+            width = s["expert"].shape[1]
+            self.expert = torch.zeros((self.capacity, width), dtype=torch.bool, device=self.obs.device)
             self.expert[:n] = s["expert"]
 
 

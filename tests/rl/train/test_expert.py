@@ -113,3 +113,29 @@ def test_training_with_the_expert_loss_learns_the_shortest_moves(tmp_path):
         load_policy(res.checkpoint), load_dataset("synthetic-12x8/blueprint"), pairs=100, seed=0, latency=False
     )
     assert m.success_rate >= 0.9 and m.spl >= 0.85
+
+
+@pytest.mark.parametrize("wait", [True, False])
+def test_on_a_moving_twin_the_shortest_moves_reach_the_target_in_time_and_meet_no_mover(wait):
+    ds = load_dataset("synthetic-moving-12x8/blueprint")
+    env = BatchedNavEnv.from_dataset(ds, 64, obs="neighbors", reward="geodesic", seed=5, wait_action=wait)
+    env.reset()
+    moves = env.shortest_moves()
+    assert moves.shape == (64, 5 if wait else 4)
+    cells = env.mdp.num_cells
+    dist = env._st_dist[env.tpool, env.t * cells + env.cell].long()
+    # with free waiting every robot whose target the movers leave reachable has a shortest action; without the wait
+    # action a robot that must wait in the open has none, so it is left out of the walk
+    walking = (dist > 0) & moves.any(1)
+    assert bool(walking.any()) and (not wait or bool(walking[dist > 0].all()))
+    done = ~walking
+    for step in range(1, int(dist[walking].max()) + 1):
+        moves = env.shortest_moves()
+        stuck = ~done & ~moves.any(1)
+        done |= stuck  # only without the wait action: a wait in the open was the shortest way
+        assert wait is False or not bool(stuck.any())
+        _, _, terminated, _, info = env.step(moves.float().argmax(1))
+        assert not bool((info["collision"] | info["mover_hit"])[~done].any()), "a shortest move met a mover"
+        assert bool((terminated == (dist == step))[~done].all())
+        done |= terminated
+    assert bool(done.all())
