@@ -19,7 +19,7 @@ from dtradar_rl.train.saved_runs import load_policy
         ({"lr": 0.0}, "--lr"),
         ({"lr": -1e-3}, "--lr"),
         ({"max_steps": -5}, "--max-steps"),
-        ({"total_env_steps": 0}, "--total-env-steps"),
+        ({"total_env_steps": -1}, "--total-env-steps"),
         ({"gamma": 1.0}, "--gamma"),
         ({"num_envs": 0}, "--num-envs"),
         ({"eps_end": 1.5}, "--eps-end"),
