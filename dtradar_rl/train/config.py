@@ -108,8 +108,9 @@ class DQNConfig(TwinConfig):
     """fraction of the budget over which exploration decays linearly from eps_start to eps_end"""
     expert_weight: float = 1.0
     """weight of a large-margin loss towards the training twin's breadth-first shortest moves (DQfD's; 0 = off, plain
-    DQN). The twin's map is known in training, as the geodesic reward already uses it; the agent still acts from its
-    observation alone. On by default (the margin preset); make adapt uses it to fine-tune fast"""
+    DQN); on a moving twin the actions of a shortest path in time, which meet no mover. The twin's map is known in
+    training, as the geodesic reward already uses it; the agent still acts from its observation alone. On by default
+    (the margin preset); make adapt uses it to fine-tune fast"""
     expert_margin: float = 1.0
     """margin by which the expert loss wants a shortest move's value above every other move's"""
     max_grad_norm: float = 10.0
