@@ -1,7 +1,8 @@
 """One navigation table: every twin x {the default agent, SB3 DQN, the classical planner} x measurement noise.
 
 For each scene and seed, train each ``--presets`` agent (default: ``DEFAULT_PRESET``) on the blueprint for ``--steps``
-(the paper's 600 K), and Stable-Baselines3's DQN with its defaults on our gymnasium env (seed 0, capped at
+(default 0: each preset's own budget, the default's growing with the twin's free cells), and Stable-Baselines3's DQN
+with its defaults on our gymnasium env (seed 0, capped at
 ``--sb3-seconds`` of wall time: what a user would otherwise run); then evaluate them and the fingerprint +
 breadth-first planner on 500 seeded pairs of the blueprint and the dynamic twin (where the scene has one) under
 every ``--noise`` level, and, where ``<scene>-txpose`` was built (``python -m dtradar_data build --scene <scene>
@@ -37,7 +38,7 @@ from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.runs import run_dir
 from dtradar_rl.task.runtime import describe, machine
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.config import DEFAULT_PRESET, config_for
+from dtradar_rl.train.config import DEFAULT_PRESET, PAPER_BUDGET, config_for
 from dtradar_rl.train.dqn import train
 from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.plots import _save, plt
@@ -61,7 +62,7 @@ def trained(scene: str, seed: int, preset: str, steps: int, runs: str, threads: 
         preset,
         scene=scene,
         seed=seed,
-        total_env_steps=steps,
+        **({"total_env_steps": steps} if steps else {}),  # 0: the preset's own budget
         out=str(out),
         verbose=False,
         threads=threads,
@@ -168,7 +169,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
     ap.add_argument("--presets", nargs="+", default=[DEFAULT_PRESET], help="our agents, side by side")
     ap.add_argument("--preset", dest="presets", action="store", type=lambda p: [p], help=argparse.SUPPRESS)
-    ap.add_argument("--steps", type=int, default=600_000)
+    ap.add_argument(
+        "--steps", type=int, default=0, help="budget of our agents (0: each preset's own; SB3's: the paper's 600K)"
+    )
     ap.add_argument("--noise", nargs="+", default=["none", "realistic"])
     ap.add_argument("--pairs", type=int, default=500)
     ap.add_argument("--sb3-seconds", type=float, default=300.0, help="wall-time cap of each SB3 run (0 = no SB3)")
@@ -201,7 +204,7 @@ def _train_all(args) -> dict[tuple, tuple[str, float | None]]:
     with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {
             job: (
-                pool.submit(sb3_trained, job[0], job[1], args.steps, args.sb3_seconds, args.runs)
+                pool.submit(sb3_trained, job[0], job[1], args.steps or PAPER_BUDGET, args.sb3_seconds, args.runs)
                 if job[2] == SB3
                 else pool.submit(trained, *job, args.steps, args.runs, args.threads)
             )
@@ -284,11 +287,15 @@ def _pm(values, fmt="{:.3f}"):
     return fmt.format(v.mean()) + (f" ± {fmt.format(v.std())}" if v.size > 1 else "")
 
 
+def _budget(steps: int) -> str:
+    return f"{steps:,} training steps" if steps else "each preset's own training budget"
+
+
 def markdown(result) -> str:
     a = result["args"]
     lines = [
         f"## Navigation on every twin ({a['pairs']} seeded pairs per twin, seeds {' '.join(map(str, a['seeds']))}, "
-        f"{a['steps']:,} training steps; {describe(result['machine']['start'])})",
+        f"{_budget(a['steps'])}; {describe(result['machine']['start'])})",
         "",
         f"`{result.get('command', 'python bench/bench_nav.py')}`."
         + (

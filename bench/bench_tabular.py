@@ -365,7 +365,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scenes", nargs="+", default=["cubicle", "dallas-q3"], help="twins with a dynamic variant")
     ap.add_argument("--learners", nargs="+", default=list(LEARNERS), choices=LEARNERS)
-    ap.add_argument("--steps", type=int, default=600_000, help="env steps per learner (the default DQN's budget)")
+    ap.add_argument("--steps", type=int, default=600_000, help="env steps per learner (the paper's budget)")
     ap.add_argument("--every", type=int, default=60_000, help="evaluate the greedy policy every this many env steps")
     ap.add_argument(
         "--early", type=int, nargs="*", default=[2_560, 5_120, 10_240, 20_480, 40_960], help="and at these env steps"
