@@ -35,6 +35,8 @@ class MovesMixin:
         self.wait_action = bool(wait_action)
         #: the collision penalty of a step that meets a mover, in units of the reward's (module docstring)
         self.mover_penalty = float(mover_penalty)
+        #: a moving twin's space-time distance tables, made at the first call of _space_time_shortest_moves
+        self._st_dist: torch.Tensor | None = None
         if not self.wait_action:
             self._step_cell, self._step_collides = self.next_cell, self.collides
             return
@@ -75,7 +77,7 @@ class MovesMixin:
         ``wait_action``. The extra obstacles are not in the search: a shortest move into one is left out, and a robot
         they leave no shortest move gets an all-false row, as does one on its target."""
         cells = self.mdp.num_cells
-        if getattr(self, "_st_dist", None) is None or self._st_dist.shape[0] < self.pool.numel():
+        if self._st_dist is None or self._st_dist.shape[0] < self.pool.numel():
             tables = self.mdp.space_time_distances_many(self.pool.cpu().numpy(), "free")  # int32[P, T, cells]
             # int16 rows of t * cells + cell: Dallas Q3's 1 950 targets x 50 snapshots take 0.7 GB, not 1.4
             self._st_dist = self._tensor(tables.reshape(tables.shape[0], -1).astype(np.int16), torch.int16)
