@@ -63,16 +63,23 @@ KILLED_PULL = textwrap.dedent("""
 
 
 def killed(script: str) -> subprocess.Popen:
-    """``script`` run in a process of its own, SIGKILLed once it prints ``midway`` (see :func:`wait_and_kill`)."""
+    """``script`` run in a process of its own, SIGKILLed once it prints ``midway`` (see :func:`wait_midway`, :func:`kill`)."""
     return subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def wait_and_kill(proc: subprocess.Popen) -> None:
+def wait_midway(proc: subprocess.Popen) -> None:
+    """Block until ``proc`` prints ``midway`` (its stage is made and held); fail with its stderr if it ends first."""
+    for line in proc.stdout:
+        if line.strip() == "midway":
+            return
+    kill(proc)
+
+
+def kill(proc: subprocess.Popen) -> None:
+    """SIGKILL ``proc`` (if still running) and check that the kill, not the process, ended it."""
     try:
-        for line in proc.stdout:
-            if line.strip() == "midway":
-                proc.send_signal(signal.SIGKILL)
-                break
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
         if proc.poll() is None:
@@ -91,9 +98,14 @@ def stages(work):
 def test_a_killed_builds_or_pulls_stage_is_removed_by_the_next_build_and_pull_but_never_a_live_one(
     root, tmp_path, monkeypatch
 ):
-    procs = [killed(KILLED_WRITE), killed(KILLED_PULL)]
-    for proc in procs:
-        wait_and_kill(proc)
+    # One after the other, each held while the next starts: a process that starts cleans the stages of those already
+    # killed (what this test checks below), so the write, killed first, would lose its stage to a slow-starting pull.
+    pull = killed(KILLED_PULL)
+    wait_midway(pull)
+    write = killed(KILLED_WRITE)
+    wait_midway(write)
+    for proc in (write, pull):
+        kill(proc)
     work = root / "work"
     left = stages(work)
     assert [n.split("-")[0] for n in left] == ["pull", "stage"], f"each killed process left its stage: {left}"
