@@ -63,7 +63,7 @@ KILLED_PULL = textwrap.dedent("""
 
 
 def killed(script: str) -> subprocess.Popen:
-    """``script`` run in a process of its own, held at ``midway`` (:func:`wait_midway`), then SIGKILLed (:func:`kill`)."""
+    """``script`` in a process of its own, held at ``midway`` (:func:`wait_midway`), then SIGKILLed (:func:`kill`)."""
     return subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
