@@ -9,7 +9,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-tx-shift bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -156,6 +156,10 @@ bench-radiomap:
 # Tracing time and memory per transmitter: a twin with its first 1..N transmitters, side by side -> results/bench_transmitters.*
 bench-transmitters:
 	$(PY) bench/bench_transmitters.py $(ARGS)
+
+# What a dynamic twin changes per transmitter and what it costs the agents and the planner -> results/bench_transmitter_shift.*
+bench-tx-shift:
+	$(PY) bench/bench_transmitter_shift.py $(ARGS)
 
 # Our DQN against Stable-Baselines3 DQN on the same twins, side by side -> results/bench_rl.*
 bench-rl:
