@@ -102,10 +102,12 @@ def test_a_killed_builds_or_pulls_stage_is_removed_by_the_next_build_and_pull_bu
     # killed (what this test checks below), so the write, killed first, would lose its stage to a slow-starting pull.
     pull = killed(KILLED_PULL)
     wait_midway(pull)
-    write = killed(KILLED_WRITE)
-    wait_midway(write)
-    for proc in (write, pull):
-        kill(proc)
+    try:
+        write = killed(KILLED_WRITE)
+        wait_midway(write)
+        kill(write)
+    finally:
+        kill(pull)  # never left sleeping, even when the write failed
     work = root / "work"
     left = stages(work)
     assert [n.split("-")[0] for n in left] == ["pull", "stage"], f"each killed process left its stage: {left}"
