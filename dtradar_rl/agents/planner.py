@@ -50,10 +50,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import shortest_path
 
 from dtradar_data.core.dataset import Dataset
+from dtradar_rl.agents.grid_search import GridSearch
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import flag_columns
 from dtradar_rl.task.grid_mdp import GridMDP
@@ -63,13 +62,6 @@ from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observ
 #: Observation columns of the cell's own radio features (``neighbors`` preset) with one transmitter; with several,
 #: :attr:`~dtradar_rl.task.observations.ObservationTable.radio_columns` (every transmitter's).
 RADIO_COLUMNS = slice(2, len(PAPER_COLUMNS))
-#: Replans run one compiled breadth-first search per robot (scipy) when they are few or the grid is large, else one
-#: frontier propagation for all robots at once (torch, one step per step of distance). Measured on one core (same
-#: distances both ways): one robot on a Dallas quadrant 16 ms batched against 1.2 ms compiled; 500 robots 113 ms
-#: against 222 ms on the cubicle (756 cells), 758 against 304 ms on Dallas Q3 (3 618), 2 090 against 496 ms on
-#: Munich (6 400).
-SMALL_REPLAN = 8
-LARGE_GRID = 2_000
 #: On a moving twin: earlier stands on a cell after which the robot leaves it by a random move (loop escape), and the
 #: extra steps of a detour around sensed cells worth taking rather than waiting on the static path. Chosen on the
 #: synthetic moving twins (12 x 8, 16 x 10, 42 x 18; 200 pairs): without the escape a robot in step with a mover
@@ -105,11 +97,7 @@ class FingerprintPlanner:
         self.next_cell = t(self.mdp.next_cell, torch.long)
         self.wall = t(self.mdp.collides, torch.bool)  # moves the blueprint itself forbids
         self.blocked = t(self.mdp.blocked.ravel(), torch.bool)
-        # the blueprint's moves between free cells, both ways: the graph of the compiled search
-        u = np.repeat(np.arange(self.mdp.num_cells), 4)
-        v = self.mdp.next_cell.ravel()
-        edge = (u != v) & self.mdp.free.ravel()[u] & self.mdp.free.ravel()[v]
-        self._edges = (u[edge], v[edge])
+        self.search = GridSearch(self.mdp, self.device)
         self.flags = flag_columns()
         self.meta: dict[str, Any] = {
             "dataset": {"name": blueprint.name, "version": blueprint.version},
@@ -236,53 +224,8 @@ class FingerprintPlanner:
 
     def _bfs(self, targets: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
         """``long[k, cells]`` breadth-first steps to ``targets`` on the map with ``extra`` cells blocked too
-        (-1: blocked or cut off). Distances are unique, so both ways of computing them give the same array."""
-        if targets.numel() <= SMALL_REPLAN or self.mdp.num_cells >= LARGE_GRID:
-            return self._bfs_each(targets, extra)
-        return self._bfs_batched(targets, extra)
-
-    def _bfs_each(self, targets: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
-        """One compiled breadth-first search per robot on the blueprint graph less its ``extra`` cells."""
-        u, v = self._edges
-        n = self.mdp.num_cells
-        out = np.full((targets.numel(), n), -1, dtype=np.int64)
-        for i, (t, ex) in enumerate(zip(targets.tolist(), extra.cpu().numpy())):
-            keep = ~ex[u] & ~ex[v]
-            # the target's own moves out, in case it sits on a cell the blueprint blocks (a dynamic twin's may)
-            out_of_t = self.mdp.next_cell[t][(self.mdp.next_cell[t] != t) & ~ex[self.mdp.next_cell[t]]]
-            rows = np.concatenate([u[keep], np.full(out_of_t.size, t)])
-            cols = np.concatenate([v[keep], out_of_t])
-            graph = csr_matrix((np.ones(rows.size, np.float32), (rows, cols)), shape=(n, n))
-            d = shortest_path(graph, method="D", unweighted=True, indices=t)
-            reached = np.isfinite(d) & ~ex
-            out[i, reached] = d[reached]
-            out[i, t] = 0
-        return torch.as_tensor(out, device=self.device)
-
-    def _bfs_batched(self, targets: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
-        """Frontier propagation on a padded grid, all robots at once."""
-        k, (h, w) = targets.numel(), self.mdp.blocked.shape
-        rows = torch.arange(k, device=self.device)
-        open_ = torch.zeros((k, h + 2, w + 2), dtype=torch.bool, device=self.device)
-        open_[:, 1:-1, 1:-1] = (~self.blocked[None] & ~extra).view(k, h, w)
-        dist = torch.full((k, h + 2, w + 2), -1, dtype=torch.long, device=self.device)
-        frontier = torch.zeros_like(open_)
-        ty, tx = targets // w + 1, targets % w + 1
-        frontier[rows, ty, tx] = True
-        open_[rows, ty, tx] = False
-        dist[rows, ty, tx] = 0
-        step = 0
-        while bool(frontier.any()):
-            step += 1
-            new = torch.zeros_like(frontier)
-            new[:, 1:-1, 1:-1] = (
-                frontier[:, :-2, 1:-1] | frontier[:, 2:, 1:-1] | frontier[:, 1:-1, :-2] | frontier[:, 1:-1, 2:]
-            )
-            new &= open_
-            open_ &= ~new
-            dist[new] = step
-            frontier = new
-        return dist[:, 1:-1, 1:-1].reshape(k, -1)
+        (-1: blocked or cut off): :class:`~dtradar_rl.agents.grid_search.GridSearch`."""
+        return self.search(targets, extra)
 
 
 #: The opposite of each action (X- <-> X+, Y- <-> Y+).

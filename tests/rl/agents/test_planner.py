@@ -40,5 +40,5 @@ def test_one_robots_compiled_search_and_the_batched_search_give_the_same_distanc
         extra[i, rng.choice(free, 6)] = True
         extra[i, t] = False
     t, ex = torch.as_tensor(targets), torch.as_tensor(extra)
-    each, batched = planner._bfs_each(t, ex), planner._bfs_batched(t, ex)
+    each, batched = planner.search.each(t, ex), planner.search.batched(t, ex)
     assert torch.equal(each, batched) and (each >= 0).sum() > targets.size

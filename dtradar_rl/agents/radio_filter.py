@@ -1,0 +1,286 @@
+"""The default agent: a localisation filter over the blueprint's radio fingerprints, acting on exact distances (QMDP).
+
+The robot is switched on somewhere and is never told where it is (:mod:`dtradar_rl.task.sensing`). It carries the
+blueprint twin as its map: every cell's radio fingerprint (what each transmitter's strongest path looks like there),
+which cells are blocked, and where each cell lies. At every step it
+
+1. **predicts** where its last move took it: the belief (a histogram over the map's cells) shifts one cell the way
+   it moved; after a bump it stays, and cells where the map has that move free lose weight (a new obstacle may stand
+   there, so not all of it: :data:`MAP_ERROR`); a move the map forbids keeps a little weight too (a dynamic twin may
+   have moved an object out of the way);
+2. **weighs** each cell by how well it explains what the robot senses now: the measured radio of every transmitter
+   against the cell's fingerprint, each quantity a Gaussian error with the receiver's noise (:attr:`FilterConfig.noise`)
+   plus a floor for what a twin's change does to it, circular for azimuths and phase, and robust (a quantity off by
+   more than :data:`CLIP` standard deviations counts as off by :data:`CLIP`: a changed twin's radio differs in places);
+   whether each transmitter is heard against whether the map hears it there; and the proximity sensor's four readings
+   against the map's obstacles around the cell;
+3. **acts** by QMDP (Littman et al. 1995): the move whose expected distance to the target, over the belief, is
+   smallest, with breadth-first distances on the map plus the obstacles it has sensed this episode; a move the
+   proximity sensor reports blocked is never taken. When the belief is sure of a cell (:data:`SURE`), a neighbour the
+   sensor reports blocked where the map has it free, or a move that bumped, is a new obstacle: it goes into the robot's
+   own map and the distances are replanned.
+
+Nothing is learnt: the filter's model is the blueprint (its fingerprints and obstacles) and the receiver's noise model.
+A decision is one Bayes update and one expectation over the map's cells, batched over robots in torch.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.errors import InvalidSettingError
+from dtradar_data.core.files import write_atomic
+from dtradar_rl.agents.grid_search import GridSearch
+from dtradar_rl.envs.honest import HonestNavEnv
+from dtradar_rl.task.grid_mdp import GridMDP
+from dtradar_rl.task.moving_masks import background
+from dtradar_rl.task.noise import noise_model
+from dtradar_rl.task.sensing import CIRCULAR, MEASURED, PER_TX, Readings, neighbours, sensing_for
+
+#: How far (in standard deviations) one quantity's mismatch counts at most: a changed twin's radio differs in places.
+CLIP = 3.0
+#: Each quantity's error floor on top of the receiver's noise: the change between the map and the navigated twin, in
+#: SI units (angles 2°, delay 2 ns, gain 2 dB, phase 20°).
+FLOOR = np.array([math.radians(2)] * 4 + [2e-9, 2.0, math.radians(20)])
+#: The weight of a reading the map cannot explain: a proximity reading or a heard flag against the map, a move the map
+#: forbids, a bump where the map has the move free (a twin's change; a wrong map costs a few steps, never the robot).
+MAP_ERROR = 0.05
+#: Log-weight floor below the best cell: no cell is ever ruled out for good, so a wrong belief recovers.
+FLOOR_LOG = 30.0
+#: Belief in one cell above which what the robot senses around it is taken as a fact about that cell.
+SURE = 0.9
+#: The format of a saved agent.
+FORMAT = "dtradar-radio-filter/1"
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """The settings of a :class:`RadioFilterAgent`: the sensing it acts from and the noise model its filter assumes."""
+
+    scene: str = "cubicle"
+    """scene whose blueprint is the agent's map"""
+    sensing: str = "radio"
+    """what the robot observes (dtradar_rl.task.sensing): radio, radio-no-proximity, no-angles, no-delay, no-gain,
+    no-phase, rssi or no-radio"""
+    noise: str = "realistic"
+    """the receiver noise the filter's likelihood assumes: none, realistic or 2x"""
+
+    def validate(self) -> FilterConfig:
+        s = sensing_for(self.sensing)
+        if s.privileged:
+            raise InvalidSettingError(
+                "the radio-filter agent acts from honest sensing; 'privileged' is the learnt agents' observation",
+                hint="pick an honest sensing (e.g. radio), or train a DQN for the privileged upper bound",
+            )
+        noise_model(self.noise)
+        return self
+
+
+class RadioFilterAgent:
+    """Histogram localisation over the blueprint's fingerprints + QMDP on breadth-first distances (module docstring).
+
+    It has the part of :class:`~dtradar_rl.agents.policy.Policy` the evaluation loop uses (``env_for``, ``act``,
+    ``obs_preset``, ``meta``) and keeps one belief per robot, started afresh whenever a robot is switched on."""
+
+    obs_preset = "honest"
+
+    def __init__(self, blueprint: Dataset, config: FilterConfig | None = None, device: str = "cpu"):
+        self.config = (config or FilterConfig()).validate()
+        self.sensing = sensing_for(self.config.sensing)
+        self.device = dev = torch.device(device)
+        blueprint = background(blueprint)  # a moving twin's static map
+        self.mdp = GridMDP.from_dataset(blueprint)
+        readings = Readings.from_dataset(blueprint)
+        t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=dev)
+        n = self.mdp.num_cells
+        free = self.mdp.free
+        self.measured = t(self.sensing.measured, torch.bool)
+        self.k = readings.transmitters
+        self.fingerprints = t(readings.radio)  # [cells, K, 7]
+        self.heard = t(readings.heard, torch.bool)
+        self.known = t(free, torch.bool)  # cells whose fingerprint the map has (a blocked cell's is unknown)
+        self.around = t(readings.blocked_around, torch.bool)  # [cells, 4] the map's obstacles around each cell
+        sigma = np.sqrt(noise_model(self.config.noise).sigmas() ** 2 + FLOOR**2)
+        self.inv_sigma = t(1.0 / sigma)
+        self.circular = t(CIRCULAR, torch.bool)
+        self.positions = t(readings.target_xy)
+        nbr = neighbours(blueprint.shape)
+        # prediction: the cell each move came from (-1: none), and the weight of that move on the map
+        prev = np.full((4, n), -1, np.int64)
+        weight = np.zeros((4, n), np.float32)
+        for a in range(4):
+            src = np.flatnonzero(nbr[:, a] >= 0)
+            prev[a, nbr[src, a]] = src
+            weight[a, nbr[src, a]] = np.where(free[nbr[src, a]], 1.0, MAP_ERROR)
+        self.prev, self.log_move = t(prev.clip(min=0), torch.long), t(np.log(np.maximum(weight, 1e-30)))
+        self.next_cell = t(self.mdp.next_cell, torch.long)
+        self.neighbour = t(nbr.clip(min=0), torch.long)
+        self.log_bump = t(np.where(self.mdp.collides, 0.0, math.log(MAP_ERROR)))  # [cells, 4]
+        self.log_prior = t(np.where(free, 0.0, math.log(MAP_ERROR)))
+        self.search = GridSearch(self.mdp, dev)
+        self.meta: dict[str, Any] = {
+            "dataset": {"name": blueprint.name, "version": blueprint.version},
+            "path": "radio-filter",
+            "sensing": self.sensing.name,
+            "stats": {},
+        }
+        self._n = -1
+
+    # -- the Policy interface used by dtradar_rl.evaluation.evaluate -------------------------------------------------
+    def env_for(self, ds: Dataset, num_envs: int, *, noise="none", seed: int = 0, **kwargs) -> HonestNavEnv:
+        self._start(num_envs)
+        if ds.transmitters != self.k:
+            raise InvalidSettingError(
+                f"the agent's map ({self.meta['dataset']['name']}) has {self.k} transmitter(s), {ds.name} has "
+                f"{ds.transmitters}",
+                hint="build the agent on a blueprint of the same deployment",
+            )
+        return HonestNavEnv.from_dataset(ds, num_envs, sensing=self.sensing, noise=noise, seed=seed, **kwargs)
+
+    def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
+        """One move per robot from its honest observation; ``shield`` is accepted and ignored (the proximity sensor
+        already keeps the robot out of what it senses)."""
+        obs = obs.to(self.device)
+        if obs.shape[0] != self._n:
+            self._start(obs.shape[0])
+        k4 = self.k * PER_TX
+        radio = obs[:, :k4].reshape(-1, self.k, PER_TX)
+        blocked_now = obs[:, k4 : k4 + 4] > 0.5
+        moved, last, fresh = obs[:, k4 + 4] > 0.5, obs[:, k4 + 5 : k4 + 9], obs[:, k4 + 9] > 0.5
+        self._predict(moved, last, fresh, obs[:, -2:])
+        self.log_belief += self._log_likelihood(radio[..., :-1], radio[..., -1] > 0.5, blocked_now)
+        top = self.log_belief.max(1, keepdim=True).values
+        self.log_belief = torch.maximum(self.log_belief - top, torch.full_like(top, -FLOOR_LOG))
+        belief = self.log_belief.exp()
+        belief /= belief.sum(1, keepdim=True)
+        self._sense_obstacles(belief, blocked_now, moved, last, fresh)
+        action = self._qmdp(belief, blocked_now)
+        self._last_action = action
+        return action
+
+    # -- the filter ----------------------------------------------------------------------------------------------------
+    def _predict(self, moved, last, fresh, target_xy) -> None:
+        if bool(fresh.any()):  # switched on: anywhere on the map
+            idx = torch.nonzero(fresh, as_tuple=True)[0]
+            self.log_belief[idx] = self.log_prior
+            self.target[idx] = torch.cdist(target_xy[idx], self.positions).argmin(1)
+            self.sensed[idx] = False
+            self._plan_target[idx] = -1
+        a = last.argmax(1)
+        went = last.any(1) & ~fresh
+        shift = went & moved
+        if bool(shift.any()):
+            idx = torch.nonzero(shift, as_tuple=True)[0]
+            src = self.prev[a[idx]]  # [k, cells]
+            lb = self.log_belief[idx].gather(1, src) + self.log_move[a[idx]]
+            self.log_belief[idx] = lb
+        bump = went & ~moved
+        if bool(bump.any()):
+            idx = torch.nonzero(bump, as_tuple=True)[0]
+            self.log_belief[idx] += self.log_bump[:, a[idx]].T
+
+    def _log_likelihood(self, measured, heard, blocked_now) -> torch.Tensor:
+        """``float32[n, cells]``: log p(reading | cell), up to a constant per robot."""
+        n = measured.shape[0]
+        out = torch.zeros((n, self.mdp.num_cells), device=self.device)
+        use = self.measured
+        for k in range(self.k):
+            # heard or not, against the map (a cell without a fingerprint explains either)
+            same = heard[:, k, None] == self.heard[None, :, k]
+            out += torch.where(same | ~self.known, 0.0, math.log(MAP_ERROR))
+            if not bool(use.any()):
+                continue
+            both = heard[:, k, None] & self.heard[None, :, k]  # [n, cells]
+            d = measured[:, None, k, :] - self.fingerprints[None, :, k, :]  # [n, cells, 7]
+            d = torch.where(self.circular, torch.remainder(d + math.pi, 2 * math.pi) - math.pi, d)
+            z2 = (d * self.inv_sigma).square().clamp(max=CLIP * CLIP)
+            ll = -0.5 * (z2 * use).sum(2)
+            unknown = -0.5 * CLIP * CLIP * float(use.sum())  # a cell without a fingerprint: as the worst match
+            out += torch.where(both, ll, torch.where(self.known, 0.0, unknown))
+        if self.sensing.proximity:
+            miss = (blocked_now[:, None, :] != self.around[None]).sum(2)  # [n, cells]
+            out += miss * math.log(MAP_ERROR)
+        return out
+
+    # -- acting --------------------------------------------------------------------------------------------------------
+    def _sense_obstacles(self, belief, blocked_now, moved, last, fresh) -> None:
+        """Obstacles the map lacks, where the belief is sure of the robot's cell: a neighbour sensed blocked, or the
+        cell a move just bumped into."""
+        p, cell = belief.max(1)
+        sure = p > SURE
+        new = torch.zeros_like(blocked_now)
+        if self.sensing.proximity:
+            new |= blocked_now & ~self.around[cell]
+        bumped = last.any(1) & ~moved & ~fresh
+        if bool(bumped.any()):  # the move bumped from where the robot is now (it did not move)
+            new |= (last > 0.5) & bumped[:, None] & ~self.around[cell]
+        new &= sure[:, None]
+        if bool(new.any()):
+            rows = torch.arange(len(cell), device=self.device)[:, None].expand(-1, 4)
+            self.sensed[rows[new], self.neighbour[cell][new]] = True
+            self.sensed[torch.arange(len(cell), device=self.device), self.target] = False
+
+    def _qmdp(self, belief, blocked_now) -> torch.Tensor:
+        stale = (self._plan_target != self.target) | (self.sensed != self._plan_sensed).any(1)
+        if bool(stale.any()):
+            self._dist[stale] = self.search(self.target[stale], self.sensed[stale])
+            self._plan_target, self._plan_sensed = self.target.clone(), self.sensed.clone()
+        dist = self._dist.float()
+        dist = torch.where(dist < 0, float(self.mdp.num_cells), dist)  # unreachable on the robot's map: far
+        here = dist  # a bump leaves the robot where it is, a step spent
+        cost = torch.stack([dist.gather(1, self.next_cell[:, a].expand_as(dist)) for a in range(4)], 2)
+        cost = torch.where(self.mdp_collides[None], here[..., None] + 1.0, cost)  # [n, cells, 4]
+        score = torch.einsum("nc,nca->na", belief, cost)
+        if self.sensing.proximity:
+            score = torch.where(blocked_now & ~blocked_now.all(1, keepdim=True), torch.inf, score)
+        return score.argmin(1)
+
+    @property
+    def mdp_collides(self) -> torch.Tensor:
+        return self.around
+
+    def _start(self, n: int) -> None:
+        self._n, dev, cells = n, self.device, self.mdp.num_cells
+        self.log_belief = self.log_prior.expand(n, cells).clone()
+        self.target = torch.zeros(n, dtype=torch.long, device=dev)
+        self.sensed = torch.zeros((n, cells), dtype=torch.bool, device=dev)
+        self._plan_target = torch.full((n,), -1, dtype=torch.long, device=dev)
+        self._plan_sensed = self.sensed.clone()
+        self._dist = torch.full((n, cells), -1, dtype=torch.long, device=dev)
+        self._last_action = torch.full((n,), -1, dtype=torch.long, device=dev)
+
+    # -- saving ----------------------------------------------------------------------------------------------------------
+    def save(self, path: str | Path) -> Path:
+        """``agent.json``: the format, the settings and the map (blueprint name and version) it was built on."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        record = {"format": FORMAT, "config": asdict(self.config), "map": self.meta["dataset"]}
+        record["observes"] = self.sensing.describe()
+        write_atomic(path, json.dumps(record, indent=2) + "\n")
+        return path
+
+
+def load_agent(path: str | Path, device: str = "cpu") -> RadioFilterAgent:
+    """The agent saved at ``path`` (``agent.json``), on the exact blueprint version it was built on."""
+    from dtradar_data.core.errors import CorruptDatasetError
+    from dtradar_rl.task.twins import load_dataset
+
+    try:
+        record = json.loads(Path(path).read_text())
+        if record.get("format") != FORMAT:
+            raise ValueError(f"format {record.get('format')!r}")
+        cfg = FilterConfig(**record["config"])
+        name, version = record["map"]["name"], record["map"]["version"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise CorruptDatasetError(
+            f"{path} is not a radio-filter agent ({e})", hint="build it again: make train SCENE=<scene>"
+        ) from e
+    return RadioFilterAgent(load_dataset(f"{name}@{version}"), cfg, device)
