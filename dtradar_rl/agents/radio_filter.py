@@ -43,7 +43,7 @@ from dtradar_rl.envs.honest import HonestNavEnv
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.moving_masks import background
 from dtradar_rl.task.noise import noise_model
-from dtradar_rl.task.sensing import CIRCULAR, MEASURED, PER_TX, Readings, neighbours, sensing_for
+from dtradar_rl.task.sensing import CIRCULAR, PER_TX, Readings, neighbours, sensing_for
 
 #: How far (in standard deviations) one quantity's mismatch counts at most: a changed twin's radio differs in places.
 CLIP = 3.0
@@ -134,7 +134,7 @@ class RadioFilterAgent:
         }
         self._n = -1
 
-    # -- the Policy interface used by dtradar_rl.evaluation.evaluate -------------------------------------------------
+    # -- the Policy interface used by dtradar_rl.evaluation.evaluate -----------------------------------------------
     def env_for(self, ds: Dataset, num_envs: int, *, noise="none", seed: int = 0, **kwargs) -> HonestNavEnv:
         self._start(num_envs)
         if ds.transmitters != self.k:
@@ -166,7 +166,7 @@ class RadioFilterAgent:
         self._last_action = action
         return action
 
-    # -- the filter ----------------------------------------------------------------------------------------------------
+    # -- the filter ------------------------------------------------------------------------------------------------
     def _predict(self, moved, last, fresh, target_xy) -> None:
         if bool(fresh.any()):  # switched on: anywhere on the map
             idx = torch.nonzero(fresh, as_tuple=True)[0]
@@ -210,7 +210,7 @@ class RadioFilterAgent:
             out += miss * math.log(MAP_ERROR)
         return out
 
-    # -- acting --------------------------------------------------------------------------------------------------------
+    # -- acting ----------------------------------------------------------------------------------------------------
     def _sense_obstacles(self, belief, blocked_now, moved, last, fresh) -> None:
         """Obstacles the map lacks, where the belief is sure of the robot's cell: a neighbour sensed blocked, or the
         cell a move just bumped into."""
@@ -257,7 +257,7 @@ class RadioFilterAgent:
         self._dist = torch.full((n, cells), -1, dtype=torch.long, device=dev)
         self._last_action = torch.full((n,), -1, dtype=torch.long, device=dev)
 
-    # -- saving ----------------------------------------------------------------------------------------------------------
+    # -- saving ----------------------------------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
         """``agent.json``: the format, the settings and the map (blueprint name and version) it was built on."""
         path = Path(path)
