@@ -53,11 +53,13 @@ import torch
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.agents.grid_search import GridSearch
+from dtradar_rl.agents.honest_reader import honest_reader
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.envs.memory import flag_columns
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.moving_masks import background
 from dtradar_rl.task.observations import PAPER_COLUMNS, Normalizer, build_observations, check_transmitters
+from dtradar_rl.task.sensing import sensing_for
 
 #: Observation columns of the cell's own radio features (``neighbors`` preset) with one transmitter; with several,
 #: :attr:`~dtradar_rl.task.observations.ObservationTable.radio_columns` (every transmitter's).
@@ -76,8 +78,17 @@ class FingerprintPlanner:
 
     obs_preset = "neighbors"
 
-    def __init__(self, blueprint: Dataset, normalizer: Normalizer | None = None, device: str = "cpu"):
+    def __init__(
+        self, blueprint: Dataset, normalizer: Normalizer | None = None, device: str = "cpu", sensing: str = "radio"
+    ):
         self.normalizer = normalizer or Normalizer.fit(blueprint)
+        #: honest sensing (:mod:`dtradar_rl.task.sensing`; the default): one-shot localisation by the most likely
+        #: fingerprint and the proximity sensor; ``privileged``: the nearest fingerprint of the ``neighbors``
+        #: observation and its neighbours' has-radio flags (radio of other cells of the navigated twin)
+        self.sensing = sensing_for(sensing)
+        self._honest = None if self.sensing.privileged else honest_reader(blueprint, sensing, device)
+        if self._honest is not None:
+            self.obs_preset = "honest"
         blueprint = background(blueprint)  # a moving twin's static map and fingerprints
         self.mdp = GridMDP.from_dataset(blueprint)
         self.device = torch.device(device)
@@ -103,6 +114,7 @@ class FingerprintPlanner:
             "dataset": {"name": blueprint.name, "version": blueprint.version},
             "stats": {},
             "path": "planner",
+            "sensing": self.sensing.name,
         }
         self.config = None
         self._n = -1
@@ -116,6 +128,8 @@ class FingerprintPlanner:
     def env_for(self, ds: Dataset, num_envs: int, **kwargs) -> BatchedNavEnv:
         self._start(num_envs)
         self.forget = ds.is_moving
+        if self._honest is not None:
+            return self._honest.env_for(ds, num_envs, **kwargs)
         return BatchedNavEnv.from_dataset(ds, num_envs, obs="neighbors", normalizer=self.normalizer, **kwargs)
 
     def observations(self, ds: Dataset):
@@ -128,26 +142,30 @@ class FingerprintPlanner:
             self._start(obs.shape[0])
         n = obs.shape[0]
         rows = torch.arange(n, device=self.device)
-        fp = obs[:, self.radio_columns]
-        gap = torch.cdist(fp, self.fingerprints)  # [n, fingerprints]
-        cell = self.cells[gap.argmin(1)]
-        target = torch.cdist(obs[:, -2:], self.positions).argmin(1)
+        if self._honest is not None:
+            fp, cell, target, occupied, stuck, blank = self._honest.read(obs, self._last_action)
+        else:
+            fp = obs[:, self.radio_columns]
+            gap = torch.cdist(fp, self.fingerprints)  # [n, fingerprints]
+            cell = self.cells[gap.argmin(1)]
+            target = torch.cdist(obs[:, -2:], self.positions).argmin(1)
+            # a collision: the same fingerprint after a move the plan expected to succeed
+            stuck = (self._last_action >= 0) & (fp == self._last_fp).all(1)
+            # a mover on the robot's cell blanks it (no position, no radio)
+            blank = (obs[:, : len(PAPER_COLUMNS)] == 0).all(1) & (self._last_action >= 0)
+            occupied = obs[:, self.flags] < 0.5  # [n, 4]
 
         if self.forget:  # a moving twin: plan on what is sensed now only
             self.sensed.zero_()
-        # a collision: the same fingerprint after a move the plan expected to succeed
-        stuck = (self._last_action >= 0) & (fp == self._last_fp).all(1)
         if self.forget and self.predict:
-            # a mover on the robot's cell blanks it (no position, no radio): any fingerprint would match by chance,
-            # so the robot believes it is where its last move led, and a blank twice is no collision
-            blank = (obs[:, : len(PAPER_COLUMNS)] == 0).all(1) & (self._last_action >= 0)
+            # a blank own cell: any fingerprint would match by chance, so the robot believes it is where its last
+            # move led, and a blank twice is no collision
             cell = torch.where(blank, self.next_cell[self._last_cell, self._last_action.clamp(min=0)], cell)
             stuck &= ~blank
         if bool(stuck.any()):
             r = rows[stuck]
             aimed = self.next_cell[self._last_cell[r], self._last_action[r]]
             self.sensed[r, aimed] = True
-        occupied = obs[:, self.flags] < 0.5  # [n, 4]
         nbr = self.next_cell[cell]
         hit = occupied & ~self.wall[cell]
         self.sensed[rows[:, None].expand(n, 4)[hit], nbr[hit]] = True
@@ -300,8 +318,8 @@ def _columns(cols: list[int], device: torch.device) -> slice | torch.Tensor:
     return torch.as_tensor(cols, dtype=torch.long, device=device)
 
 
-def planner_for_scene(scene: str, device: str = "cpu") -> FingerprintPlanner:
-    """The baseline with the blueprint of ``scene`` as its map and fingerprint table."""
+def planner_for_scene(scene: str, device: str = "cpu", sensing: str = "radio") -> FingerprintPlanner:
+    """The baseline with the blueprint of ``scene`` as its map and fingerprint table, observing with ``sensing``."""
     from dtradar_rl.task.twins import load_dataset
 
-    return FingerprintPlanner(load_dataset(f"{scene}/blueprint"), device=device)
+    return FingerprintPlanner(load_dataset(f"{scene}/blueprint"), device=device, sensing=sensing)

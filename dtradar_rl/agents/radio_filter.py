@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +41,10 @@ from dtradar_data.core.files import write_atomic
 from dtradar_rl.agents.grid_search import GridSearch
 from dtradar_rl.envs.honest import HonestNavEnv
 from dtradar_rl.task.grid_mdp import GridMDP
+from dtradar_rl.task.config import Config
 from dtradar_rl.task.moving_masks import background
 from dtradar_rl.task.noise import noise_model
+from dtradar_rl.task.runs import agent_path
 from dtradar_rl.task.sensing import CIRCULAR, PER_TX, Readings, neighbours, sensing_for
 
 #: How far (in standard deviations) one quantity's mismatch counts at most: a changed twin's radio differs in places.
@@ -62,8 +64,9 @@ FORMAT = "dtradar-radio-filter/1"
 
 
 @dataclass(frozen=True)
-class FilterConfig:
-    """The settings of a :class:`RadioFilterAgent`: the sensing it acts from and the noise model its filter assumes."""
+class FilterConfig(Config):
+    """Build the default agent of a scene: a localisation filter over its blueprint's radio fingerprints, acting on
+    exact distances (nothing to learn: its model is the map and the receiver's noise model)."""
 
     scene: str = "cubicle"
     """scene whose blueprint is the agent's map"""
@@ -72,8 +75,11 @@ class FilterConfig:
     no-phase, rssi or no-radio"""
     noise: str = "realistic"
     """the receiver noise the filter's likelihood assumes: none, realistic or 2x"""
+    out: str = ""
+    """where the agent is saved (default runs/<scene>/agent/agent.json)"""
 
     def validate(self) -> FilterConfig:
+        super().validate()
         s = sensing_for(self.sensing)
         if s.privileged:
             raise InvalidSettingError(
@@ -82,6 +88,10 @@ class FilterConfig:
             )
         noise_model(self.noise)
         return self
+
+    @property
+    def path(self) -> Path:
+        return Path(self.out) if self.out else agent_path(self.scene)
 
 
 class RadioFilterAgent:
@@ -96,6 +106,7 @@ class RadioFilterAgent:
         self.config = (config or FilterConfig()).validate()
         self.sensing = sensing_for(self.config.sensing)
         self.device = dev = torch.device(device)
+        self.blueprint = blueprint
         blueprint = background(blueprint)  # a moving twin's static map
         self.mdp = GridMDP.from_dataset(blueprint)
         readings = Readings.from_dataset(blueprint)
@@ -133,6 +144,11 @@ class RadioFilterAgent:
             "stats": {},
         }
         self._n = -1
+
+    @classmethod
+    def from_agent(cls, agent: RadioFilterAgent, sensing: str) -> RadioFilterAgent:
+        """The same agent (map, noise model) observing with another honest ``sensing``."""
+        return cls(agent.blueprint, replace(agent.config, sensing=sensing), str(agent.device))
 
     # -- the Policy interface used by dtradar_rl.evaluation.evaluate -----------------------------------------------
     def env_for(self, ds: Dataset, num_envs: int, *, noise="none", seed: int = 0, **kwargs) -> HonestNavEnv:
@@ -262,7 +278,8 @@ class RadioFilterAgent:
         """``agent.json``: the format, the settings and the map (blueprint name and version) it was built on."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        record = {"format": FORMAT, "config": asdict(self.config), "map": self.meta["dataset"]}
+        config = {k: v for k, v in asdict(self.config).items() if k != "out"}
+        record = {"format": FORMAT, "config": config, "map": self.meta["dataset"]}
         record["observes"] = self.sensing.describe()
         write_atomic(path, json.dumps(record, indent=2) + "\n")
         return path
@@ -284,3 +301,22 @@ def load_agent(path: str | Path, device: str = "cpu") -> RadioFilterAgent:
             f"{path} is not a radio-filter agent ({e})", hint="build it again: make train SCENE=<scene>"
         ) from e
     return RadioFilterAgent(load_dataset(f"{name}@{version}"), cfg, device)
+
+
+def build_agent(cfg: FilterConfig, device: str = "cpu") -> RadioFilterAgent:
+    """``make train``: the agent of ``cfg`` on its scene's blueprint, saved to ``cfg.path``; says what it built."""
+    import time
+
+    from dtradar_rl.task.twins import load_dataset
+
+    t0 = time.perf_counter()
+    agent = RadioFilterAgent(load_dataset(f"{cfg.scene}/blueprint"), cfg, device)
+    path = agent.save(cfg.path)
+    m = agent.meta["dataset"]
+    print(
+        f"agent: {path}\nmap: {m['name']} version {m['version']} ({int(agent.mdp.free.sum())} free cells, "
+        f"{agent.k} transmitter(s)); sensing {agent.sensing.name}: {agent.sensing.describe()}\n"
+        f"filter noise model: {cfg.noise}; nothing to learn (its model is the map and the receiver's noise), "
+        f"built in {time.perf_counter() - t0:.1f} s\nnext: make eval SCENE={cfg.scene}"
+    )
+    return agent

@@ -313,12 +313,24 @@ def evaluate_twins(
                 f" (shielded{noisy})" if sh else (f" ({noisy[2:]})" if noisy else "")
             )
             row = {"case": case, "dataset": ds.name, "version": ds.version, "shield": sh, "noise": noise}
+            row["sensing"] = sensing_of(policy)
             out.append(({**row, **metrics.to_dict()}, ds, roll))
     return out
 
 
+def sensing_of(policy) -> str:
+    """The sensing a policy acts from (:mod:`dtradar_rl.task.sensing`), as every results table names it: an honest
+    agent's own, and ``privileged`` for the learnt agents, whose observation presets hold the robot's ``x, y``
+    (``privileged (paper)`` for the paper's own state)."""
+    sensing = policy.meta.get("sensing")
+    if sensing:
+        return str(sensing)
+    return "privileged (paper)" if getattr(policy, "obs_preset", "") == "paper" else "privileged"
+
+
 # -- reports ------------------------------------------------------------------------------------------------------
 COLUMNS = (
+    ("sensing", "sensing", "{}"),
     ("pairs", "pairs", "{:d}"),
     ("success_rate", "success", "{:.3f}"),
     ("spl", "SPL", "{:.3f}"),

@@ -14,11 +14,13 @@ from dtradar_data.core.errors import DatasetNotFoundError, unknown_name
 from dtradar_data.core.ids import DATASET_VARIANTS, VARIANTS
 from dtradar_rl.agents.checkpoints import TRAINING_STATE
 from dtradar_rl.agents.planner import planner_for_scene
+from dtradar_rl.agents.radio_filter import RadioFilterAgent, load_agent
 from dtradar_rl.evaluation.evaluate import cross_matrix, evaluate_twins, write_results
 from dtradar_rl.evaluation.fixed_pair import evaluate_pair
 from dtradar_rl.task.config import Config, ConfigError, check_device, check_unique
 from dtradar_rl.task.noise import noise_model
-from dtradar_rl.task.runs import dqn_checkpoint, run_dir
+from dtradar_rl.task.runs import agent_path, dqn_checkpoint, run_dir
+from dtradar_rl.task.sensing import sensing_for
 from dtradar_rl.task.twins import check_scenes, load_dataset
 from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.figures import plot_bars
@@ -32,7 +34,14 @@ class EvalConfig(Config):
     scene: str = "cubicle"
     """scene whose twins are evaluated (synthetic = the 42x18 stand-in)"""
     checkpoint: str = ""
-    """model.pt to evaluate (default runs/<scene>/dqn/model.pt)"""
+    """the agent to evaluate: an agent.json (the default agent, default runs/<scene>/agent/agent.json: make train) or
+    a DQN's model.pt"""
+    sensing: str = ""
+    """evaluate the default agent with another honest sensing (radio, radio-no-proximity, no-angles, no-delay,
+    no-gain, no-phase, rssi, no-radio; default: the agent's own)"""
+    privileged: bool = True
+    """also report the learnt DQN of runs/<scene>/dqn/model.pt when it is trained (make train AGENT=dqn): privileged,
+    its observation holds the robot's x, y (an upper bound, labelled so)"""
     variants: tuple[str, ...] = ("blueprint", "dynamic")
     """twins to evaluate on (blueprint, dynamic, moving: the moving twin, `make dataset VARIANT=moving`)"""
     pairs: int = 500
@@ -47,9 +56,9 @@ class EvalConfig(Config):
     planner: bool = True
     """also report the classical baseline (fingerprint localisation + breadth-first replanning on the blueprint;
     see dtradar_rl.agents.planner)"""
-    noise: str = "none"
-    """measurement noise the robots observe with: none, realistic or 2x (see dtradar_rl.task.noise; seeded by
-    --seed)"""
+    noise: str = "realistic"
+    """measurement noise the robots' receivers measure with: none, realistic or 2x (see dtradar_rl.task.noise; seeded
+    by --seed)"""
     plot_paths: int = 6
     """navigation paths drawn over the coverage map per twin"""
     out: str = ""
@@ -73,6 +82,8 @@ class EvalConfig(Config):
         check_unique(self.variants, "variants")
         check_device(self.device)
         noise_model(self.noise)
+        if self.sensing:
+            sensing_for(self.sensing)
         return self
 
 
@@ -115,19 +126,41 @@ class CrossConfig(Config):
         return self
 
 
+def load_agent_or_policy(path: Path, device: str = "cpu", sensing: str = ""):
+    """The agent saved at ``path``: a radio-filter agent (``agent.json``; ``sensing`` overrides its own) or a DQN
+    policy (``model.pt``). A missing default agent says how to build it."""
+    if path.suffix == ".json":
+        if not path.exists():
+            raise DatasetNotFoundError(
+                f"no agent at {path}", hint=f"build the default agent first: make train SCENE={path.parent.parent.name}"
+            )
+        agent = load_agent(path, device)
+        if sensing and sensing != agent.sensing.name:
+            agent = RadioFilterAgent.from_agent(agent, sensing)
+        return agent
+    return load_policy(path, device)
+
+
 def run_eval(cfg: EvalConfig) -> str:
-    ckpt = Path(cfg.checkpoint or dqn_checkpoint(cfg.scene))
+    ckpt = Path(cfg.checkpoint or agent_path(cfg.scene))
     out = Path(cfg.out or run_dir(cfg.scene, "eval"))
-    policy = load_policy(ckpt, cfg.device)
+    policy = load_agent_or_policy(ckpt, cfg.device, cfg.sensing)
     for line in describe_checkpoint(policy, ckpt):
         print(line)
     if getattr(policy.config, "fixed_pair", False):
         return _eval_pair(cfg, policy, ckpt, out)
     rows = []
+    learnt = dqn_checkpoint(cfg.scene)
+    others = []
+    if cfg.privileged and ckpt.suffix == ".json" and learnt.exists():
+        others.append(("privileged DQN: ", load_policy(learnt, cfg.device), cfg.shield))
+    if cfg.planner:
+        others.append(("planner: ", planner_for_scene(cfg.scene, cfg.device), False))
     for row, ds, roll in evaluate_twins(
         policy,
         cfg.scene,
         cfg.variants,
+        label="radio filter: " if isinstance(policy, RadioFilterAgent) else "",
         pairs=cfg.pairs,
         seed=cfg.seed,
         max_steps=cfg.max_steps or None,
@@ -147,19 +180,19 @@ def run_eval(cfg: EvalConfig) -> str:
             )
         else:
             plot_paths(ds, roll.paths[:k], out / f"{stem}.png", successes=list(roll.success[:k]), title=title)
-    if cfg.planner:
+    for label, other, shield in others:
         rows += [
             row
             for row, _, _ in evaluate_twins(
-                planner_for_scene(cfg.scene, cfg.device),
+                other,
                 cfg.scene,
                 cfg.variants,
-                label="planner: ",
+                label=label,
                 pairs=cfg.pairs,
                 seed=cfg.seed,
                 max_steps=cfg.max_steps or None,
                 device=cfg.device,
-                shield=False,
+                shield=shield,
                 noise=cfg.noise,
             )
         ]
@@ -168,6 +201,7 @@ def run_eval(cfg: EvalConfig) -> str:
         "checkpoint": str(ckpt),
         "train": policy.config.to_dict(),
         "train_stats": policy.meta.get("stats", {}),
+        "sensing": {row["case"]: row["sensing"] for row in rows},
     }
     md = write_results(rows, out, config)
     print(md, end="")

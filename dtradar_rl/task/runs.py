@@ -1,7 +1,8 @@
 """Where runs go: every default output path of a job is built here, so ``runs/`` has one definition; and how a job
 holds its output folder while it writes it (:func:`held_out_folder`: one writer per folder).
 
-runs/<scene>/dqn/model.pt            make train (config.json, curves.csv, curves.png, last.pt beside it)
+runs/<scene>/agent/agent.json        make train: the default agent (radio filter; honest sensing)
+runs/<scene>/dqn/model.pt            make train AGENT=dqn (config.json, curves.csv, curves.png, last.pt beside it)
 runs/<scene>/eval/                   make eval
 runs/<scene>/adapt/                  make adapt
 runs/<scene>/offline/<algorithm>/    make offline
@@ -28,6 +29,11 @@ def run_dir(*parts: str) -> Path:
 def dqn_checkpoint(scene: str) -> Path:
     """The ``model.pt`` that ``make train SCENE=<scene>`` writes and ``make eval``/``adapt``/``logged`` read."""
     return run_dir(scene, "dqn", "model.pt")
+
+
+def agent_path(scene: str) -> Path:
+    """The ``agent.json`` that ``make train SCENE=<scene>`` writes (the default agent) and ``make eval`` reads."""
+    return run_dir(scene, "agent", "agent.json")
 
 
 @contextmanager
