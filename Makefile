@@ -78,17 +78,20 @@ publish:
 pull:
 	$(PY) -m dtradar_data pull $(NAME) $(ARGS)
 
-# Train the default agent on $(SCENE)'s blueprint twin -> runs/$(SCENE)/dqn/model.pt (ARGS="--preset paper" etc.);
-# VARIANT=moving trains it among the movers of the moving twin with $(MOVING_ARGS) -> runs/$(SCENE)/dqn-moving/model.pt:
-# the best measured among movers (docs/navigation.md, "Waiting, the clock and the mover penalty"): the cells up to 4
-# away sensed, a wait action, the schedule's phase, a 4x mover penalty, the default's margin loss (on a moving twin
-# towards the shortest paths in time, which meet no mover) and the default budget of a moving twin (twice the static
-# one: 1.2 M steps on the cubicle, 1.95 M on Dallas Q3).
+AGENT ?= radio-filter
 MOVING_ARGS ?= --sense-radius 4 --wait-action --clock sincos --mover-penalty 4
+# Build the default agent on $(SCENE)'s blueprint -> runs/$(SCENE)/agent/agent.json: a localisation filter over the
+# blueprint's radio fingerprints acting on exact distances, from honest sensing (own cell's radio, proximity, odometry;
+# never its position). AGENT=dqn trains the learnt DQN instead -> runs/$(SCENE)/dqn/model.pt (privileged: its
+# observation holds the robot's x, y; ARGS="--preset paper" etc.); VARIANT=moving trains that DQN among the movers of
+# the moving twin with $(MOVING_ARGS) -> runs/$(SCENE)/dqn-moving/model.pt: the best measured among movers
+# (docs/navigation.md, "Waiting, the clock and the mover penalty"): the cells up to 4 away sensed, a wait action, the
+# schedule's phase, a 4x mover penalty, the margin loss towards the shortest paths in time, twice the static budget.
 train:
-	$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving $(MOVING_ARGS) --out runs/$(SCENE)/dqn-moving) $(ARGS)
+	$(if $(or $(filter dqn,$(AGENT)),$(filter moving,$(VARIANT))),$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving $(MOVING_ARGS) --out runs/$(SCENE)/dqn-moving) $(ARGS),$(PY) -m dtradar_rl agent --scene $(SCENE) $(ARGS))
 
-# Evaluate runs/$(SCENE)/dqn/model.pt on the blueprint and dynamic twins, beside the classical planner; VARIANT=moving
+# Evaluate the default agent on the blueprint and dynamic twins under realistic receiver noise, beside the privileged
+# DQN (when trained) and the classical planner, each row naming its sensing; VARIANT=moving
 # adds the moving twin, and the agent trained among movers (runs/$(SCENE)/dqn-moving) when there is one -> runs/$(SCENE)/eval-moving
 eval:
 	$(PY) -m dtradar_rl eval --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variants blueprint dynamic moving) $(ARGS)
