@@ -40,8 +40,8 @@ from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.agents.grid_search import GridSearch
 from dtradar_rl.envs.honest import HonestNavEnv
-from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.config import Config
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.moving_masks import background
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import agent_path

@@ -36,6 +36,7 @@ def test_markdown_table_lists_every_case():
         [
             {
                 "case": "a -> b",
+                "sensing": "radio",
                 "pairs": 3,
                 "success_rate": 1.0,
                 "spl": 0.9,
@@ -46,8 +47,8 @@ def test_markdown_table_lists_every_case():
             }
         ]
     )
-    assert md.splitlines()[0].startswith("| case | pairs | success | SPL")
-    assert "| a -> b | 3 | 1.000 | 0.900 | 0.00 | 4.0 | 3.0 | - | - |" in md
+    assert md.splitlines()[0].startswith("| case | sensing | pairs | success | SPL")
+    assert "| a -> b | radio | 3 | 1.000 | 0.900 | 0.00 | 4.0 | 3.0 | - | - |" in md
     assert "decision p50 (ms) | p99 (ms)" in md.splitlines()[0]
 
 
