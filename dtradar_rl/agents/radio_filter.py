@@ -55,6 +55,9 @@ FLOOR = np.array([math.radians(2)] * 4 + [2e-9, 2.0, math.radians(20)])
 #: The weight of a reading the map cannot explain: a proximity reading or a heard flag against the map, a move the map
 #: forbids, a bump where the map has the move free (a twin's change; a wrong map costs a few steps, never the robot).
 MAP_ERROR = 0.05
+LOG_MAP_ERROR = math.log(MAP_ERROR)
+#: Elements of one chunk of robots' differences to every fingerprint (robots x cells x transmitters x quantities).
+CHUNK = 1 << 20
 #: Log-weight floor below the best cell: no cell is ever ruled out for good, so a wrong belief recovers.
 FLOOR_LOG = 30.0
 #: Belief in one cell above which what the robot senses around it is taken as a fact about that cell.
@@ -113,15 +116,20 @@ class RadioFilterAgent:
         t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=dev)
         n = self.mdp.num_cells
         free = self.mdp.free
-        self.measured = t(self.sensing.measured, torch.bool)
         self.k = readings.transmitters
-        self.fingerprints = t(readings.radio)  # [cells, K, 7]
         self.heard = t(readings.heard, torch.bool)
         self.known = t(free, torch.bool)  # cells whose fingerprint the map has (a blocked cell's is unknown)
         self.around = t(readings.blocked_around, torch.bool)  # [cells, 4] the map's obstacles around each cell
-        sigma = np.sqrt(noise_model(self.config.noise).sigmas() ** 2 + FLOOR**2)
-        self.inv_sigma = t(1.0 / sigma)
-        self.circular = t(CIRCULAR, torch.bool)
+        # the quantities measured, each in units of its standard deviation (the receiver's noise and the floor)
+        used = np.flatnonzero(self.sensing.measured)
+        inv_sigma = 1.0 / np.sqrt(noise_model(self.config.noise).sigmas() ** 2 + FLOOR**2)[used]
+        self.used = t(used, torch.long)
+        self.inv_sigma = t(inv_sigma)
+        self.scaled = t(readings.radio[..., used] * inv_sigma)  # [cells, K, u]
+        self.circular = t(CIRCULAR[used], torch.bool)
+        self.period = t(2 * math.pi * inv_sigma)
+        #: the radio term of a cell without a fingerprint (blocked on the map): the worst match of every quantity
+        self.unknown = -0.5 * CLIP * CLIP * len(used) * readings.transmitters
         self.positions = t(readings.target_xy)
         nbr = neighbours(blueprint.shape)
         # prediction: the cell each move came from (-1: none), and the weight of that move on the map
@@ -204,26 +212,34 @@ class RadioFilterAgent:
             self.log_belief[idx] += self.log_bump[:, a[idx]].T
 
     def _log_likelihood(self, measured, heard, blocked_now) -> torch.Tensor:
-        """``float32[n, cells]``: log p(reading | cell), up to a constant per robot."""
+        """``float32[n, cells]``: log p(reading | cell), up to a constant per robot; robots in chunks, so that the
+        differences to every fingerprint (``[robots, cells, K, quantities]``) stay small enough for the caches."""
         n = measured.shape[0]
-        out = torch.zeros((n, self.mdp.num_cells), device=self.device)
-        use = self.measured
-        for k in range(self.k):
-            # heard or not, against the map (a cell without a fingerprint explains either)
-            same = heard[:, k, None] == self.heard[None, :, k]
-            out += torch.where(same | ~self.known, 0.0, math.log(MAP_ERROR))
-            if not bool(use.any()):
-                continue
-            both = heard[:, k, None] & self.heard[None, :, k]  # [n, cells]
-            d = measured[:, None, k, :] - self.fingerprints[None, :, k, :]  # [n, cells, 7]
-            d = torch.where(self.circular, torch.remainder(d + math.pi, 2 * math.pi) - math.pi, d)
-            z2 = (d * self.inv_sigma).square().clamp(max=CLIP * CLIP)
-            ll = -0.5 * (z2 * use).sum(2)
-            unknown = -0.5 * CLIP * CLIP * float(use.sum())  # a cell without a fingerprint: as the worst match
-            out += torch.where(both, ll, torch.where(self.known, 0.0, unknown))
+        per_robot = self.mdp.num_cells * self.k * max(1, self.used.numel())
+        step = max(1, CHUNK // per_robot)
+        if n <= step:
+            return self._likelihood_chunk(measured, heard, blocked_now)
+        out = torch.empty((n, self.mdp.num_cells), device=self.device)
+        for i in range(0, n, step):
+            j = slice(i, i + step)
+            out[j] = self._likelihood_chunk(measured[j], heard[j], blocked_now[j])
+        return out
+
+    def _likelihood_chunk(self, measured, heard, blocked_now) -> torch.Tensor:
+        # heard or not, against the map (a cell without a fingerprint explains either)
+        mismatch = (heard[:, None, :] != self.heard[None]).sum(2)  # [n, cells]
+        out = torch.where(self.known, mismatch * LOG_MAP_ERROR, 0.0)
+        if self.used.numel():
+            # in units of each quantity's standard deviation; circular ones wrap with a period of 2 pi / sigma
+            z = measured[..., self.used] * self.inv_sigma  # [n, K, u]
+            d = z[:, None] - self.scaled[None]  # [n, cells, K, u]
+            d = torch.where(self.circular, d - self.period * torch.round(d / self.period), d)
+            z2 = d.square_().clamp_(max=CLIP * CLIP).sum(3)  # [n, cells, K]
+            both = heard[:, None, :] & self.heard[None]
+            ll = -0.5 * (z2 * both).sum(2)
+            out += torch.where(self.known, ll, self.unknown)
         if self.sensing.proximity:
-            miss = (blocked_now[:, None, :] != self.around[None]).sum(2)  # [n, cells]
-            out += miss * math.log(MAP_ERROR)
+            out += (blocked_now[:, None, :] != self.around[None]).sum(2) * LOG_MAP_ERROR
         return out
 
     # -- acting ----------------------------------------------------------------------------------------------------

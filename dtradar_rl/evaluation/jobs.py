@@ -171,7 +171,7 @@ def run_eval(cfg: EvalConfig) -> str:
         rows.append(row)
         k = min(cfg.plot_paths, len(roll.paths))
         out.mkdir(parents=True, exist_ok=True)
-        noisy = "" if cfg.noise == "none" else f"_noise-{cfg.noise}"
+        noisy = "" if cfg.noise == EvalConfig.noise else f"_noise-{cfg.noise}"  # the default level: no suffix
         stem = f"paths_{ds.name.split('/')[1]}{'_shielded' if row['shield'] else ''}{noisy}"
         title = f"{row['case']}: success {row['success_rate']:.2f}, SPL {row['spl']:.2f}"
         if ds.is_moving:  # the episodes in time, robots among the movers: an animation

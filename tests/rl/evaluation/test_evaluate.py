@@ -115,10 +115,11 @@ def test_cli_trains_then_evaluates_on_blueprint_and_dynamic(tmp_path, capsys):
 
     noisy = tmp_path / "eval-noise"
     argv = ["eval", "--scene", "synthetic-6x5", "--checkpoint", str(run / "model.pt"), "--pairs", "20"]
-    assert main([*argv, "--noise", "realistic", "--no-planner", "--out", str(noisy)]) == 0
+    assert main([*argv, "--noise", "2x", "--no-planner", "--out", str(noisy)]) == 0
     rows = json.loads((noisy / "results.json").read_text())["results"]
-    assert [r["case"].endswith("noise realistic)") for r in rows] == [True] * 4
-    assert {r["noise"] for r in rows} == {"realistic"} and (noisy / "paths_dynamic_noise-realistic.png").exists()
+    assert [r["case"].endswith("noise 2x)") for r in rows] == [True] * 4
+    assert {r["noise"] for r in rows} == {"2x"} and (noisy / "paths_dynamic_noise-2x.png").exists()
+    assert {r["sensing"] for r in rows} == {"privileged"}  # a DQN's observation holds the robot's x, y
     assert main([*argv, "--noise", "loud"]) == 2
     assert "unknown noise level 'loud'" in capsys.readouterr().err
 
