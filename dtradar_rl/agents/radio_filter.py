@@ -47,8 +47,9 @@ from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.runs import agent_path
 from dtradar_rl.task.sensing import CIRCULAR, PER_TX, Readings, neighbours, sensing_for
 
-#: How far (in standard deviations) one quantity's mismatch counts at most: a changed twin's radio differs in places.
-CLIP = 3.0
+#: How far (in squared standard deviations per measured quantity) one transmitter's mismatch counts at most: a
+#: changed twin's radio differs in places.
+TX_CLIP = 4.0
 #: Each quantity's error floor on top of the receiver's noise: the change between the map and the navigated twin, in
 #: SI units (angles 2°, delay 2 ns, gain 2 dB, phase 20°).
 FLOOR = np.array([math.radians(2)] * 4 + [2e-9, 2.0, math.radians(20)])
@@ -56,8 +57,8 @@ FLOOR = np.array([math.radians(2)] * 4 + [2e-9, 2.0, math.radians(20)])
 #: forbids, a bump where the map has the move free (a twin's change; a wrong map costs a few steps, never the robot).
 MAP_ERROR = 0.05
 LOG_MAP_ERROR = math.log(MAP_ERROR)
-#: Elements of one chunk of robots' differences to every fingerprint (robots x cells x transmitters x quantities).
-CHUNK = 1 << 20
+#: Elements of one chunk of robots' distances to every fingerprint (robots x cells x transmitters).
+CHUNK = 1 << 21
 #: Log-weight floor below the best cell: no cell is ever ruled out for good, so a wrong belief recovers.
 FLOOR_LOG = 30.0
 #: Belief in one cell above which what the robot senses around it is taken as a fact about that cell.
@@ -120,16 +121,23 @@ class RadioFilterAgent:
         self.heard = t(readings.heard, torch.bool)
         self.known = t(free, torch.bool)  # cells whose fingerprint the map has (a blocked cell's is unknown)
         self.around = t(readings.blocked_around, torch.bool)  # [cells, 4] the map's obstacles around each cell
+        self._heard_t, self._around_t = self.heard.float().T.contiguous(), self.around.float().T.contiguous()
+        self._heard_count, self._around_count = self._heard_t.sum(0), self._around_t.sum(0)
         # the quantities measured, each in units of its standard deviation (the receiver's noise and the floor)
         used = np.flatnonzero(self.sensing.measured)
         inv_sigma = 1.0 / np.sqrt(noise_model(self.config.noise).sigmas() ** 2 + FLOOR**2)[used]
         self.used = t(used, torch.long)
-        self.inv_sigma = t(inv_sigma)
-        self.scaled = t(readings.radio[..., used] * inv_sigma)  # [cells, K, u]
-        self.circular = t(CIRCULAR[used], torch.bool)
-        self.period = t(2 * math.pi * inv_sigma)
-        #: the radio term of a cell without a fingerprint (blocked on the map): the worst match of every quantity
-        self.unknown = -0.5 * CLIP * CLIP * len(used) * readings.transmitters
+        circ = CIRCULAR[used]
+        self._lin, self._circ = t(np.flatnonzero(~circ), torch.long), t(np.flatnonzero(circ), torch.long)
+        self._lin_scale = t(inv_sigma[~circ], torch.float64)
+        self._circ_scale = t(np.tile(inv_sigma[circ], 2), torch.float64)
+        fp = self._embed(t(readings.radio))  # [cells, K, e]
+        heard = t(readings.heard, torch.bool)
+        self.center = (fp * heard[..., None]).sum(0) / heard.sum(0).clamp(min=1)[:, None]  # [K, e]
+        self.fp = (fp - self.center) * heard[..., None]
+        self.fp2 = self.fp.square().sum(2)  # [cells, K]
+        #: the radio term of a cell without a fingerprint (blocked on the map): the worst match
+        self.unknown = -0.5 * TX_CLIP * len(used) * readings.transmitters
         self.positions = t(readings.target_xy)
         nbr = neighbours(blueprint.shape)
         # prediction: the cell each move came from (-1: none), and the weight of that move on the map
@@ -141,6 +149,8 @@ class RadioFilterAgent:
             weight[a, nbr[src, a]] = np.where(free[nbr[src, a]], 1.0, MAP_ERROR)
         self.prev, self.log_move = t(prev.clip(min=0), torch.long), t(np.log(np.maximum(weight, 1e-30)))
         self.next_cell = t(self.mdp.next_cell, torch.long)
+        self._next_flat = self.next_cell.reshape(-1)
+        self._bump_cost = t(self.mdp.collides, torch.float32)  # [cells, 4]
         self.neighbour = t(nbr.clip(min=0), torch.long)
         self.log_bump = t(np.where(self.mdp.collides, 0.0, math.log(MAP_ERROR)))  # [cells, 4]
         self.log_prior = t(np.where(free, 0.0, math.log(MAP_ERROR)))
@@ -213,10 +223,9 @@ class RadioFilterAgent:
 
     def _log_likelihood(self, measured, heard, blocked_now) -> torch.Tensor:
         """``float32[n, cells]``: log p(reading | cell), up to a constant per robot; robots in chunks, so that the
-        differences to every fingerprint (``[robots, cells, K, quantities]``) stay small enough for the caches."""
+        distances to every fingerprint (``[robots, cells, K]``) stay small enough for the caches."""
         n = measured.shape[0]
-        per_robot = self.mdp.num_cells * self.k * max(1, self.used.numel())
-        step = max(1, CHUNK // per_robot)
+        step = max(1, CHUNK // (self.mdp.num_cells * self.k))
         if n <= step:
             return self._likelihood_chunk(measured, heard, blocked_now)
         out = torch.empty((n, self.mdp.num_cells), device=self.device)
@@ -226,21 +235,30 @@ class RadioFilterAgent:
         return out
 
     def _likelihood_chunk(self, measured, heard, blocked_now) -> torch.Tensor:
-        # heard or not, against the map (a cell without a fingerprint explains either)
-        mismatch = (heard[:, None, :] != self.heard[None]).sum(2)  # [n, cells]
-        out = torch.where(self.known, mismatch * LOG_MAP_ERROR, 0.0)
-        if self.used.numel():
-            # in units of each quantity's standard deviation; circular ones wrap with a period of 2 pi / sigma
-            z = measured[..., self.used] * self.inv_sigma  # [n, K, u]
-            d = z[:, None] - self.scaled[None]  # [n, cells, K, u]
-            d = torch.where(self.circular, d - self.period * torch.round(d / self.period), d)
-            z2 = d.square_().clamp_(max=CLIP * CLIP).sum(3)  # [n, cells, K]
-            both = heard[:, None, :] & self.heard[None]
-            ll = -0.5 * (z2 * both).sum(2)
-            out += torch.where(self.known, ll, self.unknown)
+        # readings that disagree with the map, counted by products of 0/1 flags: sum(a) + sum(b) - 2 a.b
+        h = heard.float()
+        mismatch = h.sum(1, keepdim=True) + self._heard_count - 2 * h @ self._heard_t  # [n, cells]
         if self.sensing.proximity:
-            out += (blocked_now[:, None, :] != self.around[None]).sum(2) * LOG_MAP_ERROR
+            p = blocked_now.float()
+            mismatch = mismatch + p.sum(1, keepdim=True) + self._around_count - 2 * p @ self._around_t
+        # heard or not means nothing on a cell without a fingerprint (blocked on the map)
+        out = (mismatch - torch.where(self.known, 0.0, h.sum(1, keepdim=True) + self._heard_count)) * LOG_MAP_ERROR
+        if self.used.numel():
+            m = self._embed(measured) - self.center  # [n, K, e]
+            d2 = m.square().sum(2)[:, None, :] + self.fp2[None] - 2 * torch.einsum("nke,cke->nck", m, self.fp)
+            both = heard[:, None, :] & self.heard[None]  # [n, cells, K]
+            ll = -0.5 * (d2.clamp_(0, TX_CLIP * len(self.used)) * both).sum(2)
+            out += torch.where(self.known, ll.float(), self.unknown)
         return out
+
+    def _embed(self, raw: torch.Tensor) -> torch.Tensor:
+        """``float64[..., K, e]``: measured quantities (``[..., K, 7]``, SI units) in units of their standard
+        deviation, a circular one as its cosine and sine (their distance is the chord, the angle's error while small:
+        no wrap-around), so a squared distance to every fingerprint is one matrix product."""
+        x = raw[..., self.used].double()
+        lin = x[..., self._lin] * self._lin_scale
+        ang = x[..., self._circ]
+        return torch.cat([lin, torch.cat([ang.cos(), ang.sin()], -1) * self._circ_scale], -1)
 
     # -- acting ----------------------------------------------------------------------------------------------------
     def _sense_obstacles(self, belief, blocked_now, moved, last, fresh) -> None:
@@ -263,21 +281,16 @@ class RadioFilterAgent:
     def _qmdp(self, belief, blocked_now) -> torch.Tensor:
         stale = (self._plan_target != self.target) | (self.sensed != self._plan_sensed).any(1)
         if bool(stale.any()):
-            self._dist[stale] = self.search(self.target[stale], self.sensed[stale])
+            d = self.search(self.target[stale], self.sensed[stale]).float()
+            self._dist[stale] = torch.where(d < 0, float(self.mdp.num_cells), d)  # cut off on its map: far
             self._plan_target, self._plan_sensed = self.target.clone(), self.sensed.clone()
-        dist = self._dist.float()
-        dist = torch.where(dist < 0, float(self.mdp.num_cells), dist)  # unreachable on the robot's map: far
-        here = dist  # a bump leaves the robot where it is, a step spent
-        cost = torch.stack([dist.gather(1, self.next_cell[:, a].expand_as(dist)) for a in range(4)], 2)
-        cost = torch.where(self.mdp_collides[None], here[..., None] + 1.0, cost)  # [n, cells, 4]
-        score = torch.einsum("nc,nca->na", belief, cost)
+        # the expected distance after each move; a bump leaves the robot where it is, a step spent
+        n, cells = belief.shape
+        after = self._dist.index_select(1, self._next_flat).view(n, cells, 4)
+        score = torch.einsum("nc,nca->na", belief, after) + belief @ self._bump_cost
         if self.sensing.proximity:
             score = torch.where(blocked_now & ~blocked_now.all(1, keepdim=True), torch.inf, score)
         return score.argmin(1)
-
-    @property
-    def mdp_collides(self) -> torch.Tensor:
-        return self.around
 
     def _start(self, n: int) -> None:
         self._n, dev, cells = n, self.device, self.mdp.num_cells
@@ -286,7 +299,7 @@ class RadioFilterAgent:
         self.sensed = torch.zeros((n, cells), dtype=torch.bool, device=dev)
         self._plan_target = torch.full((n,), -1, dtype=torch.long, device=dev)
         self._plan_sensed = self.sensed.clone()
-        self._dist = torch.full((n, cells), -1, dtype=torch.long, device=dev)
+        self._dist = torch.zeros((n, cells), device=dev)
         self._last_action = torch.full((n,), -1, dtype=torch.long, device=dev)
 
     # -- saving ----------------------------------------------------------------------------------------------------
