@@ -13,9 +13,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import shortest_path
+from scipy.sparse.csgraph import dijkstra, shortest_path
 
 from dtradar_rl.task.grid_mdp import GridMDP
+from dtradar_rl.task.sensing import neighbours
 
 SMALL_REPLAN = 8
 LARGE_GRID = 2_000
@@ -32,6 +33,10 @@ class GridSearch:
         v = mdp.next_cell.ravel()
         edge = (u != v) & mdp.free.ravel()[u] & mdp.free.ravel()[v]
         self._edges = (u[edge], v[edge])
+        # every move inside the grid, blocked cells included, for the search that may cross the map's obstacles
+        nbr = neighbours(mdp.blocked.shape).ravel()
+        inside = nbr >= 0
+        self._all_edges = (u[inside], nbr[inside])
 
     def __call__(self, targets: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:
         """``long[k, cells]`` breadth-first steps to ``targets`` on the map with ``extra`` cells blocked too
@@ -56,6 +61,25 @@ class GridSearch:
             reached = np.isfinite(d) & ~ex
             out[i, reached] = d[reached]
             out[i, t] = 0
+        return torch.as_tensor(out, device=self.device)
+
+    def through_obstacles(self, targets: torch.Tensor, extra: torch.Tensor, cost: float) -> torch.Tensor:
+        """``float32[k, cells]``: the least cost to reach each target from every cell on the map less each robot's
+        ``extra`` cells, where a step into a free cell costs 1 and a step into a cell the map blocks ``cost``. With
+        ``cost`` above any free path's length these are the breadth-first distances wherever a free path exists, and
+        a finite way through the map's obstacles where none does (a changed twin may have freed a cell the map
+        blocks; the robot's proximity sensor tells it when it gets there). ``inf``: one of its ``extra`` cells."""
+        x, y = self._all_edges  # the move y -> x, searched from the target outwards: it costs entering x
+        n = self.mdp.num_cells
+        enter = np.where(self.mdp.free, 1.0, float(cost))
+        out = np.full((targets.numel(), n), np.inf, dtype=np.float32)
+        for i, (t, ex) in enumerate(zip(targets.tolist(), extra.cpu().numpy())):
+            keep = ~ex[x] & ~ex[y]
+            w = np.where(x[keep] == t, 1.0, enter[x[keep]])  # the target is where the robot stops: a step
+            graph = csr_matrix((w, (x[keep], y[keep])), shape=(n, n))
+            out[i] = dijkstra(graph, indices=t)
+            out[i, ex] = np.inf
+            out[i, t] = 0.0
         return torch.as_tensor(out, device=self.device)
 
     def batched(self, targets: torch.Tensor, extra: torch.Tensor) -> torch.Tensor:

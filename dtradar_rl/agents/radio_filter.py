@@ -63,6 +63,12 @@ CHUNK = 1 << 21
 FLOOR_LOG = 30.0
 #: Belief in one cell above which what the robot senses around it is taken as a fact about that cell.
 SURE = 0.9
+#: Moves back and forth in a row after which the robot takes a random move (:meth:`RadioFilterAgent._escape`), and
+#: the seed of those moves (restarted with every batch of episodes: evaluations repeat).
+ESCAPE_AFTER = 3
+ESCAPE_SEED = 0
+#: The opposite of each move (X- <-> X+, Y- <-> Y+).
+OPPOSITE = torch.tensor([1, 0, 3, 2])
 #: The format of a saved agent.
 FORMAT = "dtradar-radio-filter/1"
 
@@ -155,6 +161,10 @@ class RadioFilterAgent:
         self.log_bump = t(np.where(self.mdp.collides, 0.0, math.log(MAP_ERROR)))  # [cells, 4]
         self.log_prior = t(np.where(free, 0.0, math.log(MAP_ERROR)))
         self.search = GridSearch(self.mdp, dev)
+        # a step through a cell the map blocks costs more than any free path, so the robot plans through the map's
+        # obstacles only where no free path exists (a changed twin may have freed the cell it needs)
+        self._through = float(n)
+        self._far = float(n) * float(n)
         self.meta: dict[str, Any] = {
             "dataset": {"name": blueprint.name, "version": blueprint.version},
             "path": "radio-filter",
@@ -197,7 +207,26 @@ class RadioFilterAgent:
         belief /= belief.sum(1, keepdim=True)
         self._sense_obstacles(belief, blocked_now, moved, last, fresh)
         action = self._qmdp(belief, blocked_now)
-        self._last_action = action
+        return self._escape(action, last, moved, fresh, blocked_now)
+
+    def _escape(self, action, last, moved, fresh, blocked_now) -> torch.Tensor:
+        """A robot whose moves have gone back and forth :data:`ESCAPE_AFTER` times in a row (its odometry says so)
+        takes a seeded random move the proximity sensor allows: a belief that two places explain equally well, or a
+        changed twin that fools it, can hold a greedy robot between two cells for good; a move elsewhere reads
+        something new."""
+        a = last.argmax(1)
+        reversed_ = (
+            last.any(1) & moved & ~fresh & (self._prev_move >= 0) & (a == OPPOSITE[self._prev_move.clamp(min=0)])
+        )
+        self._reversals = torch.where(reversed_, self._reversals + 1, torch.zeros_like(self._reversals))
+        self._prev_move = torch.where(last.any(1) & moved & ~fresh, a, torch.full_like(a, -1))
+        stuck = self._reversals >= ESCAPE_AFTER
+        if bool(stuck.any()):
+            score = torch.rand(blocked_now.shape, generator=self._gen, device=self.device)
+            allowed = ~blocked_now if self.sensing.proximity else torch.ones_like(blocked_now)
+            allowed = allowed | ~allowed.any(1, keepdim=True)
+            action = torch.where(stuck, torch.where(allowed, score, -1.0).argmax(1), action)
+            self._reversals = torch.where(stuck, torch.zeros_like(self._reversals), self._reversals)
         return action
 
     # -- the filter ------------------------------------------------------------------------------------------------
@@ -281,8 +310,8 @@ class RadioFilterAgent:
     def _qmdp(self, belief, blocked_now) -> torch.Tensor:
         stale = (self._plan_target != self.target) | (self.sensed != self._plan_sensed).any(1)
         if bool(stale.any()):
-            d = self.search(self.target[stale], self.sensed[stale]).float()
-            self._dist[stale] = torch.where(d < 0, float(self.mdp.num_cells), d)  # cut off on its map: far
+            d = self.search.through_obstacles(self.target[stale], self.sensed[stale], cost=self._through)
+            self._dist[stale] = d.clamp(max=self._far)  # one of its sensed obstacles: as far as anything
             self._plan_target, self._plan_sensed = self.target.clone(), self.sensed.clone()
         # the expected distance after each move; a bump leaves the robot where it is, a step spent
         n, cells = belief.shape
@@ -300,7 +329,10 @@ class RadioFilterAgent:
         self._plan_target = torch.full((n,), -1, dtype=torch.long, device=dev)
         self._plan_sensed = self.sensed.clone()
         self._dist = torch.zeros((n, cells), device=dev)
-        self._last_action = torch.full((n,), -1, dtype=torch.long, device=dev)
+        self._prev_move = torch.full((n,), -1, dtype=torch.long, device=dev)
+        self._reversals = torch.zeros(n, dtype=torch.long, device=dev)
+        self._gen = torch.Generator(device=dev)
+        self._gen.manual_seed(ESCAPE_SEED)
 
     # -- saving ----------------------------------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
