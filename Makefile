@@ -9,7 +9,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-tx-shift bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-tabular bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-tx-shift bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-radio bench-tabular bench-offline-speed bench-gpu gpu-pack
 
 # List the targets (the first line of the comment above each one); `make` alone does the same.
 help:
@@ -195,6 +195,11 @@ bench-threads:
 # The default agent, SB3 DQN and the planner on every twin, with and without noise and a tx pose error -> results/bench_nav.*
 bench-nav:
 	$(PY) bench/bench_nav.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
+
+# What the radio contributes: the default agent on every twin with each sensing (radio, without each feature group, RSSI,
+# no radio) under noise none, realistic and 2x, localisation error along the episode -> results/bench_radio.*
+bench-radio:
+	$(PY) bench/bench_radio.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
 # GPU figures (tracing, batched env, training; CUDA beside the CPU) -> results/bench_gpu.*; on a GPU machine
 # run bash bench/gpu.sh after make gpu-pack here
