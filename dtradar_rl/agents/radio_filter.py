@@ -132,6 +132,7 @@ class RadioFilterAgent:
         self.around = t(readings.blocked_around, torch.bool)  # [cells, 4] the map's obstacles around each cell
         self._heard_t, self._around_t = self.heard.float().T.contiguous(), self.around.float().T.contiguous()
         self._heard_count, self._around_count = self._heard_t.sum(0), self._around_t.sum(0)
+        self._known_f = self.known.float()
         # the quantities measured, each in units of its standard deviation (the receiver's noise and the floor)
         used = np.flatnonzero(self.sensing.measured)
         inv_sigma = 1.0 / np.sqrt(noise_model(self.config.noise).sigmas() ** 2 + FLOOR**2)[used]
@@ -143,10 +144,12 @@ class RadioFilterAgent:
         fp = self._embed(t(readings.radio))  # [cells, K, e]
         heard = t(readings.heard, torch.bool)
         self.center = (fp * heard[..., None]).sum(0) / heard.sum(0).clamp(min=1)[:, None]  # [K, e]
-        self.fp = (fp - self.center) * heard[..., None]
-        self.fp2 = self.fp.square().sum(2)  # [cells, K]
+        fp = (fp - self.center) * heard[..., None]
+        self.fp = fp.permute(1, 2, 0).float().contiguous()  # [K, e, cells]
+        self.fp2 = fp.square().sum(2).T[:, None, :].float().contiguous()  # [K, 1, cells]
+        self._heard_f = heard.T[:, None, :].float().contiguous()
         #: the radio term of a cell without a fingerprint (blocked on the map): the worst match
-        self.unknown = -0.5 * TX_CLIP * len(used) * readings.transmitters
+        self._unknown = t(np.where(free, 0.0, -0.5 * TX_CLIP * len(used) * readings.transmitters))
         self.positions = t(readings.target_xy)
         nbr = neighbours(blueprint.shape)
         # prediction: the cell each move came from (-1: none), and the weight of that move on the map
@@ -267,20 +270,21 @@ class RadioFilterAgent:
         return out
 
     def _likelihood_chunk(self, measured, heard, blocked_now) -> torch.Tensor:
-        # readings that disagree with the map, counted by products of 0/1 flags: sum(a) + sum(b) - 2 a.b
+        # readings that disagree with the map, counted by products of 0/1 flags: sum(a) + sum(b) - 2 a.b; heard or
+        # not means nothing on a cell without a fingerprint (blocked on the map: its flags are all 0)
         h = heard.float()
-        mismatch = h.sum(1, keepdim=True) + self._heard_count - 2 * h @ self._heard_t  # [n, cells]
+        mismatch = h.sum(1, keepdim=True) * self._known_f + self._heard_count - 2 * h @ self._heard_t  # [n, cells]
         if self.sensing.proximity:
             p = blocked_now.float()
             mismatch = mismatch + p.sum(1, keepdim=True) + self._around_count - 2 * p @ self._around_t
-        # heard or not means nothing on a cell without a fingerprint (blocked on the map)
-        out = (mismatch - torch.where(self.known, 0.0, h.sum(1, keepdim=True) + self._heard_count)) * LOG_MAP_ERROR
+        out = mismatch * LOG_MAP_ERROR
         if self.used.numel():
-            m = self._embed(measured) - self.center  # [n, K, e]
-            d2 = m.square().sum(2)[:, None, :] + self.fp2[None] - 2 * torch.einsum("nke,cke->nck", m, self.fp)
-            both = heard[:, None, :] & self.heard[None]  # [n, cells, K]
-            ll = -0.5 * (d2.clamp_(0, TX_CLIP * len(self.used)) * both).sum(2)
-            out += torch.where(self.known, ll.float(), self.unknown)
+            # transmitter-major ([K, n, cells]): one batched product over the transmitters, no copy of the map
+            m = (self._embed(measured) - self.center).float().transpose(0, 1)  # [K, n, e]
+            d2 = torch.bmm(m, self.fp).mul_(-2).add_(self.fp2).add_(m.square().sum(2, keepdim=True))
+            d2 = d2.clamp_(0, TX_CLIP * len(self.used)).mul_(self._heard_f)  # a transmitter the map hears there
+            d2 = d2.mul_(h.T[:, :, None]).sum(0) if self.k > 1 else d2[0].mul_(h)  # ... and the robot hears
+            out += d2.mul_(-0.5).add_(self._unknown)
         return out
 
     def _embed(self, raw: torch.Tensor) -> torch.Tensor:
@@ -319,7 +323,7 @@ class RadioFilterAgent:
         # the expected distance after each move; a bump leaves the robot where it is, a step spent
         n, cells = belief.shape
         after = self._dist.index_select(1, self._next_flat).view(n, cells, 4)
-        score = torch.einsum("nc,nca->na", belief, after) + belief @ self._bump_cost
+        score = torch.bmm(belief[:, None, :], after)[:, 0] + belief @ self._bump_cost
         if self.sensing.proximity:
             score = torch.where(blocked_now & ~blocked_now.all(1, keepdim=True), torch.inf, score)
         return score.argmin(1)
