@@ -150,7 +150,10 @@ def markdown(report: dict) -> str:
 def verdicts(rows) -> list[str]:
     """The default agent (radio, realistic noise) against its goal on each twin, and radio against no radio."""
     out = ["### The default agent against its goals (radio, realistic noise)", ""]
-    out += ["| twin | success / SPL | goal | met | SPL without any radio | radio adds |", "|---|---|---|---|---|---|"]
+    out += [
+        "| twin | success / SPL | goal | met | SPL without any radio | radio adds | decision p50 / p99 (ms) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for scene, twin in dict.fromkeys((r["scene"], r["twin"]) for r in rows):
         r, bare = spl(rows, scene, twin, "radio", "realistic"), spl(rows, scene, twin, "no-radio", "realistic")
         if r is None:
@@ -159,9 +162,10 @@ def verdicts(rows) -> list[str]:
         met = r["success_rate"] >= g[0] and r["spl"] >= g[1]
         gap = "-" if bare is None else f"{r['spl'] - bare['spl']:+.3f}"
         miss = "yes" if met else f"no: success {r['success_rate'] - g[0]:+.3f}, SPL {r['spl'] - g[1]:+.3f}"
+        lat = "-" if r.get("latency_ms") is None else f"{r['latency_ms']:.2f} / {r['latency_p99_ms']:.2f}"
         out.append(
             f"| {scene}/{twin} | {r['success_rate']:.3f} / {r['spl']:.3f} | {g[0]} / {g[1]} | {miss} | "
-            f"{'-' if bare is None else format(bare['spl'], '.3f')} | {gap} |"
+            f"{'-' if bare is None else format(bare['spl'], '.3f')} | {gap} | {lat} |"
         )
     return out + [""]
 
@@ -182,6 +186,7 @@ def plots(report: dict, out: Path) -> list[Path]:
         ax.set_ylabel("SPL")
         ax.set_title(f"{scene}/{twin}", fontsize=9)
     axes[0, 0].legend(fontsize=7, ncol=len(noises))
+    fig.tight_layout()
     bars = out.with_suffix(".png")
     _save(fig, bars)
     fig, axes = plt.subplots(1, len(twins_), figsize=(3.2 * len(twins_), 3), squeeze=False, sharey=False)
@@ -195,6 +200,7 @@ def plots(report: dict, out: Path) -> list[Path]:
         ax.set_xlabel("step")
     axes[0, 0].set_ylabel("mean localisation error (m)")
     axes[0, 0].legend(fontsize=6)
+    fig.tight_layout()
     loc = out.with_name(out.name + "_localisation.png")
     _save(fig, loc)
     return [bars, loc]
@@ -228,6 +234,36 @@ def page(report: dict, path: Path, images: list[Path]) -> None:
     write_atomic(path, "\n".join(text))
 
 
+def merge(args) -> int:
+    """One report (JSON, Markdown, PNG and page) from the reports of several runs, in the order given."""
+    parts = [json.loads(Path(p).read_text()) for p in args.merge]
+    report = {
+        "rows": [r for p in parts for r in p["rows"]],
+        "localisation": [t for p in parts for t in p["localisation"]],
+        "command": "\n".join(p["command"] for p in parts),
+        "machine": parts[0]["machine"],
+        "machine_line": parts[0]["machine_line"],
+        "date": max(p["date"] for p in parts),
+        "pairs": parts[0]["pairs"],
+        "wall_s": sum(p["wall_s"] for p in parts),
+    }
+    return write(report, args)
+
+
+def write(report: dict, args) -> int:
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(out.with_suffix(".json"), json.dumps(report, indent=1) + "\n")
+    md = markdown(report)
+    write_atomic(out.with_suffix(".md"), md)
+    images = plots(report, out)
+    if args.page:
+        page(report, Path(args.page), images)
+    print(md, end="")
+    print(f"results: {out.with_suffix('.json')}, {out.with_suffix('.md')}, " + ", ".join(map(str, images)))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), help="twins (their blueprint and dynamic variants)")
@@ -241,7 +277,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-latency", dest="latency", action="store_false", help="skip the decision-time figures")
     ap.add_argument("--out", default="results/bench_radio", help="output stem (.json, .md, .png)")
     ap.add_argument("--page", default="", help="also write the docs' results page here (e.g. docs/results/radio.md)")
+    ap.add_argument("--merge", nargs="+", default=[], help="only merge these reports (.json of earlier runs) into one")
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge(args)
     if args.pairs < 1 or args.track_steps < 1 or args.track_pairs < 1:
         ap.error("--pairs, --track-steps and --track-pairs must be >= 1")
     t0 = time.perf_counter()
@@ -258,17 +297,7 @@ def main(argv: list[str] | None = None) -> int:
         pairs=args.pairs,
         wall_s=time.perf_counter() - t0,
     )
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(out.with_suffix(".json"), json.dumps(report, indent=1) + "\n")
-    md = markdown(report)
-    write_atomic(out.with_suffix(".md"), md)
-    images = plots(report, out)
-    if args.page:
-        page(report, Path(args.page), images)
-    print(md, end="")
-    print(f"results: {out.with_suffix('.json')}, {out.with_suffix('.md')}, " + ", ".join(map(str, images)))
-    return 0
+    return write(report, args)
 
 
 if __name__ == "__main__":
