@@ -34,12 +34,20 @@ def env_id(name: str) -> str:
     return f"dtradar/{scene}-{variant or 'blueprint'}-v0"
 
 
+def honest_env_id(name: str) -> str:
+    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-honest-v0"``: the twin with honest sensing."""
+    return env_id(name)[: -len("-v0")] + "-honest-v0"
+
+
 def register_dataset_envs(**kwargs) -> list[str]:
     """Register one env id per built dataset, plus ``dtradar/synthetic-{blueprint,dynamic}-v0`` and the moving twin
-    ``dtradar/synthetic-moving-blueprint-v0``; returns the ids.
+    ``dtradar/synthetic-moving-blueprint-v0``, and beside each its honest-sensing id
+    ``dtradar/<scene>-<variant>-honest-v0`` (:class:`~dtradar_rl.envs.honest_gym.HonestGymEnv`: the robot is never
+    told where it is); returns the ids.
 
-    ``kwargs`` (``obs``, ``reward``, ...) become the default arguments of every id; ``gym.make`` can override them.
-    Datasets are loaded when an env is made, not here. Registering again replaces the ids.
+    ``kwargs`` (``obs``, ``reward``, ...) become the default arguments of every ``-v0`` id (the privileged
+    observation presets); ``gym.make`` can override them. Datasets are loaded when an env is made, not here.
+    Registering again replaces the ids.
     """
     ids = []
     for name in ["synthetic/blueprint", "synthetic/dynamic", "synthetic-moving/blueprint", *built_datasets()]:
@@ -51,7 +59,10 @@ def register_dataset_envs(**kwargs) -> list[str]:
             kwargs={"dataset": name, **kwargs},
             disable_env_checker=True,
         )
-        ids.append(eid)
+        hid = honest_env_id(name)
+        gym.registry.pop(hid, None)
+        gym.register(id=hid, entry_point="dtradar_rl.envs.honest_gym:HonestGymEnv", kwargs={"dataset": name})
+        ids += [eid, hid]
     return ids
 
 
@@ -136,6 +147,7 @@ __all__ = [
     "built_datasets",
     "env_id",
     "make_twin_env",
+    "honest_env_id",
     "register_dataset_envs",
     "twin_env_spec",
     "twin_version",

@@ -107,3 +107,19 @@ def test_the_privileged_setting_is_refused_by_the_honest_env():
     ds = load_dataset("synthetic/blueprint")
     with pytest.raises(ValueError, match="privileged"):
         HonestNavEnv.from_dataset(ds, 1, sensing=SENSINGS["privileged"])
+
+
+def test_the_honest_gymnasium_env_plays_an_episode_to_its_target_without_telling_the_position():
+    import gymnasium as gym
+
+    from dtradar_rl.envs.registration import register_dataset_envs
+
+    register_dataset_envs()
+    env = gym.make("dtradar/synthetic-blueprint-honest-v0", noise="none")
+    obs, info = env.reset(seed=1, options={"start": (1, 1), "target": (3, 1)})
+    assert obs.shape == env.observation_space.shape and "x_m" not in info["names"]
+    assert obs[info["names"].index("switched_on")] == 1.0
+    obs, reward, terminated, truncated, step_info = env.step(1)  # X+
+    assert obs[info["names"].index("moved")] == 1.0 and obs[info["names"].index("last[X+]")] == 1.0
+    obs, reward, terminated, truncated, step_info = env.step(1)
+    assert terminated and step_info["is_success"]
