@@ -178,6 +178,8 @@ class RadioFilterAgent:
             "stats": {},
         }
         self._n = -1
+        #: forget sensed obstacles at every step (set by :meth:`env_for` on a moving twin)
+        self.forget = False
 
     @classmethod
     def from_agent(cls, agent: RadioFilterAgent, sensing: str) -> RadioFilterAgent:
@@ -186,7 +188,11 @@ class RadioFilterAgent:
 
     # -- the Policy interface used by dtradar_rl.evaluation.evaluate -----------------------------------------------
     def env_for(self, ds: Dataset, num_envs: int, *, noise="none", seed: int = 0, **kwargs) -> HonestNavEnv:
+        """The honest env of ``ds`` for ``num_envs`` robots (each switched on afresh). On a moving twin the robot
+        knows that things move around it (people, vehicles): it keeps only what it senses now as obstacles (a mover
+        sensed a step ago may have walked on), as the planner does."""
         self._start(num_envs)
+        self.forget = ds.is_moving
         if ds.transmitters != self.k:
             raise InvalidSettingError(
                 f"the agent's map ({self.meta['dataset']['name']}) has {self.k} transmitter(s), {ds.name} has "
@@ -273,7 +279,9 @@ class RadioFilterAgent:
         # readings that disagree with the map, counted by products of 0/1 flags: sum(a) + sum(b) - 2 a.b; heard or
         # not means nothing on a cell without a fingerprint (blocked on the map: its flags are all 0)
         h = heard.float()
-        mismatch = h.sum(1, keepdim=True) * self._known_f + self._heard_count - 2 * h @ self._heard_t  # [n, cells]
+        mismatch = torch.zeros((h.shape[0], self.mdp.num_cells), device=self.device)
+        if self.sensing.groups:  # with no radio at all the receiver is off: nothing is heard or not
+            mismatch += h.sum(1, keepdim=True) * self._known_f + self._heard_count - 2 * h @ self._heard_t
         if self.sensing.proximity:
             p = blocked_now.float()
             mismatch = mismatch + p.sum(1, keepdim=True) + self._around_count - 2 * p @ self._around_t
@@ -300,6 +308,8 @@ class RadioFilterAgent:
     def _sense_obstacles(self, belief, blocked_now, moved, last, fresh) -> None:
         """Obstacles the map lacks, where the belief is sure of the robot's cell: a neighbour sensed blocked, or the
         cell a move just bumped into."""
+        if self.forget:  # a moving twin: only what is sensed now
+            self.sensed.zero_()
         p, cell = belief.max(1)
         sure = p > SURE
         new = torch.zeros_like(blocked_now)

@@ -40,7 +40,8 @@ class HonestNavEnv:
         t = lambda a, dt=torch.float32: torch.as_tensor(np.ascontiguousarray(a), dtype=dt, device=dev)
         measured = self.sensing.measured
         self.radio = t(readings.radio * measured[None, None, :])  # [rows, K, 7]; a group left out reads 0
-        self.heard = t(readings.heard, torch.float32)  # [rows, K]
+        # whether the receiver hears each transmitter is radio too: with no radio at all the receiver is off
+        self.heard = t(readings.heard if self.sensing.groups else np.zeros_like(readings.heard), torch.float32)
         self.around = t(readings.blocked_around if self.sensing.proximity else np.zeros_like(readings.blocked_around))
         self.target_xy = t(readings.target_xy)
         self.transmitters = readings.transmitters

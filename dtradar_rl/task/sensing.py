@@ -14,8 +14,8 @@ sensing                         what the robot observes
 ``radio-no-proximity``          the same without the proximity sensor (odometry and bumps only)
 ``no-angles`` ... ``no-phase``  ``radio`` without one group of radio features (:data:`GROUPS`)
 ``rssi``                        the gain only (a received-power reading), proximity, odometry
-``no-radio``                    proximity, odometry and bumps only: no radio at all (what the map's layout alone
-                                localises)
+``no-radio``                    proximity, odometry and bumps only: no radio at all, not even whether a
+                                transmitter is heard (what the map's layout alone localises)
 ``privileged``                  **privileged** (an upper bound): the observation presets of the learnt agents, which
                                 hold the robot's exact ``x, y`` and, with ``neighbors``, the radio of the four
                                 neighbouring cells read from the twin being navigated

@@ -123,3 +123,13 @@ def test_the_honest_gymnasium_env_plays_an_episode_to_its_target_without_telling
     assert obs[info["names"].index("moved")] == 1.0 and obs[info["names"].index("last[X+]")] == 1.0
     obs, reward, terminated, truncated, step_info = env.step(1)
     assert terminated and step_info["is_success"]
+
+
+def test_with_no_radio_the_receiver_is_off_not_even_whether_a_transmitter_is_heard(two_tx):
+    env = HonestNavEnv.from_dataset(two_tx, 4, sensing="no-radio", noise="realistic", reward="paper")
+    obs = env.reset()
+    assert torch.count_nonzero(obs[:, : 2 * 8]) == 0  # both transmitters' measured quantities and heard flags
+    rssi = HonestNavEnv.from_dataset(two_tx, 4, sensing="rssi", reward="paper").reset()
+    gain, heard = [7 - 2, 7], [8 + 7 - 2, 8 + 7]  # each transmitter's gain_db and heard columns
+    assert torch.count_nonzero(rssi[:, gain + heard]) > 0
+    assert torch.count_nonzero(rssi[:, [0, 1, 2, 3, 4, 6, 8, 9, 10, 11, 12, 14]]) == 0  # nothing but the gain
