@@ -18,7 +18,8 @@ episode, two maps of the grid:
 
 The observation is the ``neighbors`` one followed by a ``(2R+1) x (2R+1)`` window of each map centred on the robot
 (``memory_radius = R``; cells off the grid read as sensed). Everything the memory holds is derived from earlier
-observations, so the agent still moves from radio features alone; the window only keeps them. With a wider sensing
+observations; the window only keeps them. The ``neighbors`` observation it extends is privileged (the robot's
+``x, y`` and its neighbours' radio; :mod:`dtradar_rl.task.sensing`), so the memory agents are too. With a wider sensing
 radius (:mod:`dtradar_rl.task.observations`) the ring's flags sit between the ``neighbors`` columns and the target's,
 and ``sensed`` still takes only the four neighbours: the map keeps what it sensed for the whole episode, so a mover
 seen passing 2..R cells away would stay in it as an obstacle long after it has gone (the ring is in the observation

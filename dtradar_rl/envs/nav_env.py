@@ -107,6 +107,10 @@ class DtradarNavEnv(gym.Env):
     are in its snapshot. Without the wait action the robot waits only by bumping.
 
     ## Observations
+    **Privileged** (:mod:`dtradar_rl.task.sensing`): every preset holds the robot's exact ``x, y``, and ``neighbors``
+    the radio of the four neighbouring cells read from the twin being navigated, which a robot's receiver could not
+    measure. For what a robot with a radio receiver observes, use the honest-sensing env
+    (:class:`~dtradar_rl.envs.honest_gym.HonestGymEnv`, ids ``dtradar/<scene>-<variant>-honest-v0``).
     ``Box(low, high, (D,), float32)`` (bounds: the range of the lookup tables), z-scored features of the
     chosen preset (:mod:`dtradar_rl.task.observations`):
     ``paper`` (D = 10: x, y, AoA az/zen, AoD az/zen, coefficient real/imag, delay, phase; no target),

@@ -1,4 +1,9 @@
-"""What an agent observes: observation presets built by table lookup, and the normaliser stored with a model.
+"""What the learnt agents observe: observation presets built by table lookup, and the normaliser stored with a model.
+
+Every preset here is **privileged** (:mod:`dtradar_rl.task.sensing`): it holds the robot's exact ``x, y``, and
+``neighbors`` the radio of the four neighbouring cells read from the twin being navigated. What a robot with a radio
+receiver observes (its own cell's measurement, proximity, odometry; never its position) is
+:mod:`dtradar_rl.task.sensing` and :mod:`dtradar_rl.envs.honest`.
 
 An observation is the concatenation of a part that depends only on the robot's cell and a part that depends only
 on the target cell, ``obs = [cell_part[cell], target_part[target]]``, so both environments build it with two

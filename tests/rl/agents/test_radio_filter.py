@@ -82,3 +82,11 @@ def test_the_filter_localises_on_a_twin_with_two_transmitters(two_tx):
     m, _ = evaluate(agent, two_tx, pairs=100, noise="realistic", latency=False)
     assert m.success_rate == 1.0 and m.spl >= 0.95
     assert np.isfinite(m.steps)
+
+
+def test_on_a_moving_twin_the_filter_keeps_only_what_it_senses_now_and_reaches_its_targets():
+    moving = load_dataset("synthetic-moving/blueprint")
+    agent = RadioFilterAgent(moving, FilterConfig(scene="synthetic-moving"))
+    m, r = evaluate(agent, moving, pairs=60, noise="realistic", latency=False)
+    assert agent.forget and r.t0 is not None
+    assert m.success_rate >= 0.95 and m.mover_collisions is not None
