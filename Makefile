@@ -80,9 +80,9 @@ pull:
 
 AGENT ?= radio-filter
 MOVING_ARGS ?= --sense-radius 4 --wait-action --clock sincos --mover-penalty 4
-# Build the default agent on $(SCENE)'s blueprint -> runs/$(SCENE)/agent/agent.json: a localisation filter over the
-# blueprint's radio fingerprints acting on exact distances, from honest sensing (own cell's radio, proximity, odometry;
-# never its position). AGENT=dqn trains the learnt DQN instead -> runs/$(SCENE)/dqn/model.pt (privileged: its
+# Build the default agent (radio filter, honest sensing) on $(SCENE)'s blueprint -> runs/$(SCENE)/agent/agent.json.
+# A localisation filter over the blueprint's radio fingerprints acting on exact distances, from honest sensing (own
+# cell's radio, proximity, odometry; never its position). AGENT=dqn trains the learnt DQN instead -> runs/$(SCENE)/dqn/model.pt (privileged: its
 # observation holds the robot's x, y; ARGS="--preset paper" etc.); VARIANT=moving trains that DQN among the movers of
 # the moving twin with $(MOVING_ARGS) -> runs/$(SCENE)/dqn-moving/model.pt: the best measured among movers
 # (docs/navigation.md, "Waiting, the clock and the mover penalty"): the cells up to 4 away sensed, a wait action, the
@@ -90,27 +90,27 @@ MOVING_ARGS ?= --sense-radius 4 --wait-action --clock sincos --mover-penalty 4
 train:
 	$(if $(or $(filter dqn,$(AGENT)),$(filter moving,$(VARIANT))),$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving $(MOVING_ARGS) --out runs/$(SCENE)/dqn-moving) $(ARGS),$(PY) -m dtradar_rl agent --scene $(SCENE) $(ARGS))
 
-# Evaluate the default agent on the blueprint and dynamic twins under realistic receiver noise, beside the privileged
-# DQN (when trained) and the classical planner, each row naming its sensing; VARIANT=moving
+# Evaluate the default agent on the blueprint and dynamic twins, beside the privileged DQN and the planner.
+# Under realistic receiver noise, each row naming its sensing; VARIANT=moving
 # adds the moving twin, and the agent trained among movers (runs/$(SCENE)/dqn-moving) when there is one -> runs/$(SCENE)/eval-moving
 eval:
 	$(PY) -m dtradar_rl eval --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variants blueprint dynamic moving) $(ARGS)
 	$(if $(and $(filter moving,$(VARIANT)),$(wildcard runs/$(SCENE)/dqn-moving/model.pt)),$(PY) -m dtradar_rl eval --scene $(SCENE) --variants moving --checkpoint runs/$(SCENE)/dqn-moving/model.pt --out runs/$(SCENE)/eval-moving --no-planner $(ARGS))
 
-# Offline RL with d3rlpy on a named logged dataset (--logged NAME, else <scene>/blueprint/<behaviour>, logged or
-# reused), e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
+# Offline RL with d3rlpy on a logged dataset, evaluated on the blueprint and dynamic twins.
+# --logged NAME, else <scene>/blueprint/<behaviour>, logged or reused; e.g. make offline SCENE=cubicle ARGS="--algorithm cql"
 offline:
 	$(PY) -m dtradar_rl offline --scene $(SCENE) $(ARGS)
 
-# The exact solution of $(SCENE)'s twins: V*/Q* for every (cell, target) under the geodesic and paper rewards (cached
-# in the data root), the greedy policy's success and SPL on the 500 evaluation pairs -> results/solve/$(SCENE)/
+# The exact solution of $(SCENE)'s twins and its greedy policy's success and SPL -> results/solve/$(SCENE)/
+# V*/Q* for every (cell, target) under the geodesic and paper rewards (cached in the data root), 500 evaluation pairs.
 solve:
 	$(PY) -m dtradar_rl solve --scene $(SCENE) $(ARGS)
 
 BEHAVIOUR ?= noisy-shortest
-# A logged offline-RL dataset <scene>/blueprint/<behaviour> in the store (+ Minari copy), e.g.
-# make log SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt" (a memoryless agent:
-# make train SCENE=cubicle ARGS="--preset tuned"). Dataset families (D4RL's names, no checkpoint needed): BEHAVIOUR=
+# Log a behaviour policy or a dataset family as an offline-RL dataset <scene>/blueprint/<behaviour> (+ Minari copy).
+# e.g. make log SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt" (a memoryless agent:
+# make train SCENE=cubicle AGENT=dqn ARGS="--preset tuned"). Dataset families (D4RL's names, no checkpoint needed): BEHAVIOUR=
 # random, expert, medium, medium-replay or mixed, and OGBench's navigate, stitch or explore; BEHAVIOUR=all logs the
 # eight (docs/logged-datasets.md).
 log:
@@ -135,13 +135,13 @@ sweep:
 adapt:
 	$(PY) -m dtradar_rl adapt --scene $(SCENE) $(ARGS)
 
-# The paper's tables and figures from the built datasets into runs/paper/ (report.md + PNGs),
+# The paper's tables and figures from the built datasets -> runs/paper/ (report.md + PNGs).
 # e.g. make paper SCENES="cubicle meeting"; every option: python -m dtradar_rl paper --help
 paper:
 	$(PY) -m dtradar_rl paper $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
-# Tabular Q-learning and Dyna-Q beside the DQN at equal env steps: learning curves, fingerprint ambiguity, localisation
-# cost -> results/bench_tabular.*
+# Tabular Q-learning and Dyna-Q beside the DQN at equal env steps -> results/bench_tabular.*
+# Learning curves, fingerprint ambiguity, localisation cost.
 bench-tabular:
 	$(PY) bench/bench_tabular.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
@@ -196,17 +196,17 @@ bench-threads:
 bench-nav:
 	$(PY) bench/bench_nav.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
-# What the radio contributes: the default agent on every twin with each sensing (radio, without each feature group, RSSI,
-# no radio) under noise none, realistic and 2x, localisation error along the episode -> results/bench_radio.*
+# What the radio contributes: the default agent with each sensing and noise level on every twin -> results/bench_radio.*
+# Sensings radio, without each feature group, RSSI, no radio; noise none, realistic, 2x; localisation error plots.
 bench-radio:
 	$(PY) bench/bench_radio.py $(if $(SCENES),--scenes $(SCENES)) $(ARGS)
 
-# GPU figures (tracing, batched env, training; CUDA beside the CPU) -> results/bench_gpu.*; on a GPU machine
-# run bash bench/gpu.sh after make gpu-pack here
+# GPU figures (tracing, batched env, training; CUDA beside the CPU) -> results/bench_gpu.*.
+# On a GPU machine run bash bench/gpu.sh after make gpu-pack here.
 bench-gpu:
 	$(PY) bench/bench_gpu.py $(ARGS)
 
-# Copy the twins bench/gpu.sh reads (dallas-q3, cubicle) into .gpu_data/, which travels with the working tree
+# Copy the twins bench/gpu.sh reads (dallas-q3, cubicle) into .gpu_data/, which travels with the working tree.
 gpu-pack:
 	mkdir -p .gpu_data/datasets
 	for t in dallas-q3 cubicle; do cp -r "$$($(PY) -c 'from dtradar_data.core.layout import data_root; print(data_root())')/datasets/$$t" .gpu_data/datasets/; done
