@@ -214,6 +214,12 @@ def describe_checkpoint(policy, ckpt: Path) -> list[str]:
     and the torch threads the run trained with (its reproducibility record, where the checkpoint has one)."""
     stats = policy.meta.get("stats") or {}
     lines = []
+    if isinstance(policy, RadioFilterAgent):
+        m = policy.meta["dataset"]
+        return [
+            f"agent: {ckpt} (radio filter on the map {m['name']} version {m['version']}); "
+            f"sensing {policy.sensing.name}: {policy.sensing.describe()}"
+        ]
     if policy.meta.get("kind") == TRAINING_STATE:
         lines.append(
             f"note: {ckpt} is a run's training state (last.pt, {stats.get('env_steps', '?')} env steps): evaluating "
