@@ -189,8 +189,10 @@ class RadioFilterAgent:
     # -- the Policy interface used by dtradar_rl.evaluation.evaluate -----------------------------------------------
     def env_for(self, ds: Dataset, num_envs: int, *, noise="none", seed: int = 0, **kwargs) -> HonestNavEnv:
         """The honest env of ``ds`` for ``num_envs`` robots (each switched on afresh). On a moving twin the robot
-        knows that things move around it (people, vehicles): it keeps only what it senses now as obstacles (a mover
-        sensed a step ago may have walked on), as the planner does."""
+        knows that things move around it (people, vehicles): what it senses blocked where its map is free is a mover
+        that walks on, so it keeps no sensed obstacle and plans on the map; a move into a mover is not refused, the
+        bump waits for it to go (a four-move robot's only way to wait). Walking round it instead was measured worse:
+        on the dense 12 x 8 synthetic moving twin 0.76 success, against 0.97 waiting."""
         self._start(num_envs)
         self.forget = ds.is_moving
         if ds.transmitters != self.k:
@@ -225,20 +227,25 @@ class RadioFilterAgent:
         """A robot whose moves have gone back and forth :data:`ESCAPE_AFTER` times in a row (its odometry says so)
         takes a seeded random move the proximity sensor allows: a belief that two places explain equally well, or a
         changed twin that fools it, can hold a greedy robot between two cells for good; a move elsewhere reads
-        something new."""
+        something new. One that has bumped :data:`ESCAPE_AFTER` times in a row takes a random move of all four: on a
+        moving twin a mover walking back and forth beside it can refuse its planned move every time, in step with
+        it."""
         a = last.argmax(1)
         reversed_ = (
             last.any(1) & moved & ~fresh & (self._prev_move >= 0) & (a == OPPOSITE[self._prev_move.clamp(min=0)])
         )
         self._reversals = torch.where(reversed_, self._reversals + 1, torch.zeros_like(self._reversals))
         self._prev_move = torch.where(last.any(1) & moved & ~fresh, a, torch.full_like(a, -1))
-        stuck = self._reversals >= ESCAPE_AFTER
-        if bool(stuck.any()):
+        bumped = last.any(1) & ~moved & ~fresh
+        self._bumps = torch.where(bumped, self._bumps + 1, torch.zeros_like(self._bumps))
+        stuck, pinned = self._reversals >= ESCAPE_AFTER, self._bumps >= ESCAPE_AFTER
+        if bool((stuck | pinned).any()):
             score = torch.rand(blocked_now.shape, generator=self._gen, device=self.device)
             allowed = ~blocked_now if self.sensing.proximity else torch.ones_like(blocked_now)
-            allowed = allowed | ~allowed.any(1, keepdim=True)
-            action = torch.where(stuck, torch.where(allowed, score, -1.0).argmax(1), action)
+            allowed = (allowed | ~allowed.any(1, keepdim=True)) | pinned[:, None]
+            action = torch.where(stuck | pinned, torch.where(allowed, score, -1.0).argmax(1), action)
             self._reversals = torch.where(stuck, torch.zeros_like(self._reversals), self._reversals)
+            self._bumps = torch.where(pinned, torch.zeros_like(self._bumps), self._bumps)
         return action
 
     # -- the filter ------------------------------------------------------------------------------------------------
@@ -308,8 +315,8 @@ class RadioFilterAgent:
     def _sense_obstacles(self, belief, blocked_now, moved, last, fresh) -> None:
         """Obstacles the map lacks, where the belief is sure of the robot's cell: a neighbour sensed blocked, or the
         cell a move just bumped into."""
-        if self.forget:  # a moving twin: only what is sensed now
-            self.sensed.zero_()
+        if self.forget:  # a moving twin: what is sensed is mostly movers, gone by the next step or two
+            return
         p, cell = belief.max(1)
         sure = p > SURE
         new = torch.zeros_like(blocked_now)
@@ -335,7 +342,10 @@ class RadioFilterAgent:
         after = self._dist.index_select(1, self._next_flat).view(n, cells, 4)
         score = torch.bmm(belief[:, None, :], after)[:, 0] + belief @ self._bump_cost
         if self.sensing.proximity:
-            score = torch.where(blocked_now & ~blocked_now.all(1, keepdim=True), torch.inf, score)
+            refused = blocked_now
+            if self.forget:  # a mover (blocked now, free on the map) is walked into: the bump waits for it to go
+                refused = blocked_now & self.around[belief.argmax(1)]
+            score = torch.where(refused & ~refused.all(1, keepdim=True), torch.inf, score)
         return score.argmin(1)
 
     def _start(self, n: int) -> None:
@@ -348,6 +358,7 @@ class RadioFilterAgent:
         self._dist = torch.zeros((n, cells), device=dev)
         self._prev_move = torch.full((n,), -1, dtype=torch.long, device=dev)
         self._reversals = torch.zeros(n, dtype=torch.long, device=dev)
+        self._bumps = torch.zeros(n, dtype=torch.long, device=dev)
         self._gen = torch.Generator(device=dev)
         self._gen.manual_seed(ESCAPE_SEED)
 
