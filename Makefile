@@ -72,6 +72,7 @@ cards:
 
 # Push a stored version to the Hugging Face Hub, e.g. make publish NAME=cubicle/blueprint ARGS="--repo you/dtradar".
 publish:
+	@if [ "$(origin NAME)" = "file" ]; then echo "error: make publish uploads one dataset and needs its name" >&2; echo "  how to fix: make publish NAME=<scene>/<variant> ARGS=\"--repo <you>/<repo>\" (make list shows what is built)" >&2; exit 2; fi
 	$(PY) -m dtradar_data publish $(NAME) $(ARGS)
 
 # Pull a version from the Hugging Face Hub into the data root.

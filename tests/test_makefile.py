@@ -1,4 +1,5 @@
-"""`make help` names every target with one complete line (the first comment line above it)."""
+"""The Makefile as users meet it: `make help` names every target with one complete line, and targets refuse what
+would do the wrong thing silently."""
 
 import re
 import shutil
@@ -18,3 +19,11 @@ def test_make_help_gives_every_target_one_complete_line():
     assert set(targets) <= set(lines), set(targets) - set(lines)
     cut = {t: d for t, d in lines.items() if not d or not re.search(r"[.)*/]$", d)}
     assert not cut, f"targets whose help line is empty or cut mid-sentence: {cut}"
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
+def test_make_publish_refuses_without_a_name_instead_of_publishing_the_cubicle():
+    refused = subprocess.run(["make", "-s", "publish"], cwd=ROOT, capture_output=True, text=True)
+    assert refused.returncode != 0 and "NAME=<scene>/<variant>" in refused.stderr
+    dry = subprocess.run(["make", "-n", "publish", "NAME=meeting/dynamic"], cwd=ROOT, capture_output=True, text=True)
+    assert "dtradar_data publish meeting/dynamic" in dry.stdout
