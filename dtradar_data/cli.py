@@ -135,8 +135,38 @@ class PlaceCmd:
     keep: bool = False
     """Keep the scene's own transmitter as the first site."""
     heard_in: str | None = None
-    """A built dataset of the scene: its cells with a path count as covered, so the sites go where its trace found
-    none (a second round)."""
+    """A built twin of the scene, <scene>/<variant>[@revision]: its cells with a path count as covered, so the sites
+    go where its trace found none (a second round)."""
+
+    def __post_init__(self) -> None:
+        # checked when parsed, before the scene is read: out of range, each used to print sites (exit 0) or fail inside
+        if not 0 < self.coverage <= 1:
+            raise InvalidSettingError(
+                f"--coverage {self.coverage} must be in (0, 1]: it is the share of the free cells to see",
+                hint="e.g. --coverage 0.99 (the default), or 1 to place sites until every free cell is seen",
+            )
+        if self.max_sites < 1:
+            raise InvalidSettingError(
+                f"--max-sites {self.max_sites} must be >= 1 (the kept site included)", hint="e.g. --max-sites 16"
+            )
+        if not self.range_m > 0:
+            raise InvalidSettingError(
+                f"--range-m {self.range_m} must be > 0: it is how far a site sees, in metres",
+                hint="e.g. --range-m 150 (the default)",
+            )
+        if self.clearance_cells < 0:
+            raise InvalidSettingError(
+                f"--clearance-cells {self.clearance_cells} must be >= 0",
+                hint="0 allows a site against a wall; 1 (the default) keeps the cells around it free",
+            )
+        if self.heard_in is not None and (not self.heard_in.strip() or is_logged_name(self.heard_in)):
+            raise InvalidSettingError(
+                f"--heard-in {self.heard_in!r} is not a ray-traced twin: --heard-in takes a built twin of the scene, "
+                "<scene>/<variant>[@revision]"
+                + (" (a logged offline-RL dataset has no paths to count)" if self.heard_in.strip() else ""),
+                hint="name a twin built on this scene's grid, e.g. --heard-in cubicle/blueprint "
+                "(`python -m dtradar_data list` shows the built ones)",
+            )
 
     def run(self) -> int:
         from dtradar_data.geometry.occupancy import occupancy
@@ -152,7 +182,7 @@ class PlaceCmd:
             ix, iy = spec.grid.index_of(*spec.tx.position_m[:2])
             start = (iy * blocked.shape[1] + ix,)
         covered = None
-        if self.heard_in:
+        if self.heard_in is not None:
             heard = load(self.heard_in).heard()
             if heard.shape != blocked.shape:
                 raise InvalidSettingError(

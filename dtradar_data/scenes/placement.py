@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from dtradar_data.core.errors import InvalidSettingError
+
 __all__ = ["place_sites", "visibility"]
 
 
@@ -42,6 +44,36 @@ def visibility(blocked: np.ndarray, sites: np.ndarray, *, range_cells: float, ra
     return out
 
 
+def _clear_cells(blocked: np.ndarray, clearance_cells: int) -> np.ndarray:
+    """The flat indices of the cells whose every cell within ``clearance_cells`` (a square; outside the grid counts
+    as blocked) is free; :class:`InvalidSettingError` naming ``--clearance-cells`` and the widest the plan allows
+    when there is none."""
+    if clearance_cells < 0:
+        raise InvalidSettingError(
+            f"--clearance-cells {clearance_cells} must be >= 0", hint="0 allows a site against a wall"
+        )
+    h, w = blocked.shape
+    near = blocked.copy()
+    for widest in range(clearance_cells):  # grow the blocked cells by one cell (a 3 x 3 square) at a time
+        if near.all():
+            break
+        padded = np.pad(near, 1, constant_values=True)
+        for oy in range(3):
+            for ox in range(3):
+                near |= padded[oy : oy + h, ox : ox + w]
+        if near.all():
+            raise InvalidSettingError(
+                f"--clearance-cells {clearance_cells}: no free cell has {clearance_cells} free cells all around it "
+                "on this plan",
+                hint=f"lower it: at most --clearance-cells {widest} here (0 allows a site against a wall)",
+            )
+    if near.all():
+        raise InvalidSettingError(
+            "the plan has no free cell to place a transmitter on", hint="check the scene's grid and its objects"
+        )
+    return np.flatnonzero(~near.ravel())
+
+
 def place_sites(
     blocked: np.ndarray,
     *,
@@ -61,14 +93,7 @@ def place_sites(
     blocked = np.asarray(blocked, bool)
     h, w = blocked.shape
     free = ~blocked.ravel()
-    padded = np.pad(blocked, clearance_cells, constant_values=True)
-    near = np.zeros_like(blocked)
-    for oy in range(2 * clearance_cells + 1):
-        for ox in range(2 * clearance_cells + 1):
-            near |= padded[oy : oy + h, ox : ox + w]
-    candidates = np.flatnonzero(~near.ravel())
-    if len(candidates) == 0:
-        raise ValueError(f"no free cell has {clearance_cells} free cell(s) around it: lower clearance_cells")
+    candidates = _clear_cells(blocked, clearance_cells)
     seen = visibility(blocked, candidates, range_cells=range_cells) & free[None, :]
     covered = np.zeros(h * w, bool) if covered is None else np.asarray(covered, bool).ravel().copy()
     sites: list[int] = [int(c) for c in start]
