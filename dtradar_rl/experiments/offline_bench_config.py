@@ -12,7 +12,7 @@ from dtradar_rl.offline.behaviours import BEHAVIOURS, FAMILIES
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.ope import FQE_GAMMA
 from dtradar_rl.offline.relabel import AUTO, RelabelConfig
-from dtradar_rl.task.config import Config, ConfigError
+from dtradar_rl.task.config import Config, ConfigError, check_unique
 
 NAMES = {
     "cql": "DiscreteCQL",
@@ -118,6 +118,9 @@ class OfflineBenchConfig(Config):
 
     def check_ranges(self) -> None:
         super().check_ranges()
+        # each value is one run (or one row, one column): a repeated one would be counted twice in every mean
+        for name in ("seeds", "algorithms", "behaviours", "variants"):
+            check_unique(getattr(self, name), name)
         # the mix is checked when the config is made, as OfflineConfig's is: a benchmark would otherwise log its
         # datasets and train the online agent before its first run refused it (an unknown algorithm: validate())
         for a in dict.fromkeys(self.algorithms):
@@ -140,6 +143,12 @@ class OfflineBenchConfig(Config):
         OfflineConfig(algorithm="bcq", senses=self.senses, precision=self.precision).validate()
         if self.workers < 0:
             raise ConfigError("--workers must be >= 0 (0 = one per CPU core)")
+        if self.ray_address is not None and not self.ray_address.strip():
+            raise ConfigError(
+                f"--ray-address {self.ray_address!r} is empty: it names an existing Ray cluster",
+                hint="give the cluster's address (auto, HOST:6379 or ray://HOST:10001), or drop --ray-address for "
+                "the default: a local Ray on this machine's cores ($RAY_ADDRESS when it is set)",
+            )
         if self.executor != "ray" and self.ray_address:
             raise ConfigError("--ray-address applies to --executor ray only", hint="add --executor ray")
         if self.executor == "ray" and self.workers:
