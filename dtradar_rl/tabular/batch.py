@@ -35,7 +35,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import shortest_path
 
 from dtradar_data.core.errors import CorruptDatasetError, InvalidSettingError, unknown_name
-from dtradar_data.store.logged import LoggedDataset
+from dtradar_data.store.logged import LoggedDataset, parse_logged_id
 from dtradar_rl.tabular.memory import check_memory, chunk_work
 from dtradar_rl.tabular.solver import (
     GAMMA,
@@ -110,11 +110,39 @@ class EmpiricalModel:
         }
 
 
+def _check_same_grid(logged: LoggedDataset, tab: TabularMDP, cells: np.ndarray) -> None:
+    """:class:`InvalidSettingError` naming both when ``logged`` was logged on another scene than ``tab``'s twin (its
+    cell numbers are another grid's), or logs a cell outside ``tab``'s grid (a hand-made twin has no scene name)."""
+    parent = parse_logged_id(logged.name).parent
+    scene = parent.split("/")[0]
+    twin = tab.mdp.name.partition("@")[0].split("/")
+    h, w = tab.mdp.blocked.shape
+    fix = (
+        f"build the model on the twin the data was logged on, TabularMDP.from_dataset(load_dataset({parent!r})); or "
+        f"log on this twin's scene: python -m dtradar_rl log --scene {twin[0] if len(twin) == 2 else '<scene>'}"
+    )
+    if len(twin) == 2 and twin[0] != scene:
+        raise InvalidSettingError(
+            f"{logged.name} was logged on {parent}, a twin of {scene}; {tab.mdp.name} is a twin of {twin[0]}: a log's "
+            "cells are its own scene's grid cells",
+            hint=fix,
+        )
+    outside = cells[(cells < 0) | (cells >= h * w)]
+    if outside.size:
+        raise InvalidSettingError(
+            f"{logged.name} (logged on {parent}) logs cell {int(outside[0])}, outside the grid of "
+            f"{tab.mdp.name!r}, {w} x {h} cells",
+            hint=fix,
+        )
+
+
 def empirical_model(logged: LoggedDataset, tab: TabularMDP) -> EmpiricalModel:
-    """The counts and successors of ``logged`` on ``tab``'s twin (:class:`CorruptDatasetError` when a logged move
-    contradicts itself or leaves the twin's free cells)."""
+    """The counts and successors of ``logged`` on ``tab``'s twin (:class:`InvalidSettingError` when the log is of
+    another scene or grid; :class:`CorruptDatasetError` when a logged move contradicts itself or leaves the twin's
+    free cells)."""
     a = logged.arrays()
     cell, action, episode = a["cell"].astype(np.int64), a["action"].astype(np.int64), a["episode"]
+    _check_same_grid(logged, tab, np.concatenate([cell, a["target"].astype(np.int64)]))
     if (tab.state_of[cell] < 0).any():
         raise CorruptDatasetError(
             f"{logged.name} logs steps on cells that are blocked in {tab.mdp.name}",

@@ -1,6 +1,7 @@
 """Tabular batch RL from a logged dataset: the empirical model counts what was logged and nothing else, the data
 ceiling bounds every policy that stays inside the data, full coverage lets every learner reach the optimum, and a log
-that contradicts its twin is refused. Tiny synthetic twins."""
+that contradicts its twin is refused, as is one of another scene or grid (a typed error naming both, not an
+IndexError). Tiny synthetic twins."""
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.tabular.batch import BatchConfig, EmpiricalModel, ceiling, empirical_model, learn
 from dtradar_rl.tabular.evaluation import follow, path_metrics, policy_values
 from dtradar_rl.tabular.solver import TabularMDP, solve
+from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.twins import load_dataset
 
 SCENE = "synthetic-10x6"
@@ -73,6 +75,20 @@ def test_a_log_that_contradicts_its_twin_is_refused(logged, tab):
     other = TabularMDP.from_dataset(load_dataset(f"{SCENE}/dynamic"))  # the dynamic twin blocks cells it visits
     with pytest.raises(CorruptDatasetError):
         empirical_model(logged, other)
+
+
+@pytest.mark.parametrize("other", ["synthetic-8x6", "synthetic-12x8"])  # a smaller grid, a larger one
+def test_a_log_of_another_scene_is_refused_naming_both(logged, other):
+    tab = TabularMDP.from_dataset(load_dataset(f"{other}/blueprint"))  # the smaller used to be an IndexError
+    with pytest.raises(InvalidSettingError, match=f"{SCENE}/blueprint/random.*{other}/blueprint") as e:
+        empirical_model(logged, tab)
+    assert f"--scene {other}" in str(e.value)
+
+
+def test_a_log_beyond_a_hand_made_twins_grid_is_refused_naming_both(logged):
+    tab = TabularMDP.from_mdp(GridMDP.from_blocked(np.zeros((6, 8), bool)))  # no scene name to compare: the grid
+    with pytest.raises(InvalidSettingError, match=f"{SCENE}/blueprint/random.*grid.*8 x 6"):
+        empirical_model(logged, tab)
 
 
 def test_bad_settings_are_refused():
