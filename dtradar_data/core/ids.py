@@ -19,12 +19,14 @@ Modelled on Minari (``namespace/name-v0``) and huggingface_hub (``repo@revision`
   without one, the newest version.
 
 ``parse_id`` checks the grammar and, given the ``known`` scenes, that the scene is one of them; unknown names fail with
-a "did you mean ...?" built from the known ``scene/variant`` names. Which scenes are known (built-in ones and those
-with data in the data root) is the store's business: :func:`dtradar_data.store.catalog.as_id`.
+a "did you mean ...?" built from the ``scene/variant`` names that exist (each scene's real variants, never a
+combination no build makes). Which scenes and names are known (built-in ones and those with data in the data root) is
+the store's business: :func:`dtradar_data.store.catalog.as_id`, :func:`~dtradar_data.store.catalog.known_names`.
 """
 
 from __future__ import annotations
 
+import difflib
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -100,18 +102,20 @@ def _split_revision(text: str, what: str) -> tuple[str, str | None]:
     return name, revision or None
 
 
-def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
+def parse_id(text: str, *, known: Iterable[str] | None = None, names: Iterable[str] | None = None) -> DatasetId:
     """Parse ``scene/variant[@revision]``.
 
-    ``known`` is the set of valid scenes; without it only the grammar is checked. Raises :class:`UnknownNameError`
-    with a suggestion on a malformed id or an unknown scene or variant.
+    ``known`` is the set of valid scenes; without it only the grammar is checked. ``names`` are the ``scene/variant``
+    names that exist (:func:`dtradar_data.store.catalog.known_names`: a scene's real variants), the only ones a "did
+    you mean" suggests; without them, every variant of each known scene. Raises :class:`UnknownNameError` with a
+    suggestion on a malformed id or an unknown scene or variant.
     """
     check_known = known is not None
     if not isinstance(text, str):
         raise UnknownNameError(f"dataset id must be a string, got {type(text).__name__}", hint=f"use {GRAMMAR}")
     name, revision = _split_revision(text, "dataset id")
     scenes = sorted(set(known or ()))
-    candidates = names_of(scenes)
+    candidates = sorted(set(names)) if names is not None else names_of(scenes)
     parts = name.split("/")
     if len(parts) == 3 and all(SCENE_RE.fullmatch(p) for p in parts):
         raise UnknownNameError(
@@ -128,9 +132,20 @@ def parse_id(text: str, *, known: Iterable[str] | None = None) -> DatasetId:
             f"malformed dataset id {text!r}" + (f"; {suggestion}" if suggestion else ""), hint=f"use {GRAMMAR}"
         )
     scene, variant = parts
+    own = [c for c in candidates if c.startswith(f"{scene}/")]
+    if check_known and own and variant not in DATASET_VARIANTS:
+        raise _unknown_variant(name, own)
     if variant not in DATASET_VARIANTS or (check_known and scene not in scenes):
         raise unknown_name("dataset", name, candidates if check_known else [f"{scene}/{v}" for v in DATASET_VARIANTS])
     return DatasetId(scene, variant, revision)
+
+
+def _unknown_variant(name: str, own: list[str]) -> UnknownNameError:
+    """A known scene with a misspelled variant: the suggestion is the closest of the datasets it has (``own``)."""
+    by_variant = {c.partition("/")[2]: c for c in own}
+    close = difflib.get_close_matches(name.partition("/")[2], list(by_variant), n=3, cutoff=0.5)
+    suggestion = f"; did you mean {' or '.join(repr(by_variant[v]) for v in close)}?" if close else ""
+    return UnknownNameError(f"unknown dataset {name!r}{suggestion}", hint=f"use one of: {', '.join(own)}")
 
 
 def format_id(dataset_id: DatasetId) -> str:
@@ -200,12 +215,15 @@ def format_logged_id(lid: LoggedId) -> str:
 
 
 # ------------------------------------------------------------------------------------------------- either form
-def parse_name(text: str | DatasetId | LoggedId, *, known: Iterable[str] | None = None) -> DatasetId | LoggedId:
+def parse_name(
+    text: str | DatasetId | LoggedId, *, known: Iterable[str] | None = None, names: Iterable[str] | None = None
+) -> DatasetId | LoggedId:
     """Either form of the grammar: a logged id when the name has two slashes (:func:`parse_logged_id`), else an RT
-    id (:func:`parse_id`, checked against the ``known`` scenes when given). Parsed ids pass through."""
+    id (:func:`parse_id`, checked against the ``known`` scenes, suggesting among ``names``, when given). Parsed ids
+    pass through."""
     if isinstance(text, (DatasetId, LoggedId)):
         return text
-    return parse_logged_id(text) if is_logged_name(text) else parse_id(text, known=known)
+    return parse_logged_id(text) if is_logged_name(text) else parse_id(text, known=known, names=names)
 
 
 def format_name(dataset_id: DatasetId | LoggedId) -> str:

@@ -29,7 +29,7 @@ from dtradar_data.scenes.city.reader import (
     load_city_spec,
     quadrant_scenes,
 )
-from dtradar_data.scenes.indoor.reader import load_moving_room_file, load_room_file
+from dtradar_data.scenes.indoor.reader import declares_moving, load_moving_room_file, load_room_file
 from dtradar_data.scenes.model import SceneSpec
 from dtradar_data.scenes.mover import Mover
 from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MoverChange, MovingScene
@@ -48,6 +48,7 @@ __all__ = [
     "available_scenes",
     "sionna_scene_names",
     "build_targets",
+    "builtin_moving_names",
     "builtin_names",
     "city_names",
     "scene_file",
@@ -208,6 +209,17 @@ def builtin_names() -> list[str]:
     names = [f"{s}/{v}" for s in indoor_scenes() for v in VARIANTS]
     names += [f"{s}/{v}" for c in city_names() for s, v in build_targets(c)]
     names += [f"{s}/blueprint" for s in sionna_dataset_scenes()]
+    return sorted(names)
+
+
+def builtin_moving_names() -> list[str]:
+    """Every built-in moving twin (``scene/moving``): each room whose file has a ``[moving]`` section, and the
+    quadrant a city's ``[moving]`` names (``build --variant moving`` makes them, ``--variant all`` never does)."""
+    names = [f"{s}/{MOVING_VARIANT}" for s in indoor_scenes() if declares_moving(scene_file(s))]
+    for city in city_names():
+        section = read_city_file(city_file(city)).moving
+        if isinstance(section, dict) and section.get("quadrant"):
+            names.append(f"{city}-{section['quadrant']}/{MOVING_VARIANT}")
     return sorted(names)
 
 

@@ -1,14 +1,16 @@
 """Which datasets exist: the built-in scenes plus every scene with data in the data root, and ids checked against them.
 
 Every public function of the store takes a name as text or as a parsed :class:`~dtradar_data.core.ids.DatasetId`;
-:func:`as_id` turns text into an id, with a "did you mean ...?" over the names known here.
+:func:`as_id` turns text into an id, with a "did you mean ...?" over the names that exist here (:func:`known_names`:
+each built-in scene's real variants, and every one stored), never over a combination no build makes
+(``sionna-munich/dynamic``).
 """
 
 from __future__ import annotations
 
 from dtradar_data.core import layout
-from dtradar_data.core.ids import SCENE_RE, DatasetId, LoggedId, names_of, parse_id, parse_name
-from dtradar_data.scenes import available_scenes
+from dtradar_data.core.ids import DATASET_VARIANTS, SCENE_RE, DatasetId, LoggedId, is_logged_name, parse_id, parse_name
+from dtradar_data.scenes import available_scenes, builtin_moving_names, builtin_names
 
 
 def builtin_scenes() -> list[str]:
@@ -24,20 +26,33 @@ def stored_scenes() -> list[str]:
     return sorted(p.name for p in root.iterdir() if p.is_dir() and SCENE_RE.fullmatch(p.name))
 
 
+def stored_names() -> list[str]:
+    """Every ``scene/variant`` with a dataset folder in the data root (built, pulled, or damaged)."""
+    return sorted(
+        f"{scene}/{v.name}"
+        for scene in stored_scenes()
+        for v in (layout.datasets_root() / scene).iterdir()
+        if v.is_dir() and v.name in DATASET_VARIANTS
+    )
+
+
 def known_scenes() -> list[str]:
     return sorted(set(builtin_scenes()) | set(stored_scenes()))
 
 
 def known_names() -> list[str]:
-    """Every ``scene/variant`` name a user can load or build here."""
-    return names_of(known_scenes())
+    """Every ``scene/variant`` name that exists here: the variants each built-in scene's file makes (its blueprint,
+    its dynamic and moving twins where it has them) and every one in the data root."""
+    return sorted({*builtin_names(), *builtin_moving_names(), *stored_names()})
 
 
 def as_id(name: str | DatasetId, *, check_known: bool = True) -> DatasetId:
     """Accept either a string or an already parsed id (public functions take both)."""
     if isinstance(name, DatasetId):
         return name
-    return parse_id(name, known=known_scenes() if check_known else None)
+    if not check_known:
+        return parse_id(name)
+    return parse_id(name, known=known_scenes(), names=known_names())
 
 
 def as_any_id(name: str | DatasetId | LoggedId, *, check_known: bool = True) -> DatasetId | LoggedId:
@@ -46,4 +61,6 @@ def as_any_id(name: str | DatasetId | LoggedId, *, check_known: bool = True) -> 
     stored gets its "did you mean" from the logged store when it is resolved)."""
     if isinstance(name, (DatasetId, LoggedId)):
         return name
-    return parse_name(name, known=known_scenes() if check_known else None)
+    if not check_known or is_logged_name(name):
+        return parse_name(name)
+    return parse_name(name, known=known_scenes(), names=known_names())

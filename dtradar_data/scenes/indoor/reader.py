@@ -56,6 +56,11 @@ def load_moving_room_file(path: str | Path) -> MovingScene:
     return parse_moving_room(_read_toml(path), origin=str(path))
 
 
+def declares_moving(path: str | Path) -> bool:
+    """Whether a room scene file has a ``[moving]`` section, i.e. a moving twin (checked only when it is read)."""
+    return isinstance(_read_toml(path).get("moving"), dict)
+
+
 def parse_room(data: dict[str, Any], variant: str, *, origin: str = "<scene>") -> SceneSpec:
     """Build a :class:`SceneSpec` from an already parsed TOML document (tests and generated scenes)."""
     return _Reader(origin, data).spec(variant)
