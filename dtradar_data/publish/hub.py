@@ -35,7 +35,7 @@ from dtradar_data.core.errors import (
 from dtradar_data.core.ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
 from dtradar_data.store import listing, local, writing
 from dtradar_data.store.card import default_hub_repo, render_version_card
-from dtradar_data.store.catalog import as_id
+from dtradar_data.store.catalog import as_id, missing_twin
 from dtradar_data.store.staging import held_stage
 
 #: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
@@ -330,6 +330,9 @@ def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | N
         check_repo_id(repo_id)
     # With an explicit repo any well-formed name may be pulled (e.g. a scene this checkout has no file for).
     did = name if isinstance(name, DatasetId) else as_id(name, check_known=repo_id is None)
+    missing = missing_twin(did) if repo_id is None else None
+    if missing is not None:  # a variant its scene does not have: no default repo can hold it
+        raise missing
     revision = revision or did.revision
     if revision is not None:
         with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):

@@ -3,12 +3,13 @@
 Every public function of the store takes a name as text or as a parsed :class:`~dtradar_data.core.ids.DatasetId`;
 :func:`as_id` turns text into an id, with a "did you mean ...?" over the names that exist here (:func:`known_names`:
 each built-in scene's real variants, and every one stored), never over a combination no build makes
-(``sionna-munich/dynamic``).
+(``sionna-munich/dynamic``). :func:`missing_twin` is the error for a built-in scene's variant that does not exist.
 """
 
 from __future__ import annotations
 
 from dtradar_data.core import layout
+from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.ids import DATASET_VARIANTS, SCENE_RE, DatasetId, LoggedId, is_logged_name, parse_id, parse_name
 from dtradar_data.scenes import available_scenes, builtin_moving_names, builtin_names
 
@@ -44,6 +45,26 @@ def known_names() -> list[str]:
     """Every ``scene/variant`` name that exists here: the variants each built-in scene's file makes (its blueprint,
     its dynamic and moving twins where it has them) and every one in the data root."""
     return sorted({*builtin_names(), *builtin_moving_names(), *stored_names()})
+
+
+def missing_twin(did: DatasetId) -> DatasetNotFoundError | None:
+    """The error for a variant a built-in scene does not have and the store does not hold (``dallas-q1/dynamic``:
+    its city file makes no dynamic twin of that quadrant, so no build or pull of it can succeed): it names the
+    datasets the scene has instead of a build that would refuse. None for every other name (a user's scene may
+    gain any variant, by a build from its file or a pull)."""
+    if did.scene not in builtin_scenes():
+        return None
+    names = known_names()
+    if did.name in names:
+        return None
+    own = [n for n in names if n.startswith(f"{did.scene}/")]
+    others = [n for n in names if n.endswith(f"/{did.variant}")]
+    return DatasetNotFoundError(
+        f"{did.scene} has no {did.variant} twin, so {did.name} cannot be built or pulled; "
+        f"its datasets are {', '.join(own)}",
+        hint=f"use {' or '.join(own)}"
+        + (f", or another scene's {did.variant} twin: {', '.join(others)}" if others else ""),
+    )
 
 
 def as_id(name: str | DatasetId, *, check_known: bool = True) -> DatasetId:

@@ -28,7 +28,7 @@ from dtradar_data.core.files import sha256_file
 from dtradar_data.core.ids import HASH_RE, MOVING_VARIANT, DatasetId
 from dtradar_data.core.record import VersionRecord
 from dtradar_data.core.schema import cell_schema, meta_transmitters, path_schema
-from dtradar_data.store.catalog import as_id
+from dtradar_data.store.catalog import as_id, missing_twin
 from dtradar_data.store.versions import Refs, one_revision, read_refs, resolve_revision
 
 # ---------------------------------------------------------------------------------------------------------- schema
@@ -170,7 +170,7 @@ def resolve(
     revision = one_revision(did.revision, revision)
     versions = local_versions(did, damaged=damaged)
     if not versions:
-        raise DatasetNotFoundError(
+        raise missing_twin(did) or DatasetNotFoundError(
             f"{did.name} has not been built or pulled into {P.data_root()}",
             hint=f"build it with `make dataset SCENE={did.scene}"
             + (" VARIANT=moving" if did.variant == MOVING_VARIANT else "")
