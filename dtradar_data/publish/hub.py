@@ -10,7 +10,9 @@ The network calls are kept to a few lines; everything around them (what is uploa
 the store) runs offline. A pull downloads into a held stage under ``<root>/work/`` (a killed pull's is removed by
 the next pull or build: :func:`dtradar_data.store.writing.clean_stages`), checks every sha256 recorded in
 ``meta.json`` and the Parquet schemas, and only then renames the version into the store: without network, without
-a token or with ``HF_HUB_OFFLINE=1`` a :class:`HubError` says so and the local store is untouched.
+a token or with ``HF_HUB_OFFLINE=1`` a :class:`HubError` says so and the local store is untouched; its hint names
+what to do for that very dataset (the copy already here, or the build that makes it). A pull of a revision already
+stored downloads nothing: :func:`pull_version` says what a pull did (:meth:`PullResult.describe`).
 """
 
 from __future__ import annotations
@@ -32,11 +34,12 @@ from dtradar_data.core.errors import (
     InvalidSettingError,
     RevisionNotFoundError,
 )
-from dtradar_data.core.ids import MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
+from dtradar_data.core.ids import HASH_RE, MIN_HASH_PREFIX, DatasetId, is_hash, is_tag
 from dtradar_data.store import listing, local, writing
 from dtradar_data.store.card import default_hub_repo, render_version_card
-from dtradar_data.store.catalog import as_id, missing_twin
+from dtradar_data.store.catalog import as_id, build_command, missing_twin
 from dtradar_data.store.staging import held_stage
+from dtradar_data.store.versions import read_refs
 
 #: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
 # every file of a version but its card (rendered for the Hub); the pictures only where the version has them
@@ -77,11 +80,23 @@ def endpoint() -> str | None:
 
 
 @contextlib.contextmanager
-def hub_errors(action: str, repo_id: str) -> Iterator[None]:
-    """Turn huggingface_hub / network exceptions into one :class:`HubError` that says what to do."""
+def hub_errors(action: str, repo_id: str, *, what: str | None = None, instead: str | None = None) -> Iterator[None]:
+    """Turn huggingface_hub / network exceptions into one :class:`HubError` that says what happened and what to do.
+
+    ``what`` names what a pull asked for (``cubicle/blueprint@v3``; None: the Hub's newest version); ``instead`` is
+    what its user can do without the Hub (the copy already here, or the build that makes it, its scene filled in). A
+    publish gives neither: its only fix is to reach the Hub, so its hint says how to retry."""
     from huggingface_hub import errors as hf
 
     where = endpoint() or "https://huggingface.co"
+    moved = "uploaded" if action.startswith("publish") else "downloaded"
+
+    def unreachable(exc: BaseException) -> HubError:
+        return HubError(
+            f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc}); nothing was {moved}",
+            hint=_retry_hint(instead),
+        )
+
     try:
         yield
     except DtradarError:
@@ -98,15 +113,14 @@ def hub_errors(action: str, repo_id: str) -> Iterator[None]:
         ) from exc
     except hf.LocalEntryNotFoundError as exc:
         if offline():
+            newest = ", so the Hub cannot be asked for its newest version"
+            why = f" and {what} is not in the local store" if what else newest
             raise HubError(
-                f"cannot {action} {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1) and the version "
-                "is not in the local store",
-                hint="unset HF_HUB_OFFLINE with network access, or build it locally (`make dataset SCENE=<scene>`)",
+                f"cannot {action} {repo_id!r}: offline mode is on (HF_HUB_OFFLINE=1){why}; nothing was {moved}",
+                hint="unset HF_HUB_OFFLINE on a machine with network access and run the same command again"
+                + (f", or {instead}" if instead else ""),
             ) from exc
-        raise HubError(
-            f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc.__cause__ or exc})",
-            hint="check the network and HF_ENDPOINT, or build the dataset locally (`make dataset SCENE=<scene>`)",
-        ) from exc
+        raise unreachable(exc.__cause__ or exc) from exc
     except hf.HfHubHTTPError as exc:
         status = getattr(getattr(exc, "response", None), "status_code", None)
         if status in (401, 403):
@@ -119,18 +133,26 @@ def hub_errors(action: str, repo_id: str) -> Iterator[None]:
             hint="retry later; check the repo on the Hub",
         ) from exc
     except (OSError, ConnectionError, TimeoutError) as exc:
-        raise HubError(
-            f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
-            hint="check the network and HF_ENDPOINT, or build the dataset locally",
-        ) from exc
+        raise unreachable(exc) from exc
     except Exception as exc:  # httpx errors and others that do not derive from OSError
         # huggingface_hub 2.x talks through httpx2/httpcore2, 1.x through httpx, older ones through requests
         if type(exc).__module__.split(".")[0].rstrip("0123456789") in {"httpx", "httpcore", "requests", "urllib"}:
-            raise HubError(
-                f"cannot {action} {repo_id!r}: the Hub at {where} could not be reached ({exc})",
-                hint="check the network and HF_ENDPOINT, or build the dataset locally",
-            ) from exc
+            raise unreachable(exc) from exc
         raise
+
+
+def _retry_hint(instead: str | None) -> str:
+    """How to try again when the Hub could not be reached: the network, the offline switch, the endpoint, and for a
+    publish (no ``instead``) the token; a pull adds what can be done without the Hub."""
+    where = endpoint()
+    text = "check the network and run the same command again, with HF_HUB_OFFLINE unset; " + (
+        f"HF_ENDPOINT={where} is the Hub asked: check that it answers, or unset HF_ENDPOINT for https://huggingface.co"
+        if where
+        else "behind a proxy set HTTPS_PROXY, or point HF_ENDPOINT at a Hub mirror that is reachable"
+    )
+    if instead:
+        return f"{text}; or {instead}"
+    return f"{text}; the token used is HF_TOKEN's, else the one `hf auth login` saved"
 
 
 def _token() -> str:
@@ -291,7 +313,7 @@ def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
     return download(repo_id, revision, dest, cache, files=[*DATA_FILES, P.CARD_FILE])
 
 
-def _remote_revision(repo_id: str, revision: str | None) -> str:
+def _remote_revision(repo_id: str, revision: str | None, instead: str | None = None) -> str:
     """A Hub revision for ``revision``: tags and full hashes are Hub tags; a short hash prefix is expanded."""
     if revision is None:
         return "main"
@@ -299,7 +321,7 @@ def _remote_revision(repo_id: str, revision: str | None) -> str:
         return revision
     from huggingface_hub import HfApi
 
-    with hub_errors("look up revisions of", repo_id):
+    with hub_errors("look up revisions of", repo_id, what=revision, instead=instead):
         tags = [t.name for t in HfApi(endpoint=endpoint()).list_repo_refs(repo_id, repo_type="dataset").tags]
     matches = [t for t in tags if is_hash(t) and t.startswith(revision)]
     if len(matches) != 1:
@@ -324,8 +346,57 @@ def _card_tag(readme: Path) -> str | None:
     return tag if isinstance(tag, str) and is_tag(tag) else None
 
 
+@dataclass(frozen=True)
+class PullResult:
+    """What a pull did. ``downloaded`` is False when the revision asked for was already in the local store (the Hub
+    was not asked); ``installed`` is False when a download brought a version the store already held."""
+
+    name: str
+    path: Path
+    version: str
+    tag: str | None
+    repo_id: str
+    asked: str | None
+    downloaded: bool
+    installed: bool
+
+    def describe(self) -> str:
+        here = f"{self.name}@{self.tag or self.version}"
+        if not self.downloaded:
+            return (
+                f"nothing downloaded: {self.name}@{self.asked} is already in the local store ({self.path}), so the "
+                f"Hub was not asked; `python -m dtradar_data verify {self.name}@{self.asked}` checks it, and a pull "
+                "downloads it again once that folder is removed"
+            )
+        if not self.installed:
+            return (
+                f"downloaded {here} from {self.repo_id}: version {self.version} was already in the local store "
+                f"({self.path}); nothing changed"
+            )
+        return f"pulled {here} (version {self.version}) from {self.repo_id} into {self.path}"
+
+
+def _tag_of(did: DatasetId, version: str) -> str | None:
+    return read_refs(P.refs_path(did.scene, did.variant)).tag_of(version)
+
+
+def _without_the_hub(did: DatasetId) -> str:
+    """What a pull's user can do without the Hub: use the copy already here (named), or build it (the command)."""
+    try:
+        _, version, vdir = local.resolve(did.with_revision(None))
+    except DtradarError:
+        return f"build it locally with {build_command(did)}"
+    tag = _tag_of(did, version)
+    return f"use the copy already here: {did.name}@{tag or version} ({vdir}) is its newest version in the local store"
+
+
 def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
     """Make ``name@revision`` available locally: return it if present, else download, verify and install it."""
+    return pull_version(name, revision, repo_id=repo_id).path
+
+
+def pull_version(name: str | DatasetId, revision: str | None = None, *, repo_id: str | None = None) -> PullResult:
+    """:func:`pull`, saying what it did (:meth:`PullResult.describe`: downloaded, or nothing downloaded and why)."""
     if repo_id is not None:
         check_repo_id(repo_id)
     # With an explicit repo any well-formed name may be pulled (e.g. a scene this checkout has no file for).
@@ -334,22 +405,26 @@ def pull(name: str | DatasetId, revision: str | None = None, *, repo_id: str | N
     if missing is not None:  # a variant its scene does not have: no default repo can hold it
         raise missing
     revision = revision or did.revision
+    did, repo_id = did.with_revision(None), repo_id or default_repo(did)
     if revision is not None:
         with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
-            return local.resolve(did.with_revision(None), revision)[2]
-    repo_id = repo_id or default_repo(did)
+            _, version, vdir = local.resolve(did, revision)
+            return PullResult(did.name, vdir, version, _tag_of(did, version), repo_id, revision, False, False)
     writing.clean_stages()
+    instead = _without_the_hub(did)
     # held: a pull killed mid-download leaves its stage to the next pull or build, never one still downloading
     with held_stage(P.work_root(), writing.stage_prefix(did)) as stage:
-        with hub_errors("pull from", repo_id):
+        with hub_errors("pull from", repo_id, what=revision and f"{did.name}@{revision}", instead=instead):
             # Offline, the real (local-files-only) download call still runs: the library's own check answers.
-            remote = _remote_revision(repo_id, revision) if not offline() else (revision or "main")
+            remote = _remote_revision(repo_id, revision, instead) if not offline() else (revision or "main")
             got = _download(repo_id, remote, stage / "download", stage / "cache")
         version_dir = stage / "version"
         version_dir.mkdir()
         meta = local.read_meta(got)
+        existed = bool(HASH_RE.fullmatch(str(meta.get("version", "")))) and local.version_exists(did, meta["version"])
         for fname in [*(meta.get("files") or {}), P.META_FILE, P.CARD_FILE]:
             if (got / fname).is_file():
                 shutil.move(str(got / fname), version_dir / fname)
         preferred = revision if revision and is_tag(revision) else _card_tag(version_dir / P.CARD_FILE)
-        return writing.install_staged(did.with_revision(None), version_dir, preferred_tag=preferred)
+        path = writing.install_staged(did, version_dir, preferred_tag=preferred)
+    return PullResult(did.name, path, path.name, _tag_of(did, path.name), repo_id, revision, True, not existed)

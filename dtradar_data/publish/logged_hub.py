@@ -21,6 +21,7 @@ from dtradar_data.core import layout as P
 from dtradar_data.core.errors import (
     CorruptDatasetError,
     DatasetNotFoundError,
+    DtradarError,
     RevisionNotFoundError,
 )
 from dtradar_data.core.ids import is_tag
@@ -32,9 +33,11 @@ from dtradar_data.store.logged import (
     check_version_dir,
     clean_logged_stages,
     install_logged,
+    local_versions,
     looks_like_stage,
     parse_logged_id,
     refs_path,
+    relog_hint,
     resolve_logged,
 )
 from dtradar_data.store.logged.staging import held_stage
@@ -80,20 +83,38 @@ def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
     return hub.download(repo_id, revision, dest, cache, files=list(FILES))
 
 
+def _without_the_hub(lid: LoggedId) -> str:
+    """What a pull's user can do without the Hub: use the copy already here (named), or log it (the commands)."""
+    try:
+        _, version, vdir = resolve_logged(lid)
+    except DtradarError:
+        return relog_hint(lid, new=True)
+    tag = read_refs(refs_path(lid)).tag_of(version)
+    return f"use the copy already here: {lid.name}@{tag or version} ({vdir}) is its newest version in the local store"
+
+
 def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | None = None) -> Path:
     """Make ``name@revision`` available locally: return it if stored, else download, verify and install it."""
+    return pull_version(name, revision, repo_id=repo_id).path
+
+
+def pull_version(name: str | LoggedId, revision: str | None = None, *, repo_id: str | None = None) -> hub.PullResult:
+    """:func:`pull`, saying what it did (:meth:`~dtradar_data.publish.hub.PullResult.describe`)."""
     if repo_id is not None:
         hub.check_repo_id(repo_id)
     lid = parse_logged_id(name)
     revision = revision or lid.revision
+    lid, repo_id = lid.with_revision(None), repo_id or default_repo(lid)
+    tag_of = read_refs(refs_path(lid)).tag_of
     if revision is not None:
         with contextlib.suppress(DatasetNotFoundError, RevisionNotFoundError):
-            return resolve_logged(lid.with_revision(None), revision)[2]
-    repo_id = repo_id or default_repo(lid)
+            _, version, vdir = resolve_logged(lid, revision)
+            return hub.PullResult(lid.name, vdir, version, tag_of(version), repo_id, revision, False, False)
     # held by this process: the next log or pull removes it if this one is killed (store.logged.staging)
     clean_logged_stages()
+    instead = _without_the_hub(lid)
     with held_stage(P.work_root(), STAGE_PREFIXES[1], lockless=looks_like_stage) as stage:
-        with hub.hub_errors("pull from", repo_id):
+        with hub.hub_errors("pull from", repo_id, what=revision and f"{lid.name}@{revision}", instead=instead):
             got = _download(repo_id, revision or "main", stage / "download", stage / "cache")
         version_dir = stage / "version"
         version_dir.mkdir()
@@ -107,8 +128,11 @@ def pull(name: str | LoggedId, revision: str | None = None, *, repo_id: str | No
                 f"the download of {lid.name} from {repo_id!r} failed verification: {exc.message}",
                 hint="retry; if it persists the Hub copy is damaged",
             ) from exc
+        existed = set(local_versions(lid))
         preferred = revision if revision and is_tag(revision) else hub._card_tag(version_dir / P.CARD_FILE)
-        return install_logged(lid, version_dir, preferred_tag=preferred)
+        path = install_logged(lid, version_dir, preferred_tag=preferred)
+    tag = read_refs(refs_path(lid)).tag_of(path.name)
+    return hub.PullResult(lid.name, path, path.name, tag, repo_id, revision, True, path.name not in existed)
 
 
-__all__ = ["FILES", "default_repo", "publish", "pull"]
+__all__ = ["FILES", "default_repo", "publish", "pull", "pull_version"]

@@ -3,14 +3,25 @@
 Every public function of the store takes a name as text or as a parsed :class:`~dtradar_data.core.ids.DatasetId`;
 :func:`as_id` turns text into an id, with a "did you mean ...?" over the names that exist here (:func:`known_names`:
 each built-in scene's real variants, and every one stored), never over a combination no build makes
-(``sionna-munich/dynamic``). :func:`missing_twin` is the error for a built-in scene's variant that does not exist.
+(``sionna-munich/dynamic``). :func:`missing_twin` is the error for a built-in scene's variant that does not exist,
+:func:`build_command` the command that builds one that does.
 """
 
 from __future__ import annotations
 
 from dtradar_data.core import layout
 from dtradar_data.core.errors import DatasetNotFoundError
-from dtradar_data.core.ids import DATASET_VARIANTS, SCENE_RE, DatasetId, LoggedId, is_logged_name, parse_id, parse_name
+from dtradar_data.core.ids import (
+    DATASET_VARIANTS,
+    MOVING_VARIANT,
+    SCENE_RE,
+    TX_POSE_SUFFIX,
+    DatasetId,
+    LoggedId,
+    is_logged_name,
+    parse_id,
+    parse_name,
+)
 from dtradar_data.scenes import available_scenes, builtin_moving_names, builtin_names
 
 
@@ -65,6 +76,21 @@ def missing_twin(did: DatasetId) -> DatasetNotFoundError | None:
         hint=f"use {' or '.join(own)}"
         + (f", or another scene's {did.variant} twin: {', '.join(others)}" if others else ""),
     )
+
+
+def build_command(did: DatasetId) -> str:
+    """The command that builds ``did``, in backquotes, its scene filled in: ``make dataset`` for a built-in scene; a
+    user's scene (or its antenna-pose twin) is built from the scene file it came from, which ``make dataset`` with
+    the bare name could not find."""
+    scene, variant = did.scene, did.variant
+    base = scene.removesuffix(TX_POSE_SUFFIX)
+    pose = " --tx-pose-error OFFSET_M ANGLE_DEG" if scene.endswith(TX_POSE_SUFFIX) else ""
+    if scene in builtin_scenes():
+        make = f"`make dataset SCENE={scene}" + (f" VARIANT={variant}" if variant == MOVING_VARIANT else "") + "`"
+        return f"{make} (or `python -m dtradar_data build --scene {scene} --variant {variant}`)"
+    source = base if base in builtin_scenes() else f"path/to/{base}.toml"
+    where = "" if base in builtin_scenes() else f" ({source}: {base}'s own scene file)"
+    return f"`python -m dtradar_data build --scene {source} --variant {variant}{pose}`{where}"
 
 
 def as_id(name: str | DatasetId, *, check_known: bool = True) -> DatasetId:

@@ -25,10 +25,10 @@ from dtradar_data.core.errors import (
     SchemaMismatchError,
 )
 from dtradar_data.core.files import sha256_file
-from dtradar_data.core.ids import HASH_RE, MOVING_VARIANT, DatasetId
+from dtradar_data.core.ids import HASH_RE, DatasetId
 from dtradar_data.core.record import VersionRecord
 from dtradar_data.core.schema import cell_schema, meta_transmitters, path_schema
-from dtradar_data.store.catalog import as_id, missing_twin
+from dtradar_data.store.catalog import as_id, build_command, missing_twin
 from dtradar_data.store.versions import Refs, one_revision, read_refs, resolve_revision
 
 # ---------------------------------------------------------------------------------------------------------- schema
@@ -172,10 +172,7 @@ def resolve(
     if not versions:
         raise missing_twin(did) or DatasetNotFoundError(
             f"{did.name} has not been built or pulled into {P.data_root()}",
-            hint=f"build it with `make dataset SCENE={did.scene}"
-            + (" VARIANT=moving" if did.variant == MOVING_VARIANT else "")
-            + "` (or `python -m dtradar_data build --scene "
-            f"{did.scene} --variant {did.variant}`), or pull a published one with "
+            hint=f"build it with {build_command(did)}, or pull a published one with "
             f"`python -m dtradar_data pull {did.name}`",
         )
     refs = read_refs(P.refs_path(did.scene, did.variant))
