@@ -21,8 +21,9 @@ from dtradar_data.core.boundary import EXIT_FAILED_CHECK
 from dtradar_data.core.errors import DtradarError
 from dtradar_data.core.files import human_size
 from dtradar_data.core.layout import data_root
+from dtradar_data.core.layout import refs_path as refs_path_of
 from dtradar_data.store import listing, local
-from dtradar_data.store.catalog import as_any_id
+from dtradar_data.store.catalog import as_any_id, build_command
 from dtradar_data.store.logged import (
     LoggedId,
     is_logged_name,
@@ -289,8 +290,10 @@ def _fix_hint(name: str, bad: list[str]) -> str:
         pull = f"`python -m dtradar_data pull {lid.name}@<tag>`"
         folder = str(logged_dir(lid) / bad[0]) if len(bad) == 1 else None
         return f"{relog_hint(lid, meta, folder)}; or re-pull a published one ({pull})"
-    variant = " VARIANT=moving" if parsed.variant == "moving" else ""
+    one = len(bad) == 1  # one failed version: its own tag (or hash) in the pull
+    revision = (read_refs(refs_path_of(parsed.scene, parsed.variant)).tag_of(bad[0]) or bad[0]) if one else "<tag>"
+    them = "it" if one else "them"
     return (
-        f"rebuild them (`make dataset SCENE={parsed.scene}{variant}`) or re-pull them "
-        f"(`python -m dtradar_data pull {parsed.name}@<tag>`)"
+        f"rebuild {them} with {build_command(parsed)} or re-pull {them} "
+        f"(`python -m dtradar_data pull {parsed.name}@{revision}`)"
     )
