@@ -98,9 +98,8 @@ class PullCmd:
     """Hub dataset repo id; default dtradar/dtradar-<scene>-<variant>."""
 
     def run(self) -> int:
-        pull = logged_hub.pull if is_logged_name(self.name) else hub.pull
-        path = pull(self.name, self.revision, repo_id=self.repo)
-        print(f"pulled into {path}")
+        pull = logged_hub.pull_version if is_logged_name(self.name) else hub.pull_version
+        print(pull(self.name, self.revision, repo_id=self.repo).describe())
         return 0
 
 

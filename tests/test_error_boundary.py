@@ -19,7 +19,7 @@ from dtradar_rl.evaluation import jobs as eval_jobs
 # (the CLI, a command line, the module attribute the command calls first)
 COMMANDS = {
     "dtradar_data list": (data_cli.main, ["list"], listing, "list_datasets"),
-    "dtradar_rl eval": (rl_cli.main, ["eval", "--scene", "synthetic"], eval_jobs, "load_policy"),
+    "dtradar_rl eval": (rl_cli.main, ["eval", "--scene", "synthetic"], eval_jobs, "load_agent_or_policy"),
 }
 
 
