@@ -191,9 +191,13 @@ def plots(report: dict, out: Path) -> list[Path]:
     twins_ = list(dict.fromkeys((r["scene"], r["twin"]) for r in rows))
     sensings = list(dict.fromkeys(r["sensing"] for r in rows))
     noises = list(dict.fromkeys(r["noise"] for r in rows))
-    fig, axes = plt.subplots(len(twins_), 1, figsize=(10, 2.6 * len(twins_)), squeeze=False)
+    cols = min(2, len(twins_))
+    fig, axes = plt.subplots(-(-len(twins_) // cols), cols, figsize=(7 * cols, 2.6 * -(-len(twins_) // cols)))
+    axes = np.atleast_2d(axes)
     width = 0.8 / max(1, len(noises))
-    for ax, (scene, twin) in zip(axes[:, 0], twins_):
+    for ax in axes.ravel()[len(twins_) :]:
+        ax.axis("off")
+    for ax, (scene, twin) in zip(axes.ravel(), twins_):
         for j, noise in enumerate(noises):
             vals = [(spl(rows, scene, twin, s, noise) or {}).get("spl", np.nan) for s in sensings]
             ax.bar(np.arange(len(sensings)) + j * width, vals, width, label=f"noise {noise}")
@@ -205,17 +209,27 @@ def plots(report: dict, out: Path) -> list[Path]:
     fig.tight_layout()
     bars = out.with_suffix(".png")
     _save(fig, bars)
-    fig, axes = plt.subplots(1, len(twins_), figsize=(3.2 * len(twins_), 3), squeeze=False, sharey=False)
-    for ax, (scene, twin) in zip(axes[0], twins_):
+    cols = min(4, len(twins_))
+    rows_ = -(-len(twins_) // cols)
+    fig, axes = plt.subplots(rows_, cols, figsize=(3.6 * cols, 2.8 * rows_), squeeze=False)
+    colour = {"radio": "tab:blue", "rssi": "tab:orange", "no-radio": "tab:grey"}
+    style = {"none": ":", "realistic": "-", "2x": "--"}
+    for ax, (scene, twin) in zip(axes.ravel(), twins_):
         for t in tracks:
-            if (t["scene"], t["twin"]) != (scene, twin):
-                continue
-            style = {"none": ":", "realistic": "-", "2x": "--"}.get(t["noise"], "-")
-            ax.plot(t["error_m"], style, label=f"{t['sensing']}, {t['noise']}")
+            if (t["scene"], t["twin"]) == (scene, twin):
+                ax.plot(
+                    t["error_m"],
+                    style.get(t["noise"], "-"),
+                    color=colour.get(t["sensing"]),
+                    label=f"{t['sensing']}, noise {t['noise']}",
+                )
         ax.set_title(f"{scene}/{twin}", fontsize=9)
-        ax.set_xlabel("step")
-    axes[0, 0].set_ylabel("mean localisation error (m)")
+        ax.set_xlabel("step", fontsize=8)
+        ax.set_ylabel("mean error (m)", fontsize=8)
+    for ax in axes.ravel()[len(twins_) :]:
+        ax.axis("off")
     axes[0, 0].legend(fontsize=6)
+    fig.suptitle("distance from the filter's most likely cell to the true one, along the episode", fontsize=10)
     fig.tight_layout()
     loc = out.with_name(out.name + "_localisation.png")
     _save(fig, loc)
