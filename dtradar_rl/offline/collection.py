@@ -27,6 +27,35 @@ from dtradar_rl.offline.behaviours import Actor, BehaviourSpec, checkpoint_polic
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.train.replay import replay_transitions
 
+#: Bytes per logged step of each column :func:`roll` records, as it records them (torch's dtypes: ``obs`` and
+#: ``next_obs`` float32 per observation column, moves, cells and targets int64, rewards float32, flags bool)...
+RECORDED_BYTES: dict[str, int] = {
+    "action": 8,
+    "reward": 4,
+    "terminated": 1,
+    "truncated": 1,
+    "cell": 8,
+    "target": 8,
+}
+#: ... and of the columns :func:`_assemble` adds (int64 each).
+ASSEMBLED_BYTES: dict[str, int] = {"episode": 8, "step": 8, "robot": 8, "component": 8}
+#: Bytes per step per observation column: ``obs`` and ``next_obs``, float32 each.
+OBS_BYTES = 2 * 4
+
+
+def rollout_steps(steps: int, num_envs: int) -> int:
+    """The steps :func:`roll` logs for ``steps``: rounded up to whole steps of all ``num_envs`` robots."""
+    return -(-int(steps) // int(num_envs)) * int(num_envs)
+
+
+def rollout_bytes(steps: int, num_envs: int, obs_width: int) -> int:
+    """The memory :func:`roll` holds at its peak for ``steps`` (:func:`rollout_steps`) of ``obs_width``-wide
+    observations: every recorded step stays in memory until the end, and :func:`_assemble` stacks the recorded steps
+    into columns while they are still held (two copies), then adds its own columns. A lower bound: the store's table
+    and the interpreter come on top, so a log refused by it cannot fit."""
+    recorded = OBS_BYTES * int(obs_width) + sum(RECORDED_BYTES.values())
+    return rollout_steps(steps, num_envs) * (2 * recorded + sum(ASSEMBLED_BYTES.values()))
+
 
 @dataclass
 class Rollout:
@@ -193,4 +222,4 @@ def replay(
     return out
 
 
-__all__ = ["Rollout", "replay", "roll"]
+__all__ = ["Rollout", "replay", "roll", "rollout_bytes", "rollout_steps"]

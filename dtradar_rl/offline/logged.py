@@ -39,6 +39,8 @@ import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import CorruptDatasetError, SchemaMismatchError
+from dtradar_data.core.files import human_size
+from dtradar_data.core.machine import available_memory
 from dtradar_data.store import read_refs
 from dtradar_data.store.logged import (
     MINARI_ENV,
@@ -76,14 +78,19 @@ from dtradar_rl.offline.behaviours import (
     BehaviourSpec,
     behaviour_policy,
 )
-from dtradar_rl.offline.collection import replay, roll
+from dtradar_rl.offline.collection import replay, roll, rollout_bytes, rollout_steps
 from dtradar_rl.offline.log_settings import parent_version, settings_of
 from dtradar_rl.offline.medium_agent import medium_agent, resolve_spec
 from dtradar_rl.offline.minari_copy import check_minari_free, export_minari
 from dtradar_rl.task.config import ConfigError
-from dtradar_rl.task.observations import Normalizer, build_observations
+from dtradar_rl.task.observations import Normalizer, build_observations, obs_dim
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.twins import load_dataset
+
+
+class LogTooLargeError(ConfigError):
+    """A log whose rollout would not fit in the memory this machine has (every step is held until it is stored),
+    refused before anything is rolled out; the message gives the size, what is available and the --steps that fit."""
 
 
 @dataclass(frozen=True)
@@ -137,8 +144,27 @@ class LogConfig(BehaviourConfig):
             )
         if self.behaviour != "medium-replay":  # medium-replay holds what the medium run collected: no --steps
             self.check_at_least(1, "steps")
+            self.check_memory()
         parse_logged_id(self.logged_name)  # the name must fit the grammar
         return self
+
+    def check_memory(self, transmitters: int = 1) -> None:
+        """:class:`LogTooLargeError` when rolling out ``--steps`` (observations of ``--obs`` on a twin of
+        ``transmitters``; 1, the narrowest, before the twin is loaded) needs more memory than this machine has
+        available (:func:`~dtradar_rl.offline.collection.rollout_bytes`); not checked where the system does not say."""
+        width = obs_dim(self.obs, transmitters)
+        need, have = rollout_bytes(self.steps, self.num_envs, width), available_memory()
+        if have is None or need <= have:
+            return
+        per_step = rollout_bytes(self.num_envs, self.num_envs, width) // self.num_envs
+        fit = have // per_step // self.num_envs * self.num_envs
+        raise LogTooLargeError(
+            f"--steps {self.steps}: logging {rollout_steps(self.steps, self.num_envs):,} steps of {width}-column "
+            f"{self.obs} observations holds about {human_size(need)} in memory ({per_step} bytes a step: "
+            "its observation, next observation and other columns, held twice while they are stacked); this machine "
+            f"has {human_size(have)} available",
+            hint=f"log fewer --steps (about {fit:,} fit now)" if fit else "free memory (other processes) and log again",
+        )
 
 
 def log_inputs(cfg: LogConfig, ds: Dataset) -> dict[str, Any]:
@@ -205,6 +231,8 @@ def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset
     torch.set_num_threads(cfg.threads or auto_threads())
     say = print if cfg.verbose else (lambda *a, **k: None)
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
+    if cfg.behaviour != "medium-replay":
+        cfg.check_memory(ds.transmitters)  # the twin's own observation width, wider with each transmitter
     check_minari_copies([cfg], ds)
     inputs = log_inputs(cfg, ds)
     version = logged_version(inputs)
@@ -331,6 +359,7 @@ def behaviour_score(
 
 __all__ = [
     "LogConfig",
+    "LogTooLargeError",
     "behaviour_score",
     "check_minari_copies",
     "log_dataset",
