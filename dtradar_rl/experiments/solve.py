@@ -4,9 +4,11 @@
     python -m dtradar_rl solve --scene dallas-q3 --rewards geodesic --gamma 0.99
 
 For every twin in ``--variants`` and every reward in ``--rewards``: V* and Q* for every (cell, target) at discount
-``--gamma`` (:mod:`dtradar_rl.tabular.solver`; cached in ``<data root>/tabular/``, reused when the twin's content
-version, reward and discount are the same), then the greedy Q* policy followed from the 500 seeded evaluation pairs
-of ``make eval`` with the true cell: its success rate and SPL, and the fraction of connected pairs it reaches.
+``--gamma`` (:mod:`dtradar_rl.tabular.solver`; cached in ``<data root>/tabular/`` by :mod:`dtradar_rl.tabular.cache`,
+reused when the twin's content version, reward and discount are the same and every file matches its recorded hash,
+else solved again and rewritten, saying so on stderr), then the greedy Q* policy followed from the 500 seeded
+evaluation pairs of ``make eval`` with the true cell: its success rate and SPL, and the fraction of connected pairs it
+reaches.
 Writes ``solve.json``, ``solve.md`` and, per twin and reward, ``value_<variant>_<reward>.png`` (V* of one target as a
 heat map, the greedy policy as arrows) to ``--out``.
 """
@@ -25,9 +27,10 @@ from dtradar_data.core.errors import DatasetNotFoundError
 from dtradar_data.core.files import write_atomic
 from dtradar_rl.evaluation.evaluate import sample_eval_pairs
 from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED
+from dtradar_rl.tabular.cache import solve_twin
 from dtradar_rl.tabular.evaluation import follow, path_metrics
 from dtradar_rl.tabular.memory import check_memory, solve_parts
-from dtradar_rl.tabular.solver import GAMMA, Solution, TabularMDP, check_gamma, check_size, solve_twin
+from dtradar_rl.tabular.solver import GAMMA, Solution, TabularMDP, check_gamma, check_size
 from dtradar_rl.task.config import Config, ConfigError
 from dtradar_rl.task.rewards import check_reward
 from dtradar_rl.task.runtime import machine

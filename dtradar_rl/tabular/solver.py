@@ -17,25 +17,21 @@ breadth-first distances and against brute-force value iteration on tiny grids; u
 prefers paths that stay near the target in straight-line distance, so its greedy SPL may fall below 1.
 
 Q* is not stored separately in memory: moves are deterministic, so ``Q*(s, a) = r(s, a, t) + γ · [s' != t] ·
-V*(s')`` exactly (:meth:`Solution.q`). :func:`solve_twin` caches a solution on disk (``<data root>/tabular/``), keyed
-by the twin's content version, the reward and the discount: it is derived data, never part of the dataset.
+V*(s')`` exactly (:meth:`Solution.q`). :func:`dtradar_rl.tabular.cache.solve_twin` caches a solution on disk
+(``<data root>/tabular/``), keyed by the twin's content version, the reward and the discount, each file with its
+content hash: it is derived data, never part of the dataset.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidSettingError
-from dtradar_data.core.files import open_atomic
-from dtradar_data.core.layout import data_root
-from dtradar_data.store.logged import table_digest
 from dtradar_rl.tabular.memory import CHUNK_BYTES, TooLargeError, check_memory, chunk_size, solve_parts
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.rewards import check_reward, reward_fn
@@ -334,65 +330,6 @@ def solve(
     return sol
 
 
-# -- the cache -------------------------------------------------------------------------------------------------------
-def cache_dir(ds: Dataset, reward: str, gamma: float) -> Path:
-    """``<data root>/tabular/<scene>/<variant>/<version>/<reward>-gamma<γ>/`` (derived data, never in the dataset)."""
-    version = ds.version or f"table-{table_digest(ds.table)[:16]}"  # a synthetic twin: its content
-    return data_root() / "tabular" / ds.name / version / f"{reward}-gamma{gamma:g}"
-
-
-def save(sol: Solution, folder: Path) -> Path:
-    """``values.npy`` (V*, float64), ``q.npy`` (Q*, float32, ``K x N x 4``), ``targets.npy``, ``cells.npy`` and
-    ``solution.json``, each written atomically; the JSON last, so a folder with it is complete. Q* is written chunk
-    by chunk of targets: whole, it would take twice the memory of V* (and its list of chunks as much again)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    k, n_t = chunk_size(sol.tab.n), sol.targets.size
-    with open_atomic(folder / "q.npy", "wb") as f:
-        header = {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)), "fortran_order": False}
-        np.lib.format.write_array_header_1_0(f, {**header, "shape": (n_t, sol.tab.n, 4)})
-        for i in range(0, n_t, k):
-            f.write(np.ascontiguousarray(sol.q(np.arange(i, min(i + k, n_t))), np.float32).tobytes())
-    for fname, arr in (("values.npy", sol.values), ("targets.npy", sol.targets), ("cells.npy", sol.tab.cells)):
-        with open_atomic(folder / fname, "wb") as f:
-            np.save(f, arr)
-    with open_atomic(folder / "solution.json", "w") as f:
-        f.write(json.dumps(sol.meta(), indent=2) + "\n")
-    return folder
-
-
-def load(folder: Path, tab: TabularMDP) -> Solution | None:
-    """The solution stored in ``folder`` for ``tab``'s twin, or None when absent, incomplete or for another grid."""
-    try:
-        meta = json.loads((folder / "solution.json").read_text())
-        if meta.get("format") != FORMAT or not np.array_equal(np.load(folder / "cells.npy"), tab.cells):
-            return None
-        values = np.load(folder / "values.npy")
-        targets = np.load(folder / "targets.npy")
-    except (OSError, ValueError, json.JSONDecodeError):
-        return None
-    if values.shape != (targets.size, tab.n):
-        return None
-    return Solution(
-        meta["dataset"], meta["version"], meta["reward"], float(meta["gamma"]), targets, values,
-        int(meta["sweeps"]), float(meta["residual"]), float(meta["seconds"]), tab,
-    )  # fmt: skip
-
-
-def solve_twin(ds: Dataset, reward: str = "geodesic", gamma: float = GAMMA, *, cache: bool = True, progress=None):
-    """The solution of ``ds`` for every free cell as target: from the cache when stored, else solved (and stored)."""
-    tab = TabularMDP.from_dataset(ds)
-    gamma = check_gamma(gamma)
-    folder = cache_dir(ds, check_reward(reward), gamma)
-    if cache:
-        sol = load(folder, tab)
-        if sol is not None:
-            return sol, folder, True
-    sol = solve(tab, reward, gamma, name=ds.name, version=ds.version or "", progress=progress)
-    if cache:
-        save(sol, folder)
-    return sol, folder, False
-
-
 __all__ = [
     "CHUNK_BYTES",
     "GAMMA",
@@ -401,11 +338,7 @@ __all__ = [
     "TooLargeError",
     "bellman_sweeps",
     "expectation_sweeps",
-    "cache_dir",
     "check_size",
     "chunk_size",
-    "load",
-    "save",
     "solve",
-    "solve_twin",
 ]

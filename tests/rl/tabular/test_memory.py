@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dtradar_rl.experiments.solve import SolveConfig, solve_scene
-from dtradar_rl.tabular import batch, memory, qlearning, solver
+from dtradar_rl.tabular import batch, cache, memory, qlearning
 from dtradar_rl.tabular.evaluation import policy_values, uniform_values
 from dtradar_rl.tabular.memory import TooLargeError
 from dtradar_rl.tabular.solver import TabularMDP, solve
@@ -98,10 +98,10 @@ def test_the_cache_and_the_greedy_table_are_made_chunk_by_chunk_never_whole_twic
     k, n = sol.targets.size, tab.n
     whole_q = k * n * 4 * 4  # Q* as float32
 
-    assert peak(lambda: solver.save(sol, tmp_path)) < whole_q, "the cache's Q* is never whole in memory"
+    assert peak(lambda: cache.save(sol, tmp_path)) < whole_q, "the cache's Q* is never whole in memory"
     q = np.load(tmp_path / "q.npy")
     np.testing.assert_array_equal(q, sol.q().astype(np.float32))
-    loaded = solver.load(tmp_path, tab)
+    loaded = cache.load(tmp_path, tab)
     np.testing.assert_array_equal(loaded.values, sol.values)
 
     greedy = sol.greedy()

@@ -9,8 +9,9 @@ import pytest
 
 from dtradar_data.core.errors import InvalidSettingError
 from dtradar_rl.tabular import solver
+from dtradar_rl.tabular.cache import solve_twin
 from dtradar_rl.tabular.evaluation import follow, path_metrics, policy_values
-from dtradar_rl.tabular.solver import TabularMDP, solve, solve_twin
+from dtradar_rl.tabular.solver import TabularMDP, solve
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.rewards import REWARDS, reward_fn
 from dtradar_rl.task.twins import load_dataset
