@@ -47,6 +47,7 @@ from dtradar_data.geometry.meshes import write_mitsuba_scene
 from dtradar_data.rt.llvm import configure as configure_llvm
 from dtradar_data.rt.settings import Device, RTSettings
 from dtradar_data.rt.sionna_version import check_patched_sionna_rt
+from dtradar_data.scenes.transmitters import check_one_array
 
 
 @dataclass
@@ -147,6 +148,8 @@ class RayTracer:
     def __init__(self, spec, settings: RTSettings = RTSettings(), *, scene_dir: Path | None = None):
         if settings.batch_independent:
             check_patched_sionna_rt()  # first: a wrong release fails before the scene loads, not deep in a trace
+        # Sionna's scene has one array for every transmitter: readers refuse other files; a spec made in code here
+        check_one_array(getattr(spec, "transmitters", (spec.tx,)), spec.name)
         self.spec = spec
         self.settings = settings
         self.mi, self.rt = _import_sionna(settings.device, cpu_only=settings.batch_independent)
@@ -159,19 +162,6 @@ class RayTracer:
         self.scene = rt.load_scene(str(xml), merge_shapes=True)
         self.scene.frequency = settings.frequency_hz
         tx = spec.tx  # the transmitter array is part of the scene (paper: 8x2 tr38901 VH, on the ceiling)
-        for other in getattr(spec, "more_tx", ()):  # Sionna's scene has one array for every transmitter
-            if (other.num_rows, other.num_cols, other.pattern, other.polarization) != (
-                tx.num_rows,
-                tx.num_cols,
-                tx.pattern,
-                tx.polarization,
-            ):
-                raise InvalidSettingError(
-                    f"{spec.name}: transmitter {other.name or ''} has another array than transmitter 0 "
-                    f"({other.num_rows}x{other.num_cols} {other.pattern} {other.polarization} vs "
-                    f"{tx.num_rows}x{tx.num_cols} {tx.pattern} {tx.polarization}): Sionna gives a scene one array",
-                    hint="give every [[tx]] the same num_rows, num_cols, pattern and polarization",
-                )
         self.scene.tx_array = rt.PlanarArray(
             num_rows=tx.num_rows, num_cols=tx.num_cols, pattern=tx.pattern, polarization=tx.polarization
         )

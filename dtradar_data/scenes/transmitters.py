@@ -7,6 +7,8 @@ before any mesh is written or ray traced:
 - :func:`check_transmitter_tables`: a file's ``tx`` is one ``[tx]`` table or an array of ``[[tx]]`` tables (a
   deployment with several access points or base stations; the first is transmitter 0). ``tx = []``, an entry that is
   not a table and two transmitters of one name are refused; :func:`tx_tables` lists them.
+- :func:`check_one_array`: every transmitter has transmitter 0's array (rows, columns, pattern, polarization):
+  Sionna gives a scene one transmitter array, so a file whose ``[[tx]]`` differ cannot be traced as written.
 - :func:`object_at` / :func:`check_transmitter_clear`: no transmitter is in one of the spec's boxes (objects,
   walls, floor, ceiling) or prisms (a city's buildings), in every variant (a dynamic change can move an object onto
   it). The shapes of an XML scene's own mesh are checked by
@@ -24,7 +26,14 @@ import numpy as np
 from dtradar_data.core.errors import SceneFileError
 from dtradar_data.scenes.model import SceneSpec
 
-__all__ = ["check_transmitter_clear", "check_transmitter_tables", "object_at", "tx_label", "tx_tables"]
+__all__ = [
+    "check_one_array",
+    "check_transmitter_clear",
+    "check_transmitter_tables",
+    "object_at",
+    "tx_label",
+    "tx_tables",
+]
 
 #: The most transmitters one twin holds: each adds 14 columns to the cell table and its rays to every trace.
 MAX_TRANSMITTERS = 16
@@ -59,6 +68,24 @@ def check_transmitter_tables(data: dict[str, Any], origin: str, *, section: str 
             f"{origin}: [[{section}]] name {', '.join(map(repr, dupes))} is given to more than one transmitter",
             hint="give each transmitter its own name (the dataset card lists them by name)",
         )
+
+
+def _array(tx) -> str:
+    return f"{tx.num_rows}x{tx.num_cols} {tx.pattern} {tx.polarization}"
+
+
+def check_one_array(transmitters, origin: str) -> None:
+    """:class:`SceneFileError` unless every transmitter (a :class:`~dtradar_data.scenes.model.TxSpec` or a file's
+    ``[[tx]]`` table, anything with ``num_rows``, ``num_cols``, ``pattern`` and ``polarization``) has the array of
+    the first: Sionna gives a scene one transmitter array. Checked when the scene is read, before anything is built."""
+    first, *more = transmitters
+    for k, tx in enumerate(more, start=1):
+        if _array(tx) != _array(first):
+            raise SceneFileError(
+                f"{origin}: {tx_label(k, tx)} has another array than {tx_label(0, first)} ({_array(tx)} vs "
+                f"{_array(first)}): Sionna gives a scene one array for all its transmitters",
+                hint="give every [[tx]] the same num_rows, num_cols, pattern and polarization",
+            )
 
 
 def tx_tables(value) -> list:

@@ -53,7 +53,7 @@ from dtradar_data.scenes.sionna_scenes import (
     sionna_version,
     sionna_xml,
 )
-from dtradar_data.scenes.transmitters import check_transmitter_tables, tx_tables
+from dtradar_data.scenes.transmitters import check_one_array, check_transmitter_tables, tx_tables
 from dtradar_data.scenes.xml_shapes import mesh_scene
 
 FORMAT = 1
@@ -172,6 +172,7 @@ def _spec(
             f"{origin}: --tx places one transmitter, and this scene has {len(tables)} ([[tx]] tables)",
             hint="edit the [[tx]] tables' position_m in the scene file instead of passing --tx",
         )
+    check_one_array(tables, origin)
     if variant != "blueprint":
         raise SceneFileError(
             f"{origin} has no {variant} twin: only its blueprint",

@@ -39,7 +39,13 @@ from dtradar_data.scenes.indoor.document import (
 from dtradar_data.scenes.model import Box, Room, SceneSpec, TxSpec
 from dtradar_data.scenes.moving_scene import MOVING_VARIANT, MovingScene
 from dtradar_data.scenes.moving_section import moving_scene_from_section
-from dtradar_data.scenes.transmitters import check_transmitter_clear, check_transmitter_tables, tx_label, tx_tables
+from dtradar_data.scenes.transmitters import (
+    check_one_array,
+    check_transmitter_clear,
+    check_transmitter_tables,
+    tx_label,
+    tx_tables,
+)
 
 _EPS = 1e-6  # metres: tolerance of the "inside the room" checks (TOML decimals are not exact in binary)
 _SIZE_KEYS = ("material", "width_m", "length_m", "height_m")
@@ -134,6 +140,7 @@ class _Reader(DocumentErrors):
         grid = self.grid(doc.grid, room)
         tables = tx_tables(doc.tx)
         tx, *more_tx = (self.tx(t, room, "[tx]" if len(tables) == 1 else tx_label(k, t)) for k, t in enumerate(tables))
+        check_one_array((tx, *more_tx), self.origin)
         for key in ("rx_height_m", "robot_height_m"):
             h = getattr(doc.robot, key)
             if h >= room.height_m:

@@ -68,6 +68,13 @@ def test_two_transmitters_of_one_name_are_refused_naming_it():
     refused(room(tx=tx), "name 'ap1' is given to more than one transmitter", "its own name")
 
 
+def test_transmitters_with_different_arrays_are_refused_when_the_room_is_read_naming_both_arrays():
+    tx = [{"name": "ap1", "position_m": [1.0, 1.0, 2.9]}, {"name": "ap2", "position_m": [5.0, 3.0, 2.9], "num_cols": 1}]
+    refused(room(tx=tx), "[[tx]] 'ap2' has another array than [[tx]] 'ap1' (8x1 tr38901 VH vs 8x2 tr38901 VH)")
+    tx[1] |= {"num_cols": 2, "pattern": "iso"}
+    refused(room(tx=tx), "(8x2 iso VH vs 8x2 tr38901 VH)", "the same num_rows, num_cols, pattern and polarization")
+
+
 def test_a_single_tx_block_in_double_brackets_is_the_same_scene_as_single_brackets():
     single = parse_room(room(tx=[{"position_m": [3.0, 2.0, 2.9]}]), "blueprint")
     assert single.digest() == parse_room(room(), "blueprint").digest()
@@ -146,6 +153,9 @@ position_m = [10.0, 0.0, 20.0]
     assert spec.more_tx[0].look_at_m == spec.tx.look_at_m  # both look at the grid's centre
     with pytest.raises(SceneFileError, match=r"--tx places one transmitter, and this scene has 2"):
         load_scene_spec(toml, "blueprint", tx=(1.0, 0.0, 20.0))
+    toml.write_text(toml.read_text() + 'polarization = "V"\n')
+    with pytest.raises(SceneFileError, match=r"\[\[tx\]\] #2 has another array than \[\[tx\]\] #1 \(8x2 tr38901 V vs"):
+        load_scene_spec(toml, "blueprint")
 
 
 def test_the_built_in_rooms_and_quadrants_keep_their_transmitters_clear():
