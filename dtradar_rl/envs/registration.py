@@ -49,8 +49,14 @@ def register_dataset_envs(**kwargs) -> list[str]:
     observation presets); ``gym.make`` can override them. Datasets are loaded when an env is made, not here.
     Registering again replaces the ids.
     """
+    return _register(
+        ["synthetic/blueprint", "synthetic/dynamic", "synthetic-moving/blueprint", *built_datasets()], kwargs
+    )
+
+
+def _register(names: list[str], kwargs: dict) -> list[str]:
     ids = []
-    for name in ["synthetic/blueprint", "synthetic/dynamic", "synthetic-moving/blueprint", *built_datasets()]:
+    for name in names:
         eid = env_id(name)
         gym.registry.pop(eid, None)
         gym.register(
@@ -64,6 +70,17 @@ def register_dataset_envs(**kwargs) -> list[str]:
         gym.register(id=hid, entry_point="dtradar_rl.envs.honest_gym:HonestGymEnv", kwargs={"dataset": name})
         ids += [eid, hid]
     return ids
+
+
+def register_on_import() -> list[str]:
+    """:func:`register_dataset_envs` as importing :mod:`dtradar_rl.envs` does it: a data root that cannot be listed
+    (missing, unreadable, damaged) registers the synthetic twins' ids alone rather than failing the import."""
+    from dtradar_data.core.errors import DtradarError
+
+    try:
+        return register_dataset_envs()
+    except (DtradarError, OSError):
+        return _register(["synthetic/blueprint", "synthetic/dynamic", "synthetic-moving/blueprint"], {})
 
 
 def twin_version(ds: Dataset) -> str:

@@ -128,3 +128,16 @@ def test_batched_random_pairs_are_connected_and_distinct():
 def test_synthetic_cubicle_stand_in_has_the_cubicle_grid_and_more_obstacles_when_dynamic():
     bp, dyn = synthetic_blocked(42, 18, "blueprint"), synthetic_blocked(42, 18, "dynamic")
     assert bp.shape == (18, 42) and bp.any() and (dyn & ~bp).any() and not (bp & ~dyn).any()
+
+
+def test_a_fresh_process_makes_an_env_by_gymnasiums_module_colon_id_form():
+    import subprocess
+    import sys
+
+    code = (
+        "import gymnasium as gym; env = gym.make('dtradar_rl.envs:dtradar/synthetic-blueprint-honest-v0');"
+        "obs, info = env.reset(seed=0); print(obs.shape[0], 'x_m' in info['names'])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["20", "False"]
