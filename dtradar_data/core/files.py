@@ -9,6 +9,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import socket
 import sys
 import tempfile
@@ -67,6 +68,23 @@ def open_atomic(path: Path, mode: str = "w", **kwargs) -> Iterator[IO]:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+#: What follows ``.<name>`` in a temp file of :func:`open_atomic`: a dot, ``tempfile``'s 8 characters, ``.tmp``.
+_TEMP_TAIL = r"\.[a-z0-9_]{8}\.tmp"
+
+
+def temp_siblings(path: Path) -> list[Path]:
+    """The temp files that :func:`open_atomic` writers of ``path`` made beside it, of live writers or of killed ones
+    (a ``kill -9`` mid-write leaves its temp file behind): only a caller that holds the lock every writer of ``path``
+    holds while it writes may remove them, and they are then a killed writer's."""
+    path = Path(path)
+    shape = re.compile(re.escape(f".{path.name}") + _TEMP_TAIL)
+    try:
+        names = [p for p in path.parent.iterdir() if shape.fullmatch(p.name)]
+    except OSError:  # no folder (nothing written yet), or unreadable
+        return []
+    return sorted(p for p in names if p.is_file() and not p.is_symlink())
 
 
 def write_atomic(path: Path, data: str | bytes) -> None:

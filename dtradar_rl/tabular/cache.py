@@ -7,6 +7,12 @@ Its arrays (``values.npy``, ``q.npy``, ``targets.npy``, ``cells.npy``) are each 
 a load re-hashes every file against it, so a damaged, short or unreadable file is noticed (:func:`check`), solved
 again and rewritten, with one line naming the file (:func:`solve_twin`). A cache written before the hashes were
 recorded has none to check against, and is solved again once, saying so.
+
+One process writes a cache folder at a time: a writer holds the folder's lock (``.lock``, a
+:func:`~dtradar_data.core.files.waiting_lock`: a second process that would solve the same twin, reward and discount
+says whom it waits for, then reads what the first one stored). Every temp file beside a cache file while that lock is
+held is therefore a killed writer's (a ``kill -9`` mid-write leaves its ``.q.npy.<random>.tmp``, as large as Q*), and
+the holder removes it, saying so; a sound cache found beside such debris has it removed when the lock is free.
 """
 
 from __future__ import annotations
@@ -18,20 +24,23 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from filelock import FileLock, Timeout
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.files import open_atomic, sha256_file
+from dtradar_data.core.files import human_size, open_atomic, sha256_file, temp_siblings, waiting_lock
 from dtradar_data.core.layout import data_root
 from dtradar_data.store.logged import table_digest
 from dtradar_rl.tabular.memory import chunk_size
 from dtradar_rl.tabular.solver import FORMAT, GAMMA, Solution, TabularMDP, check_gamma, solve
 from dtradar_rl.task.rewards import check_reward
 
-__all__ = ["ARRAYS", "cache_dir", "check", "load", "save", "solve_twin"]
+__all__ = ["ARRAYS", "LOCK", "cache_dir", "check", "load", "remove_stale_temps", "save", "solve_twin"]
 
 #: The arrays of a cached solution, each with its size and sha256 in ``solution.json``.
 ARRAYS = ("values.npy", "q.npy", "targets.npy", "cells.npy")
 META = "solution.json"
+#: The lock a writer of a cache folder holds (inside it) while it solves and writes.
+LOCK = ".lock"
 
 
 def cache_dir(ds: Dataset, reward: str, gamma: float) -> Path:
@@ -145,6 +154,40 @@ def _stderr(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
+def remove_stale_temps(folder: Path, say: Callable[[str], None] = _stderr) -> list[Path]:
+    """Remove the temp files beside the cache files of ``folder`` (killed writers'), saying so; returns them. Call it
+    only while holding the folder's :data:`LOCK`: every writer holds it while it writes, so none of them is live."""
+    gone, size = [], 0
+    for name in (*ARRAYS, META):
+        for tmp in temp_siblings(folder / name):
+            try:
+                n = tmp.stat().st_size
+                tmp.unlink()
+            except FileNotFoundError:
+                continue
+            gone.append(tmp)
+            size += n
+    if gone:
+        files = ", ".join(p.name for p in gone)
+        say(f"removed what a killed solve left in {folder}: {files} ({human_size(size)})")
+    return gone
+
+
+def _tidy_if_free(folder: Path, say: Callable[[str], None]) -> None:
+    """Beside a sound cache: remove killed writers' temp files when the folder's lock is free (no live writer), now."""
+    if not any(temp_siblings(folder / name) for name in (*ARRAYS, META)):
+        return
+    lock = FileLock(str(folder / LOCK))
+    try:
+        lock.acquire(timeout=0)
+    except (Timeout, OSError):  # a live writer's, or a folder this process may not write: left as it is
+        return
+    try:
+        remove_stale_temps(folder, say)
+    finally:
+        lock.release()
+
+
 def solve_twin(
     ds: Dataset,
     reward: str = "geodesic",
@@ -155,18 +198,31 @@ def solve_twin(
     say: Callable[[str], None] = _stderr,
 ):
     """``(solution, cache folder, from the cache)`` of ``ds`` for every free cell as target: from the cache when
-    stored and sound, else solved (and stored). A stored solution that cannot be used is solved again and rewritten,
-    and ``say`` (default: stderr) gets one line naming its file."""
+    stored and sound, else solved and stored, holding the folder's lock (module docstring). A stored solution that
+    cannot be used is solved again and rewritten; ``say`` (default: stderr) gets one line naming its file, and one
+    for the temp files of killed writers that are removed."""
     tab = TabularMDP.from_dataset(ds)
     gamma = check_gamma(gamma)
     folder = cache_dir(ds, check_reward(reward), gamma)
-    if cache:
-        sol, why = check(folder, tab)
+    if not cache:
+        return _solve(ds, tab, reward, gamma, progress), folder, False
+    sol, _ = check(folder, tab)
+    if sol is not None:
+        _tidy_if_free(folder, say)
+        return sol, folder, True
+    doing = f"solving {ds.name} exactly ({reward}, γ {gamma:g})"
+    with waiting_lock(folder / LOCK, doing, then="read its solution from the cache", notice_after_s=2.0):
+        sol, why = check(folder, tab)  # again: a writer we waited for has stored it meanwhile
         if sol is not None:
+            remove_stale_temps(folder, say)
             return sol, folder, True
         if why:
             say(f"the cached solution cannot be used: {why}; solving it again")
-    sol = solve(tab, reward, gamma, name=ds.name, version=ds.version or "", progress=progress)
-    if cache:
+        remove_stale_temps(folder, say)
+        sol = _solve(ds, tab, reward, gamma, progress)
         save(sol, folder)
     return sol, folder, False
+
+
+def _solve(ds: Dataset, tab: TabularMDP, reward: str, gamma: float, progress) -> Solution:
+    return solve(tab, reward, gamma, name=ds.name, version=ds.version or "", progress=progress)
