@@ -73,9 +73,10 @@ def read_meta(version_dir: Path) -> dict[str, Any]:
     return VersionRecord.from_meta(meta, where=str(path)).to_meta()
 
 
-def read_table(path: Path, schema: pa.Schema) -> pa.Table:
-    """Read one Parquet file, checking its schema and page checksums; typed errors name the file."""
-    fix = "rebuild it (`make dataset SCENE=<scene>`) or re-pull it (`python -m dtradar_data pull NAME`)"
+def read_table(path: Path, schema: pa.Schema, *, fix: str | None = None) -> pa.Table:
+    """Read one Parquet file, checking its schema and page checksums; typed errors name the file (``fix``: their
+    hint, by default a generic rebuild or re-pull)."""
+    fix = fix or "rebuild it (`make dataset SCENE=<scene>`) or re-pull it (`python -m dtradar_data pull NAME`)"
     try:
         pf = pq.ParquetFile(path, page_checksum_verification=True)
         actual = pf.schema_arrow
@@ -96,13 +97,32 @@ def read_table(path: Path, schema: pa.Schema) -> pa.Table:
     return table.replace_schema_metadata(schema.metadata)
 
 
-def _check_hash(version_dir: Path, fname: str, meta: dict[str, Any]) -> None:
+def _check_hash(version_dir: Path, fname: str, meta: dict[str, Any], fix: str) -> None:
     expected = (meta.get("files") or {}).get(fname, {}).get("sha256")
     if expected and sha256_file(version_dir / fname) != expected:
         raise CorruptDatasetError(
             f"{version_dir / fname} does not match the sha256 recorded in meta.json (changed or damaged on disk)",
-            hint="rebuild the dataset or re-pull it; `python -m dtradar_data verify NAME` checks every file",
+            hint=fix,
         )
+
+
+def damaged_hint(did: DatasetId, version: str, vdir: Path) -> str:
+    """How to get a damaged stored version back: see every problem, then remove it and rebuild it or re-pull its own
+    tag (both reuse a version folder that is there, damaged or not, so it has to go first)."""
+    tag = read_refs(P.refs_path(did.scene, did.variant)).tag_of(version) or version
+    return (
+        f"`python -m dtradar_data verify {did.name}` lists every problem; remove the damaged version "
+        f"(`rm -r {vdir}`), then rebuild it with {build_command(did)} or re-pull it "
+        f"(`python -m dtradar_data pull {did.name}@{tag}`)"
+    )
+
+
+def _stored_file(vdir: Path, fname: str, what: str, fix: str) -> Path:
+    """``vdir / fname``, a file the version stores, or :class:`CorruptDatasetError` naming it when it is missing."""
+    path = vdir / fname
+    if not path.is_file():
+        raise CorruptDatasetError(f"{path} is missing: {what} is damaged", hint=fix)
+    return path
 
 
 def local_versions(did: DatasetId, *, damaged: bool = False) -> list[str]:
@@ -186,22 +206,29 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
     ``paths=True`` also reads the per-path table into ``Dataset.paths_table`` (eagerly). ``verify`` re-hashes the
     files read against ``meta.json``. (``dtradar_data.load`` adds the Hub fallback on top of this.)
     """
-    did, version, vdir = resolve(name, revision)
-    meta = read_meta(vdir)
-    if verify:
-        _check_hash(vdir, P.CELLS_FILE, meta)
+    did, version, vdir = resolve(name, revision, damaged=True)  # a damaged version says so, never falls back
+    fix, what = damaged_hint(did, version, vdir), f"{did.name}@{version}"
+    _stored_file(vdir, P.META_FILE, what, fix)
+    try:
+        meta = read_meta(vdir)
+    except CorruptDatasetError as exc:
+        raise CorruptDatasetError(exc.message, hint=fix) from exc
     moving = _is_moving(meta)
-    table = read_table(vdir / P.CELLS_FILE, cell_schema(moving, meta_transmitters(meta)))
+    cells = _stored_file(vdir, P.CELLS_FILE, what, fix)
+    if verify:
+        _check_hash(vdir, P.CELLS_FILE, meta, fix)
+    table = read_table(cells, cell_schema(moving, meta_transmitters(meta)), fix=fix)
     paths_table = None
     if paths:
-        if not (vdir / P.PATHS_FILE).is_file():
+        if P.PATHS_FILE not in (meta.get("files") or {}) and not (vdir / P.PATHS_FILE).is_file():
             raise DatasetNotFoundError(
                 f"{did.name}@{version} was built without the per-path table",
                 hint="rebuild with per-path output enabled, or load without paths=True",
             )
+        path_file = _stored_file(vdir, P.PATHS_FILE, what, fix)  # listed in meta.json, so stored: missing is damage
         if verify:
-            _check_hash(vdir, P.PATHS_FILE, meta)
-        paths_table = read_table(vdir / P.PATHS_FILE, path_schema(moving, meta_transmitters(meta)))
+            _check_hash(vdir, P.PATHS_FILE, meta, fix)
+        paths_table = read_table(path_file, path_schema(moving, meta_transmitters(meta)), fix=fix)
     refs = read_refs(P.refs_path(did.scene, did.variant))
     meta["tag"] = refs.tag_of(version)  # tags live in refs.json; handed to consumers for logging
     grid = meta.get("grid", {})
@@ -211,7 +238,7 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
         raise CorruptDatasetError(
             f"{vdir / P.CELLS_FILE} has {table.num_rows} rows, meta.json grid is {grid.get('nx')}x{grid.get('ny')}"
             + what,
-            hint="rebuild the dataset or re-pull it",
+            hint=fix,
         )
     return Dataset(name=did.name, table=table, meta=meta, version=version, path=vdir, paths_table=paths_table)
 

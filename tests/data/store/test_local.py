@@ -258,3 +258,47 @@ def test_refs_is_replaced_atomically_without_leftover_temp_files(root):
     writing.write_version("cubicle/blueprint", V1, cells, meta)
     ddir = root / "datasets/cubicle/blueprint"
     assert sorted(os.listdir(ddir)) == sorted([".lock", "refs.json", V0, V1])
+
+
+@pytest.mark.parametrize("verify", [True, False])
+def test_a_deleted_cells_file_is_a_corrupt_dataset_naming_it_and_how_to_get_the_version_back(root, verify):
+    cells, meta = make()
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
+    (path / "cells.parquet").unlink()
+    with pytest.raises(CorruptDatasetError) as err:
+        dtradar_data.load("cubicle/blueprint", verify=verify)
+    text = str(err.value)
+    assert f"{path / 'cells.parquet'} is missing: cubicle/blueprint@{V0} is damaged" in text
+    assert "`python -m dtradar_data verify cubicle/blueprint`" in text and f"`rm -r {path}`" in text
+    assert "`make dataset SCENE=cubicle`" in text and "`python -m dtradar_data pull cubicle/blueprint@v0`" in text
+
+
+def test_a_deleted_paths_file_that_meta_json_lists_is_damage_not_a_build_without_paths(root):
+    cells, meta = make()
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta, paths=paths_table(cells))
+    (path / "paths.parquet").unlink()
+    assert dtradar_data.load("cubicle/blueprint").paths_table is None  # the cells alone still load
+    with pytest.raises(CorruptDatasetError, match=r"paths\.parquet is missing: .* is damaged(?s:.*)rm -r"):
+        dtradar_data.load("cubicle/blueprint", paths=True)
+    writing.write_version("cubicle/blueprint", V1, cells, {**meta, "built": "without paths"})
+    with pytest.raises(DatasetNotFoundError, match="built without the per-path table"):
+        dtradar_data.load("cubicle/blueprint@v1", paths=True)
+
+
+@pytest.mark.parametrize("revision", [None, "v0", V0])
+def test_a_deleted_meta_json_is_a_corrupt_dataset_not_one_never_built(root, revision):
+    cells, meta = make()
+    path = writing.write_version("cubicle/blueprint", V0, cells, meta)
+    (path / "meta.json").unlink()
+    with pytest.raises(CorruptDatasetError, match=r"meta\.json is missing(?s:.*)how to fix: .*verify.*rm -r"):
+        dtradar_data.load("cubicle/blueprint", revision)
+
+
+def test_the_newest_version_damaged_is_refused_rather_than_an_older_one_loaded_in_its_place(root):
+    cells, meta = make()
+    writing.write_version("cubicle/blueprint", V0, cells, meta)
+    newest = writing.write_version("cubicle/blueprint", V1, cells, {**meta, "rt": {"max_depth": 9}})
+    (newest / "meta.json").unlink()
+    with pytest.raises(CorruptDatasetError, match=f"{V1}/meta.json is missing(?s:.*)pull cubicle/blueprint@v1"):
+        dtradar_data.load("cubicle/blueprint")
+    assert dtradar_data.load("cubicle/blueprint@v0").version == V0
