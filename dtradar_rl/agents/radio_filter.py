@@ -10,15 +10,18 @@ which cells are blocked, and where each cell lies. At every step it
    have moved an object out of the way);
 2. **weighs** each cell by how well it explains what the robot senses now: the measured radio of every transmitter
    against the cell's fingerprint, each quantity a Gaussian error with the receiver's noise (:attr:`FilterConfig.noise`)
-   plus a floor for what a twin's change does to it, circular for azimuths and phase, and robust (a quantity off by
-   more than :data:`CLIP` standard deviations counts as off by :data:`CLIP`: a changed twin's radio differs in places);
-   whether each transmitter is heard against whether the map hears it there; and the proximity sensor's four readings
-   against the map's obstacles around the cell;
+   plus a floor for what a twin's change does to it (:data:`FLOOR`), circular for azimuths and phase (as a cosine
+   and a sine, so the distances to every fingerprint are one matrix product), and robust (a transmitter's mismatch
+   counts at most :data:`TX_CLIP` squared standard deviations per quantity: a changed twin's radio differs in places);
+   whether each transmitter is heard against whether the map hears it there (a mismatch weighs as the worst match);
+   and the proximity sensor's four readings against the map's obstacles around the cell;
 3. **acts** by QMDP (Littman et al. 1995): the move whose expected distance to the target, over the belief, is
-   smallest, with breadth-first distances on the map plus the obstacles it has sensed this episode; a move the
-   proximity sensor reports blocked is never taken. When the belief is sure of a cell (:data:`SURE`), a neighbour the
-   sensor reports blocked where the map has it free, or a move that bumped, is a new obstacle: it goes into the robot's
-   own map and the distances are replanned.
+   smallest, with breadth-first distances on the map plus the obstacles it has sensed this episode (through the map's
+   obstacles where no free path exists); a move the proximity sensor reports blocked is never taken. When the belief
+   is sure of a cell (:data:`SURE`), a neighbour the sensor reports blocked where the map has it free, or a move that
+   bumped, is a new obstacle: it goes into the robot's own map and the distances are replanned. A robot whose
+   odometry shows it going back and forth, or bumping, :data:`ESCAPE_AFTER` times in a row takes a seeded random
+   move. On a moving twin it keeps no sensed obstacle and waits for a mover by walking into it (:meth:`env_for`).
 
 Nothing is learnt: the filter's model is the blueprint (its fingerprints and obstacles) and the receiver's noise model.
 A decision is one Bayes update and one expectation over the map's cells, batched over robots in torch.
@@ -127,7 +130,7 @@ class RadioFilterAgent:
         n = self.mdp.num_cells
         free = self.mdp.free
         self.k = readings.transmitters
-        self.heard = t(readings.heard, torch.bool)
+        self.heard = heard = t(readings.heard, torch.bool)
         self.known = t(free, torch.bool)  # cells whose fingerprint the map has (a blocked cell's is unknown)
         self.around = t(readings.blocked_around, torch.bool)  # [cells, 4] the map's obstacles around each cell
         self._heard_t, self._around_t = self.heard.float().T.contiguous(), self.around.float().T.contiguous()
@@ -142,7 +145,6 @@ class RadioFilterAgent:
         self._lin_scale = t(inv_sigma[~circ], torch.float64)
         self._circ_scale = t(np.tile(inv_sigma[circ], 2), torch.float64)
         fp = self._embed(t(readings.radio))  # [cells, K, e]
-        heard = t(readings.heard, torch.bool)
         self.center = (fp * heard[..., None]).sum(0) / heard.sum(0).clamp(min=1)[:, None]  # [K, e]
         fp = (fp - self.center) * heard[..., None]
         self.fp = fp.permute(1, 2, 0).float().contiguous()  # [K, e, cells]
@@ -179,8 +181,9 @@ class RadioFilterAgent:
             "stats": {},
         }
         self._n = -1
-        #: forget sensed obstacles at every step (set by :meth:`env_for` on a moving twin)
+        #: a moving twin (set by :meth:`env_for`): no sensed obstacles, and a move into a mover waits by the bump
         self.forget = False
+        self._opposite = OPPOSITE.to(dev)
 
     @classmethod
     def from_agent(cls, agent: RadioFilterAgent, sensing: str) -> RadioFilterAgent:
@@ -233,7 +236,7 @@ class RadioFilterAgent:
         it."""
         a = last.argmax(1)
         reversed_ = (
-            last.any(1) & moved & ~fresh & (self._prev_move >= 0) & (a == OPPOSITE[self._prev_move.clamp(min=0)])
+            last.any(1) & moved & ~fresh & (self._prev_move >= 0) & (a == self._opposite[self._prev_move.clamp(min=0)])
         )
         self._reversals = torch.where(reversed_, self._reversals + 1, torch.zeros_like(self._reversals))
         self._prev_move = torch.where(last.any(1) & moved & ~fresh, a, torch.full_like(a, -1))
