@@ -149,10 +149,19 @@ def _finish(
     t_start: float,
     plots: bool = True,
     layout: dict[str, Any] | None = None,
+    *,
+    planned: int,
+    complete: bool = False,
 ) -> dict[str, Any]:
-    """Aggregate the runs so far (mean ± std over seeds) and write ``bench.{json,md}`` and (``plots``) the PNGs."""
+    """Aggregate the runs so far (mean ± std over seeds) and write ``bench.{json,md}`` and (``plots``) the PNGs.
+    A report written before the benchmark has finished (``complete`` False: after each run, while others, or the
+    tabular section, are still to come) says so: ``"complete": false`` with the runs done of ``planned`` in the JSON,
+    a first line in the Markdown; one killed there (kill -9) thus never reads as finished."""
     out = cfg.out_dir
     result = {
+        "complete": complete,
+        "runs_done": len(runs),
+        "runs_planned": planned,
         "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in cfg.__dict__.items()},
         "algorithms": {a: NAMES[a] for a in cfg.algorithms} if cfg.deep else {},
         **head,
@@ -323,7 +332,7 @@ def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     if cfg.tabular:
         head["tabular"], head["tabular_s"] = tables()
     runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
-    result = _finish(cfg, head, runs, m_start, t_start, layout=layout)
+    result = _finish(cfg, head, runs, m_start, t_start, layout=layout, planned=len(jobs), complete=True)
     _say_results(cfg, result, say)
     return result
 
@@ -373,7 +382,7 @@ def _gatherer(
             )
             + f" ({run['train_s']:.1f} s training{ope})"
         )
-        _finish(cfg, head, runs, m_start, t_start, plots=False, layout=layout)  # partial results survive
+        _finish(cfg, head, runs, m_start, t_start, plots=False, layout=layout, planned=len(jobs))  # marked partial
 
     return done
 

@@ -170,7 +170,7 @@ def return_table(result: dict[str, Any], variant: str) -> list[str]:
 def markdown(result: dict[str, Any]) -> str:
     """``bench.md``: the normalised score per twin (the table to quote), then every metric per run family."""
     cfg = result["config"]
-    lines = _heading(result)
+    lines = _partial_line(result) + _heading(result)
     for v in cfg["variants"]:
         lines += ["", f"**{cfg['scene']} → {v}** (normalised score)", "", *score_table(result, v)]
     if result.get("tabular"):
@@ -181,6 +181,20 @@ def markdown(result: dict[str, Any]) -> str:
         lines += _ope_lines(result["ope"])
     lines += ["", _machine_line(result)]
     return "\n".join(lines) + "\n"
+
+
+def _partial_line(result: dict[str, Any]) -> list[str]:
+    """The first line of a report written before its benchmark finished (``"complete": false``), else nothing (a
+    report of before this mark is taken as finished)."""
+    if result.get("complete", True):
+        return []
+    tabular = ", then the tabular section" if result["config"].get("tabular") else ""
+    return [
+        f"**Partial results: {result['runs_done']} of {result['runs_planned']} runs finished{tabular}.** The "
+        "benchmark stopped, or is still running, before the rest: run the same command again to finish it (the "
+        "finished runs are reused).",
+        "",
+    ]
 
 
 def _numerics(cfg: dict[str, Any]) -> str:

@@ -1,10 +1,12 @@
 """The offline benchmark beside its own failures: one benchmark per results folder (a second is refused, naming the
 first one's pid); an interrupted benchmark run again trains only the runs it had not finished, in this process or on
-Ray, and leaves nothing of the interrupted run half written; a Ray worker killed mid-run is retried, and one killed
-every time fails the benchmark with a typed error naming the run, its half-written folder removed."""
+Ray, and leaves nothing of the interrupted run half written, its report marked partial; a Ray worker killed mid-run
+is retried, and one killed every time fails the benchmark with a typed error naming the run, its half-written folder
+removed."""
 
 import dataclasses
 import hashlib
+import json
 import os
 import signal
 import threading
@@ -109,6 +111,21 @@ def test_an_interrupted_benchmark_run_again_trains_only_the_runs_it_had_not_fini
     assert finished_row(job) is not None
     assert finished_row(dataclasses.replace(job, config=dataclasses.replace(job.config, n_steps=11))) is None
     assert finished_row(dataclasses.replace(job, logged=job.logged + "0")) is None
+
+
+def test_the_report_an_interrupted_benchmark_leaves_says_it_is_partial_and_the_finished_one_does_not(
+    root, tmp_path, monkeypatch
+):
+    out, _ = interrupted(tmp_path, monkeypatch)
+    partial = json.loads((out / "bench.json").read_text())
+    assert (partial["complete"], partial["runs_done"], partial["runs_planned"]) == (False, 1, 2)
+    first = (out / "bench.md").read_text().splitlines()[0]
+    assert first.startswith("**Partial results: 1 of 2 runs finished.** The benchmark stopped")
+    assert "run the same command again" in first
+    run_bench(OfflineBenchConfig(**TINY, algorithms=("bc", "nfq"), workers=1, out=str(out)))
+    final = json.loads((out / "bench.json").read_text())
+    assert (final["complete"], final["runs_done"], final["runs_planned"]) == (True, 2, 2)
+    assert "Partial" not in (out / "bench.md").read_text()
 
 
 @pytest.mark.slow  # a Ray session: seconds (make test-all)
