@@ -323,6 +323,8 @@ class _Schedule:
     #: With an episode budget (the paper's protocol) the step backstop says nothing about progress: log by episodes.
     log_every_ep: int
     next_log_ep: int
+    #: the env steps the loop started at (a resumed run's), for the rate and the time left
+    start_steps: int = 0
 
     @classmethod
     def after(cls, cfg: DQNConfig, env_steps: int) -> _Schedule:
@@ -334,6 +336,7 @@ class _Schedule:
             next_log=env_steps + cfg.total_env_steps // 10,
             log_every_ep=log_every_ep,
             next_log_ep=log_every_ep,
+            start_steps=env_steps,
         )
 
 
@@ -346,13 +349,26 @@ def _checkpoint_and_log(run: RunState, schedule: _Schedule, eps: float, t_start:
     log_due = len(run.episodes) >= schedule.next_log_ep if schedule.log_every_ep else run.env_steps >= schedule.next_log
     if cfg.verbose and log_due:
         s = _summary(run.episodes)
+        elapsed = time.perf_counter() - t_start
         print(
-            f"[{time.perf_counter() - t_start:6.1f}s] steps {run.env_steps:>8d}  updates {run.updates:>6d}  "
-            f"episodes {len(run.episodes):>6d}  eps {eps:.3f}  success {s.get('success_rate', 0):.3f}  "
-            f"collisions/ep {s.get('collisions', 0):.2f}"
+            f"[{elapsed:6.1f}s] steps {run.env_steps:>8d}/{cfg.total_env_steps} "
+            f"({100 * run.env_steps / max(1, cfg.total_env_steps):3.0f} %, {_rate_and_left(run, schedule, elapsed)})  "
+            f"updates {run.updates:>6d}  episodes {len(run.episodes):>6d}  eps {eps:.3f}  "
+            f"success {s.get('success_rate', 0):.3f}  collisions/ep {s.get('collisions', 0):.2f}"
         )
         schedule.next_log += cfg.total_env_steps // 10
         schedule.next_log_ep += schedule.log_every_ep
+
+
+def _rate_and_left(run: RunState, schedule: _Schedule, elapsed: float) -> str:
+    """``"2 345 steps/s, ~3.1 min left"``: this loop's rate so far and the time left to the step budget at it (an
+    episode budget, the paper's protocol, may end sooner)."""
+    done = run.env_steps - schedule.start_steps
+    if elapsed <= 0 or done <= 0:
+        return "rate unknown yet"
+    rate = done / elapsed
+    left = max(0, run.cfg.total_env_steps - run.env_steps) / rate
+    return f"{rate:,.0f}".replace(",", " ") + f" steps/s, ~{left / 60:.1f} min left"
 
 
 # -- the end ---------------------------------------------------------------------------------------------------------
