@@ -83,13 +83,14 @@ AGENT ?= radio-filter
 MOVING_ARGS ?= --sense-radius 4 --wait-action --clock sincos --mover-penalty 4
 # Build the default agent (radio filter, honest sensing) on $(SCENE)'s blueprint -> runs/$(SCENE)/agent/agent.json.
 # A localisation filter over the blueprint's radio fingerprints acting on exact distances, from honest sensing (own
-# cell's radio, proximity, odometry; never its position). AGENT=dqn trains the learnt DQN instead -> runs/$(SCENE)/dqn/model.pt (privileged: its
-# observation holds the robot's x, y; ARGS="--preset paper" etc.); VARIANT=moving trains that DQN among the movers of
+# cell's radio, proximity, odometry; never its position). AGENT=dqn, or ARGS naming a --preset, trains the learnt
+# DQN instead -> runs/$(SCENE)/dqn/model.pt (privileged: its observation holds the robot's x, y; ARGS="--preset
+# paper" etc.); VARIANT=moving trains that DQN among the movers of
 # the moving twin with $(MOVING_ARGS) -> runs/$(SCENE)/dqn-moving/model.pt: the best measured among movers
 # (docs/navigation.md, "Waiting, the clock and the mover penalty"): the cells up to 4 away sensed, a wait action, the
 # schedule's phase, a 4x mover penalty, the margin loss towards the shortest paths in time, twice the static budget.
 train:
-	$(if $(or $(filter dqn,$(AGENT)),$(filter moving,$(VARIANT))),$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving $(MOVING_ARGS) --out runs/$(SCENE)/dqn-moving) $(ARGS),$(PY) -m dtradar_rl agent --scene $(SCENE) $(ARGS))
+	$(if $(or $(filter dqn,$(AGENT)),$(filter moving,$(VARIANT)),$(findstring --preset,$(ARGS))),$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving $(MOVING_ARGS) --out runs/$(SCENE)/dqn-moving) $(ARGS),$(PY) -m dtradar_rl agent --scene $(SCENE) $(ARGS))
 
 # Evaluate the default agent on the blueprint and dynamic twins, beside the privileged DQN and the planner.
 # Under realistic receiver noise, each row naming its sensing; VARIANT=moving
