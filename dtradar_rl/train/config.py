@@ -187,18 +187,7 @@ class DQNConfig(TwinConfig):
         super().validate()
         if self.preset not in PRESETS:
             raise unknown_name("training preset", self.preset, PRESETS)
-        if self.escape_after and not self.memory_visits:
-            raise ConfigError("--escape-after reads the memory's visit counts", hint="set --memory-visits too")
-        if (self.memory_bumps or self.memory_visits) and not self.memory_radius:
-            raise ConfigError(
-                "--memory-bumps and --memory-visits are maps of the memory agent",
-                hint="set --memory-radius too (e.g. 5)",
-            )
-        if self.memory_radius and self.obs != "neighbors":
-            raise ConfigError(
-                f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
-                f"radio features), got --obs {self.obs}"
-            )
+        self.check_memory()
         if self.sense_radius > 1 and self.obs != "neighbors":
             raise ConfigError(
                 f"--sense-radius {self.sense_radius} widens the neighbours' flags, which only --obs neighbors "
@@ -224,6 +213,61 @@ class DQNConfig(TwinConfig):
                 hint="use --reward geodesic, or --expert-weight 0",
             )
         return self
+
+    def preset_value(self, name: str) -> Any:
+        """What ``--preset`` gives field ``name`` when it is not typed (the field's own default, the default
+        preset's, where the preset keeps it)."""
+        return PRESETS.get(self.preset, {}).get(name, DQNConfig.__dataclass_fields__[name].default)
+
+    def _memory_off(self) -> str:
+        """The flags that turn the memory agent off, from this config."""
+        flags = ["--memory-radius 0"] if self.memory_radius else []
+        flags += ["--no-memory-bumps"] if self.memory_bumps else []
+        flags += ["--no-memory-visits"] if self.memory_visits else []
+        flags += ["--escape-after 0"] if self.escape_after else []
+        return " ".join(flags)
+
+    def check_memory(self) -> None:
+        """The memory agent's settings fit together (the escape reads the visit counts, the maps need the window,
+        the window needs neighbour observations); a refusal names the flag the user typed, and a setting the
+        preset gave as the preset's, with the flags that turn it off."""
+        preset = f"the {self.preset} preset"
+        typed = lambda name: getattr(self, name) != self.preset_value(name)  # noqa: E731
+        maps = [flag(m) for m in ("memory_bumps", "memory_visits") if getattr(self, m)]
+        if self.escape_after and not self.memory_visits:
+            if typed("memory_visits") and not typed("escape_after"):
+                raise ConfigError(
+                    f"--no-memory-visits: {preset}'s loop escape (--escape-after {self.escape_after}, on by "
+                    "default) reads the memory's visit counts",
+                    hint="add --escape-after 0 too, or keep --memory-visits",
+                )
+            raise ConfigError("--escape-after reads the memory's visit counts", hint="set --memory-visits too")
+        if maps and not self.memory_radius:
+            if typed("memory_radius") and not any(typed(m) for m in ("memory_bumps", "memory_visits")):
+                raise ConfigError(
+                    f"--memory-radius 0 turns the memory window off, and {preset}'s {' and '.join(maps)} (on by "
+                    "default) are maps of it",
+                    hint=f"turn the whole memory off: {self._memory_off()}; or keep --memory-radius "
+                    f"{self.preset_value('memory_radius') or 5}",
+                )
+            raise ConfigError(
+                "--memory-bumps and --memory-visits are maps of the memory agent",
+                hint="set --memory-radius too (e.g. 5)",
+            )
+        if self.memory_radius and self.obs != "neighbors":
+            if typed("obs") and not typed("memory_radius"):
+                raise ConfigError(
+                    f"--obs {self.obs} does not fit {preset}'s memory, which is on by default (--memory-radius "
+                    f"needs --obs neighbors, and the preset sets it to {self.memory_radius}: obstacles are sensed "
+                    "through the neighbours' radio features)",
+                    hint=f"keep --obs neighbors, or turn the memory off: add {self._memory_off()}, or use "
+                    "--preset tuned (no memory)",
+                )
+            raise ConfigError(
+                f"--memory-radius needs --obs neighbors (obstacles are sensed through the neighbours' "
+                f"radio features), got --obs {self.obs}",
+                hint=f"use --obs neighbors, or turn the memory off: {self._memory_off()}",
+            )
 
 
 #: What ``tuned`` turns off of the default agent: the extra obstacles, the memory and its visit counts, the loop escape,
