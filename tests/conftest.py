@@ -7,6 +7,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -16,6 +17,26 @@ def root(tmp_path, monkeypatch):
     """An empty data root (``DTRADAR_DATA_ROOT``) under the test's temporary folder."""
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(tmp_path / "root"))
     return tmp_path / "root"
+
+
+@pytest.fixture()
+def read_only(root):
+    """``read_only()``: the data root (``root``, with what the test stored in it) made read-only, as a shared mirror
+    or a container image is (``chmod -R a-w``); writable again after the test. The test is skipped where that does
+    not stop writes (run as root, which writes anyway)."""
+    made = []
+
+    def make() -> Path:
+        root.mkdir(parents=True, exist_ok=True)
+        subprocess.run(["chmod", "-R", "a-w", str(root)], check=True)
+        made.append(root)
+        if os.access(root, os.W_OK):
+            pytest.skip("chmod does not make a folder read-only for this user (root)")
+        return root
+
+    yield make
+    for folder in made:
+        subprocess.run(["chmod", "-R", "u+w", str(folder)], check=True)
 
 
 #: A user's 2 m x 1.5 m room file with one box: the smallest scene the tracer builds in seconds.

@@ -76,6 +76,12 @@ def work_root() -> Path:
     return writable_data_root() / "work"
 
 
+def work_root_to_read() -> Path:
+    """Where :func:`work_root` is, for a reader that only looks into it (for the locks live writers hold there): a
+    read-only data root (a shared mirror, a container image) is no error here, and nothing is created."""
+    return data_root() / "work"
+
+
 def dataset_dir(scene: str, variant: str) -> Path:
     """``<root>/datasets/<scene>/<variant>``: all versions of one dataset plus its ``refs.json``."""
     return datasets_root() / scene / variant

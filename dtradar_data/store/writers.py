@@ -39,7 +39,7 @@ def writer_locks(name: str | DatasetId | LoggedId) -> dict[str, Path]:
         )
     else:
         did = as_id(name, check_known=False)
-        folder = P.work_root() / did.scene / did.variant
+        folder = P.work_root_to_read() / did.scene / did.variant  # a reader's: a read-only root is fine
         locks = {p.stem: p for p in folder.glob("*.lock")} if folder.is_dir() else {}
     return {v: lock for v, lock in locks.items() if HASH_RE.fullmatch(v)}
 

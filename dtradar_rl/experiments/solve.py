@@ -179,7 +179,8 @@ def solve_scene(cfg: SolveConfig) -> dict[str, Any]:
             say(
                 f"{ds.name} ({reward}, γ {cfg.gamma}): V*/Q* for {tab.n} cells x {sol.targets.size} targets "
                 + ("from the cache" if cached else f"in {sol.seconds:.2f} s ({sol.sweeps} sweeps)")
-                + f" -> {folder}; greedy on {len(pairs)} pairs: success {m['success_rate']:.3f}, SPL {m['spl']:.3f}"
+                + (f" -> {folder}" if (folder / "solution.json").is_file() else " (not stored)")
+                + f"; greedy on {len(pairs)} pairs: success {m['success_rate']:.3f}, SPL {m['spl']:.3f}"
             )
             sol = None  # freed before the next solve: check_solve_memory counts one solution at a time
     result = {

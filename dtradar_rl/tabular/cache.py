@@ -13,12 +13,17 @@ One process writes a cache folder at a time: a writer holds the folder's lock (`
 says whom it waits for, then reads what the first one stored). Every temp file beside a cache file while that lock is
 held is therefore a killed writer's (a ``kill -9`` mid-write leaves its ``.q.npy.<random>.tmp``, as large as Q*), and
 the holder removes it, saying so; a sound cache found beside such debris has it removed when the lock is free.
+
+A read-only data root (a shared mirror, a container image) serves what is cached there; what is not (or cannot be
+used) is solved for this run only, saying so, and nothing is written there.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -163,7 +168,7 @@ def remove_stale_temps(folder: Path, say: Callable[[str], None] = _stderr) -> li
             try:
                 n = tmp.stat().st_size
                 tmp.unlink()
-            except FileNotFoundError:
+            except OSError:  # gone meanwhile, or in a folder this process may not write: left as it is
                 continue
             gone.append(tmp)
             size += n
@@ -175,8 +180,8 @@ def remove_stale_temps(folder: Path, say: Callable[[str], None] = _stderr) -> li
 
 def _tidy_if_free(folder: Path, say: Callable[[str], None]) -> None:
     """Beside a sound cache: remove killed writers' temp files when the folder's lock is free (no live writer), now."""
-    if not any(temp_siblings(folder / name) for name in (*ARRAYS, META)):
-        return
+    if not any(temp_siblings(folder / name) for name in (*ARRAYS, META)) or not os.access(folder, os.W_OK | os.X_OK):
+        return  # nothing to remove, or nothing this process may remove (filelock takes a read-only lock file too)
     lock = FileLock(str(folder / LOCK))
     try:
         lock.acquire(timeout=0)
@@ -206,10 +211,16 @@ def solve_twin(
     folder = cache_dir(ds, check_reward(reward), gamma)
     if not cache:
         return _solve(ds, tab, reward, gamma, progress), folder, False
-    sol, _ = check(folder, tab)
+    sol, why = check(folder, tab)
     if sol is not None:
         _tidy_if_free(folder, say)
         return sol, folder, True
+    read_only = _read_only(folder)
+    if read_only:  # a shared mirror, a container image: solved for this run only
+        if why:
+            say(f"the cached solution cannot be used: {why}; solving it again")
+        say(f"{read_only} is read-only: solving without caching (the solution is not stored)")
+        return _solve(ds, tab, reward, gamma, progress), folder, False
     doing = f"solving {ds.name} exactly ({reward}, γ {gamma:g})"
     with waiting_lock(folder / LOCK, doing, then="read its solution from the cache", notice_after_s=2.0):
         sol, why = check(folder, tab)  # again: a writer we waited for has stored it meanwhile
@@ -222,6 +233,18 @@ def solve_twin(
         sol = _solve(ds, tab, reward, gamma, progress)
         save(sol, folder)
     return sol, folder, False
+
+
+def _read_only(folder: Path) -> str:
+    """The folder (``folder`` or the first one above it that had to be made) where the cache cannot be written, or
+    ``""`` where it can."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        if e.errno not in (errno.EACCES, errno.EPERM, errno.EROFS):
+            raise
+        return str(Path(e.filename).parent) if e.filename else str(folder)
+    return "" if os.access(folder, os.W_OK | os.X_OK) else str(folder)
 
 
 def _solve(ds: Dataset, tab: TabularMDP, reward: str, gamma: float, progress) -> Solution:
