@@ -294,7 +294,7 @@ def evaluate_twins(
         try:
             ds = datasets.get(name) or load_dataset(name)
         except DatasetNotFoundError as e:
-            print(f"skipping {name}: {e.message}")
+            print(f"skipping {name}: {e}")  # the message and its fix (the build command)
             continue
         for sh in [False] + ([True] if shield and policy.obs_preset == "neighbors" else []):
             metrics, roll = evaluate(

@@ -241,7 +241,7 @@ def _eval_pair(cfg: EvalConfig, policy, ckpt: Path, out: Path) -> str:
         try:
             ds = load_dataset(f"{cfg.scene}/{variant}")
         except DatasetNotFoundError as e:
-            print(f"skipping {cfg.scene}/{variant}: {e.message}")
+            print(f"skipping {cfg.scene}/{variant}: {e}")
             continue
         row, pair, roll = evaluate_pair(policy, ds, max_steps=cfg.max_steps or None, device=cfg.device)
         rows.append(row)

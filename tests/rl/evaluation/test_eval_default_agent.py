@@ -33,3 +33,14 @@ def test_eval_can_observe_the_default_agent_with_another_honest_sensing(tmp_path
     rows = json.loads((tmp_path / "runs/synthetic-6x5/eval/results.json").read_text())["results"]
     assert {r["sensing"] for r in rows} == {"no-radio"}
     assert main([*argv[:-3], "--sensing", "privileged"]) == 2
+
+
+def test_a_twin_that_is_not_built_is_skipped_naming_its_build_command(root, capsys):
+    from dtradar_rl.agents.radio_filter import FilterConfig, RadioFilterAgent
+    from dtradar_rl.evaluation.evaluate import evaluate_twins
+    from dtradar_rl.task.twins import load_dataset
+
+    agent = RadioFilterAgent(load_dataset("synthetic/blueprint"), FilterConfig(scene="synthetic"))
+    assert evaluate_twins(agent, "cubicle", ["moving"], pairs=5, latency=False) == []
+    out = capsys.readouterr().out
+    assert "skipping cubicle/moving" in out and "how to fix:" in out and "VARIANT=moving" in out
