@@ -31,7 +31,7 @@ from dtradar_rl.tabular.cache import solve_twin
 from dtradar_rl.tabular.evaluation import follow, path_metrics
 from dtradar_rl.tabular.memory import check_memory, solve_parts
 from dtradar_rl.tabular.solver import GAMMA, Solution, TabularMDP, check_gamma, check_size
-from dtradar_rl.task.config import Config, ConfigError
+from dtradar_rl.task.config import Config, ConfigError, check_unique
 from dtradar_rl.task.rewards import check_reward
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset
@@ -63,6 +63,12 @@ class SolveConfig(Config):
     @property
     def out_dir(self) -> Path:
         return Path(self.out or f"results/solve/{self.scene}")
+
+    def check_ranges(self) -> None:
+        super().check_ranges()
+        # each value is one row of the table (one solve): a repeated one was solved and printed twice
+        for name in ("rewards", "variants"):
+            check_unique(getattr(self, name), name)
 
     def validate(self) -> SolveConfig:
         for r in self.rewards:
