@@ -40,6 +40,7 @@ import numpy as np
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import CorruptDatasetError, SchemaMismatchError
 from dtradar_data.core.files import human_size
+from dtradar_data.core.layout import writable_data_root
 from dtradar_data.core.machine import available_memory
 from dtradar_data.store import read_refs
 from dtradar_data.store.logged import (
@@ -194,6 +195,7 @@ def log_families(cfg: LogConfig, dataset: Dataset | None = None) -> dict[str, Lo
     settings, by :func:`log_dataset`; ``{family: dataset}``. The medium agent is trained once for all three that
     use it."""
     cfg = cfg.validate()
+    writable_data_root()  # a read-only data root is refused before the twin is loaded, a family rolled out
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
     check_minari_copies(cfg.families(), ds)  # all of them before the first family is logged
     return {c.behaviour: log_dataset(c, ds) for c in cfg.families()}
@@ -226,6 +228,9 @@ def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset
     if cfg.behaviour == ALL:
         raise ConfigError("log_dataset logs one behaviour", hint="use log_families for --behaviour all")
     cfg = cfg.validate()
+    # the lock, the version and its Minari copy are written into the data root: a read-only one (a shared mirror, a
+    # container image) is refused here, not with a raw PermissionError at the lock
+    writable_data_root()
     import torch
 
     torch.set_num_threads(cfg.threads or auto_threads())
