@@ -70,6 +70,7 @@ from dtradar_rl.experiments.offline_figures import plot, plot_fqe
 from dtradar_rl.experiments.offline_jobs import (
     BenchJob,
     auto_workers,
+    check_ray,
     parallel_gain,
     run_job,
     run_jobs,
@@ -305,6 +306,8 @@ def run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     the whole benchmark: a second one into it is refused at once, naming this one's pid (its runs, rows and tables
     would interleave with these)."""
     cfg = cfg.validate()
+    if cfg.executor == "ray":
+        check_ray(cfg.ray_address)  # a dead cluster before the first log is stored, not after the last
     with held_out_folder(cfg.out_dir, f"running the offline benchmark of {cfg.scene}", what="benchmark"):
         return _run_bench(cfg)
 

@@ -259,6 +259,18 @@ def run_jobs(
     return rows
 
 
+def check_ray(address: str | None) -> None:
+    """For ``--executor ray``, before anything is logged or trained: Ray is installed and something answers at the
+    cluster ``address`` (or ``$RAY_ADDRESS``; none: a local Ray, nothing to reach), else the typed error naming the
+    address and its fix. Found only when the trainings start, every dataset would be logged and stored first (and the
+    online agent trained); :func:`run_jobs_on_ray` connects, bounded, again then."""
+    from dtradar_data.core.ray_cluster import check_ray_address
+    from dtradar_rl.experiments.sweep import _import_ray
+
+    _import_ray()
+    check_ray_address(address)
+
+
 def run_jobs_on_ray(
     jobs: list[BenchJob], address: str | None = None, done: Callable[[dict[str, Any]], None] = lambda run: None
 ) -> list[dict[str, Any]]:
@@ -326,4 +338,4 @@ def _ray_job(job: BenchJob) -> dict[str, Any]:
     return run_job(job)
 
 
-__all__ = ["BenchJob", "auto_workers", "parallel_gain", "run_job", "run_jobs", "run_jobs_on_ray"]
+__all__ = ["BenchJob", "auto_workers", "check_ray", "parallel_gain", "run_job", "run_jobs", "run_jobs_on_ray"]
