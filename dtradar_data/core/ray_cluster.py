@@ -63,6 +63,18 @@ def fix_hint(flag: str, source: str, *, auto: bool = False) -> str:
     return f"{start}; or {drop} to run on a local Ray started for this command"
 
 
+def check_address_given(address: str | None, *, flag: str = "--ray-address", error=InvalidSettingError) -> None:
+    """``error`` (an :class:`InvalidSettingError` or a subclass) naming ``flag`` when ``address`` is given but empty
+    (``--ray-address ""``): it names an existing cluster, yet Ray would start a local one, as leaving the flag out
+    does. Checked with the other settings, before Ray is imported or anything runs."""
+    if address is not None and not address.strip():
+        raise error(
+            f"{flag} {address!r} is empty: it names an existing Ray cluster",
+            hint=f"give the cluster's address (auto, HOST:6379 or ray://HOST:10001), or drop {flag} for the default: "
+            f"a local Ray on this machine's cores (${RAY_ADDRESS_ENV} when it is set)",
+        )
+
+
 def check_ray_address(address: str | None, *, flag: str = "--ray-address", timeout_s: float = PROBE_TIMEOUT_S):
     """Raise unless something listens at the Ray cluster ``address`` (or ``$RAY_ADDRESS``), within ``timeout_s``.
 

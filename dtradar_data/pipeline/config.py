@@ -14,6 +14,7 @@ from typing import Literal
 
 from dtradar_data.core.errors import InvalidSettingError
 from dtradar_data.core.ids import MOVING_VARIANT
+from dtradar_data.core.ray_cluster import check_address_given
 from dtradar_data.pipeline.executors import import_ray
 from dtradar_data.rt.settings import RTSettings
 from dtradar_data.scenes.options import check_scene_options
@@ -138,6 +139,7 @@ class BuildConfig:
                 "--tx-pose-seed applies to --tx-pose-error only", hint="add --tx-pose-error 0.5 5"
             )
         if self.executor == "ray":
+            check_address_given(self.ray_address)  # "" would start a local Ray, as no --ray-address does
             import_ray()  # a missing Ray is a setup error, reported before anything is traced
         elif self.ray_address is not None or self.workers:
             raise InvalidSettingError(

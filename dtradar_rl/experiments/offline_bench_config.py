@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from dtradar_data.core.ray_cluster import check_address_given
 from dtradar_rl.evaluation.normalized import DEFAULT_SEED
 from dtradar_rl.offline.behaviours import BEHAVIOURS, FAMILIES
 from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
@@ -143,12 +144,7 @@ class OfflineBenchConfig(Config):
         OfflineConfig(algorithm="bcq", senses=self.senses, precision=self.precision).validate()
         if self.workers < 0:
             raise ConfigError("--workers must be >= 0 (0 = one per CPU core)")
-        if self.ray_address is not None and not self.ray_address.strip():
-            raise ConfigError(
-                f"--ray-address {self.ray_address!r} is empty: it names an existing Ray cluster",
-                hint="give the cluster's address (auto, HOST:6379 or ray://HOST:10001), or drop --ray-address for "
-                "the default: a local Ray on this machine's cores ($RAY_ADDRESS when it is set)",
-            )
+        check_address_given(self.ray_address, error=ConfigError)
         if self.executor != "ray" and self.ray_address:
             raise ConfigError("--ray-address applies to --executor ray only", hint="add --executor ray")
         if self.executor == "ray" and self.workers:

@@ -26,7 +26,7 @@ import numpy as np
 
 from dtradar_data.core.errors import MissingDependencyError
 from dtradar_data.core.files import write_atomic
-from dtradar_data.core.ray_cluster import connect_ray, wait_for_cpus
+from dtradar_data.core.ray_cluster import check_address_given, connect_ray, wait_for_cpus
 from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins
 from dtradar_rl.task.config import Config, ConfigError, check_unique, flag
 from dtradar_rl.task.runs import run_dir
@@ -72,6 +72,7 @@ class SweepConfig(Config):
             raise ConfigError(f"{flag('preset')} {self.preset!r} is not a preset", hint=", ".join(PRESETS))
         if self.threads < 1 or self.pairs < 1 or self.total_env_steps < 0:
             raise ConfigError(f"{flag('threads')} and {flag('pairs')} must be >= 1, {flag('total_env_steps')} >= 0")
+        check_address_given(self.ray_address, error=ConfigError)  # "" started a local Ray, as no --ray-address does
         if self.executor == "serial" and self.ray_address:
             raise ConfigError("--ray-address applies to --executor ray only")
         return self
