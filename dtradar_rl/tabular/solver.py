@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
-from dtradar_data.core.errors import InvalidSettingError
+from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_rl.tabular.memory import CHUNK_BYTES, TooLargeError, check_memory, chunk_size, solve_parts
 from dtradar_rl.task.grid_mdp import GridMDP
 from dtradar_rl.task.rewards import check_reward, reward_fn
@@ -84,8 +84,19 @@ class TabularMDP:
         return int(self.cells.size)
 
     def states(self, cells: np.ndarray) -> np.ndarray:
-        """The states of grid ``cells``; a blocked cell is an :class:`InvalidSettingError`."""
-        s = self.state_of[np.asarray(cells, np.int64)]
+        """The states of grid ``cells``; a cell number outside the grid (pairs of another twin) is an
+        :class:`InvalidCoordinatesError`, a blocked cell an :class:`InvalidSettingError`."""
+        cells = np.asarray(cells, np.int64)
+        outside = (cells < 0) | (cells >= self.state_of.size)
+        if outside.any():
+            h, w = self.mdp.blocked.shape[-2:]
+            raise InvalidCoordinatesError(
+                f"{self.mdp.name}: cell {int(cells.ravel()[np.argmax(outside.ravel())])} is outside its {w} x {h} "
+                f"grid (cells 0 to {self.state_of.size - 1})",
+                hint=f"take the starts and targets from {self.mdp.name} itself (cell = y * {w} + x): pairs of "
+                "another twin or scene number other cells",
+            )
+        s = self.state_of[cells]
         if (s < 0).any():
             raise InvalidSettingError(
                 f"{self.mdp.name}: cell {int(np.asarray(cells).ravel()[np.argmax(s.ravel() < 0)])} is blocked",
