@@ -59,7 +59,7 @@ def test_unknown_observation_preset_suggests_the_closest(small):
         DtradarNavEnv(small, obs="neighbours")
 
 
-def test_every_registered_env_id_passes_the_gymnasium_checker():
+def test_every_registered_env_id_passes_the_gymnasium_checker(root):  # an empty data root: the synthetic ids
     ids = register_dataset_envs()
     assert "dtradar/synthetic-blueprint-v0" in ids and "dtradar/synthetic-dynamic-v0" in ids
     assert "dtradar/synthetic-blueprint-honest-v0" in ids
