@@ -110,6 +110,7 @@ NOT_RAY = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # waits out its bounded wait: seconds (make test-all)
 def test_a_port_that_answers_but_is_no_ray_cluster_fails_after_the_bounded_wait():
     t0 = time.monotonic()
     out = subprocess.run([sys.executable, "-c", NOT_RAY], capture_output=True, text=True, timeout=60)
@@ -156,6 +157,7 @@ class FakeCluster:
         return [{"Alive": True, "Resources": {"CPU": float(cpus)}}]
 
 
+@pytest.mark.slow  # waits out its bounded wait: seconds (make test-all)
 def test_a_cluster_at_an_address_gets_a_bounded_wait_for_nodes_that_says_so(capsys, monkeypatch):
     from dtradar_data.core import ray_cluster
 

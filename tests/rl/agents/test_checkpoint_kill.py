@@ -83,6 +83,7 @@ def assert_last_pt_is_whole(directory, killed_at: int) -> list[str]:
     return leftovers
 
 
+@pytest.mark.slow  # a writer process killed mid-write: seconds (make test-all)
 def test_a_checkpoint_writer_killed_mid_write_leaves_a_last_pt_that_loads(tmp_path):
     kill_mid_write(tmp_path / "last.pt", 0, 2, when="midway")
     assert_last_pt_is_whole(tmp_path, 1)

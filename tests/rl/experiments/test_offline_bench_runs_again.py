@@ -51,6 +51,7 @@ def files(folder: Path) -> dict[str, str]:
     }
 
 
+@pytest.mark.slow  # a benchmark held in a worker process: seconds (make test-all)
 def test_a_second_benchmark_into_a_results_folder_in_use_is_refused_naming_the_holders_pid(
     root, tmp_path, paused_process, capsys
 ):

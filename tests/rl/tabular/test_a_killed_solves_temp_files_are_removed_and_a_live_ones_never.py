@@ -7,6 +7,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from dtradar_rl.tabular import cache
 from dtradar_rl.tabular.cache import solve_twin
@@ -55,6 +56,7 @@ def folder_of(ds):
     return cache.cache_dir(ds, "geodesic", 0.9)
 
 
+@pytest.mark.slow  # a solve in a worker process, killed: seconds (make test-all)
 def test_the_temp_file_of_a_killed_solve_is_removed_by_the_next_writer(root, paused_process):
     ds = load_dataset(NAME)
     writer = paused_process(WRITER, NAME)
@@ -82,6 +84,7 @@ def test_a_sound_cache_beside_a_killed_writers_temp_file_is_served_and_the_temp_
     assert not stale.exists() and "removed what a killed solve left" in said[0]
 
 
+@pytest.mark.slow  # a live writer in a worker process: seconds (make test-all)
 def test_a_live_writers_temp_file_is_never_removed(root, paused_process):
     ds = load_dataset(NAME)
     _, folder, _ = solve_twin(ds, "geodesic", 0.9)
@@ -95,6 +98,7 @@ def test_a_live_writers_temp_file_is_never_removed(root, paused_process):
     holder.kill()
 
 
+@pytest.mark.slow  # waits for a writer in a worker process: seconds (make test-all)
 def test_a_second_solve_waits_for_a_live_writer_and_leaves_its_temp_file(root, paused_process, capsys):
     ds = load_dataset(NAME)
     writer = paused_process(WRITER, NAME)

@@ -43,6 +43,7 @@ def snapshot(folder):
     return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())}
 
 
+@pytest.mark.slow  # a training held in a worker process: seconds (make test-all)
 def test_a_second_training_into_a_run_folder_in_use_is_refused_naming_the_holders_pid(tmp_path, paused_process, capsys):
     out = tmp_path / "run"
     holder = paused_process(HOLDER, "train", *ARGS, "--out", out)
