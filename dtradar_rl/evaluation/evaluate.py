@@ -363,11 +363,22 @@ def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_results(rows: list[dict[str, Any]], out: Path, config: dict[str, Any], name: str = "results") -> str:
-    """``<name>.json`` (rows + config), ``<name>.md`` and ``config.json`` in ``out``; returns the Markdown table."""
+def write_results(
+    rows: list[dict[str, Any]], out: Path, config: dict[str, Any], name: str = "results", missing: Sequence[str] = ()
+) -> str:
+    """``<name>.json`` (rows + config), ``<name>.md`` and ``config.json`` in ``out``; returns the Markdown table.
+    ``missing``: twins asked for but not built, named under the table (and in the JSON) so a table without them
+    never reads as complete."""
     out.mkdir(parents=True, exist_ok=True)
-    write_atomic(out / f"{name}.json", json.dumps({"config": config, "results": rows}, indent=2) + "\n")
+    record = {"config": config, "results": rows, **({"not_evaluated": list(missing)} if missing else {})}
+    write_atomic(out / f"{name}.json", json.dumps(record, indent=2) + "\n")
     md = markdown_table(rows)
+    if missing:
+        md += (
+            "\nNot evaluated (not built here): "
+            + ", ".join(missing)
+            + "; `make dataset SCENE=<scene> VARIANT=<variant>`.\n"
+        )
     write_atomic(out / f"{name}.md", md)
     write_atomic(out / "config.json", json.dumps(config, indent=2) + "\n")
     return md

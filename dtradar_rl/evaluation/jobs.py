@@ -203,7 +203,9 @@ def run_eval(cfg: EvalConfig) -> str:
         "train_stats": policy.meta.get("stats", {}),
         "sensing": {row["case"]: row["sensing"] for row in rows},
     }
-    md = write_results(rows, out, config)
+    evaluated = {row["dataset"] for row in rows}
+    missing = [f"{cfg.scene}/{v}" for v in cfg.variants if f"{cfg.scene}/{v}" not in evaluated]
+    md = write_results(rows, out, config, missing=missing)
     print(md, end="")
     print(f"results: {out / 'results.json'}, {out / 'results.md'}")
     return md

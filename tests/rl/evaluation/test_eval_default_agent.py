@@ -44,3 +44,21 @@ def test_a_twin_that_is_not_built_is_skipped_naming_its_build_command(root, caps
     assert evaluate_twins(agent, "cubicle", ["moving"], pairs=5, latency=False) == []
     out = capsys.readouterr().out
     assert "skipping cubicle/moving" in out and "how to fix:" in out and "VARIANT=moving" in out
+
+
+def test_eval_names_under_its_table_a_twin_asked_for_but_not_built(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["agent", "--scene", "synthetic-6x5"]) == 0
+    argv = ["eval", "--scene", "synthetic-6x5", "--pairs", "5", "--variants", "blueprint", "dynamic"]
+    assert main([*argv, "--no-planner"]) == 0
+    md = (tmp_path / "runs/synthetic-6x5/eval/results.md").read_text()
+    assert "Not evaluated" not in md  # every twin asked for is there
+
+    import json
+
+    from dtradar_rl.evaluation.evaluate import write_results
+
+    rows = json.loads((tmp_path / "runs/synthetic-6x5/eval/results.json").read_text())["results"]
+    md = write_results(rows, tmp_path / "again", {}, missing=["cubicle/moving"])
+    assert "Not evaluated (not built here): cubicle/moving" in md
+    assert json.loads((tmp_path / "again/results.json").read_text())["not_evaluated"] == ["cubicle/moving"]
