@@ -8,26 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dtradar_rl.cli import main
-
-SCENE = "synthetic-12x8"
-
-
-def solve(tmp_path, capsys) -> tuple[dict, str]:
-    """One solve of the blueprint under the geodesic reward: ``(its row of solve.json, stderr)``."""
-    out = tmp_path / "solve"
-    args = ["solve", "--scene", SCENE, "--variants", "blueprint", "--rewards", "geodesic", "--pairs", "30"]
-    assert main([*args, "--out", str(out)]) == 0
-    (row,) = json.loads((out / "solve.json").read_text())["rows"]
-    return row, capsys.readouterr().err
-
 
 def same_numbers(a: dict, b: dict) -> bool:
     return all(a[k] == b[k] for k in ("success_rate", "spl", "targets", "cells"))
 
 
 @pytest.fixture()
-def cached(root, tmp_path, capsys):
+def cached(root, tmp_path, capsys, solve):
     """``(row, folder, {file: its bytes})`` of a first solve, which wrote the cache."""
     row, _ = solve(tmp_path, capsys)
     assert not row["cached"]
@@ -35,7 +22,7 @@ def cached(root, tmp_path, capsys):
     return row, folder, {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix in (".npy", ".json")}
 
 
-def test_a_values_file_with_its_middle_third_overwritten_is_solved_again_and_rewritten(cached, tmp_path, capsys):
+def test_a_values_file_with_its_middle_third_overwritten_is_solved_again_and_rewritten(cached, tmp_path, capsys, solve):
     first, folder, files = cached
     data = bytearray(files["values.npy"])
     third = len(data) // 3
@@ -51,7 +38,7 @@ def test_a_values_file_with_its_middle_third_overwritten_is_solved_again_and_rew
     assert row["cached"] and same_numbers(row, first) and not err
 
 
-def test_a_q_file_cut_in_half_is_noticed_and_rewritten(cached, tmp_path, capsys):
+def test_a_q_file_cut_in_half_is_noticed_and_rewritten(cached, tmp_path, capsys, solve):
     first, folder, files = cached
     (folder / "q.npy").write_bytes(files["q.npy"][: len(files["q.npy"]) // 2])
 
@@ -63,7 +50,7 @@ def test_a_q_file_cut_in_half_is_noticed_and_rewritten(cached, tmp_path, capsys)
 
 
 @pytest.mark.parametrize("name", ["targets.npy", "cells.npy"])
-def test_a_missing_array_file_is_named_and_solved_again(cached, tmp_path, capsys, name):
+def test_a_missing_array_file_is_named_and_solved_again(cached, tmp_path, capsys, name, solve):
     first, folder, files = cached
     (folder / name).unlink()
     row, err = solve(tmp_path, capsys)
@@ -72,7 +59,7 @@ def test_a_missing_array_file_is_named_and_solved_again(cached, tmp_path, capsys
     assert (folder / name).read_bytes() == files[name]
 
 
-def test_a_cache_written_before_content_hashes_is_solved_again_once_saying_so(cached, tmp_path, capsys):
+def test_a_cache_written_before_content_hashes_is_solved_again_once_saying_so(cached, tmp_path, capsys, solve):
     first, folder, _ = cached
     meta = json.loads((folder / "solution.json").read_text())
     del meta["files"]  # what a dtradar before content hashes wrote
@@ -85,7 +72,7 @@ def test_a_cache_written_before_content_hashes_is_solved_again_once_saying_so(ca
     assert row["cached"] and not err, "once"
 
 
-def test_a_sound_cache_is_served_quietly(cached, tmp_path, capsys):
+def test_a_sound_cache_is_served_quietly(cached, tmp_path, capsys, solve):
     first, _, _ = cached
     row, err = solve(tmp_path, capsys)
     assert row["cached"] and same_numbers(row, first) and not err

@@ -3,25 +3,11 @@ there is solved for this run only, saying so (exit status 0, not a raw Permissio
 from it; a damaged one is solved again without being rewritten, both said. Skipped where chmod does not stop writes
 (as root). A tiny synthetic twin."""
 
-import json
 from pathlib import Path
-
-from dtradar_rl.cli import main
-
-SCENE = "synthetic-12x8"
-
-
-def solve(tmp_path, capsys) -> tuple[dict, str]:
-    """One solve of the blueprint under the geodesic reward, results outside the data root: ``(its row, stderr)``."""
-    out = tmp_path / "solve"
-    args = ["solve", "--scene", SCENE, "--variants", "blueprint", "--rewards", "geodesic", "--pairs", "30"]
-    assert main([*args, "--out", str(out)]) == 0
-    (row,) = json.loads((out / "solve.json").read_text())["rows"]
-    return row, capsys.readouterr().err
 
 
 def test_a_solve_into_an_empty_read_only_data_root_solves_without_caching_and_says_so(
-    root, read_only, tmp_path, capsys
+    root, read_only, tmp_path, capsys, solve
 ):
     read_only()
     row, err = solve(tmp_path, capsys)
@@ -30,7 +16,7 @@ def test_a_solve_into_an_empty_read_only_data_root_solves_without_caching_and_sa
     assert list(root.iterdir()) == [], "nothing written"
 
 
-def test_a_sound_cache_in_a_read_only_data_root_is_read_from_it(root, read_only, tmp_path, capsys):
+def test_a_sound_cache_in_a_read_only_data_root_is_read_from_it(root, read_only, tmp_path, capsys, solve):
     first, _ = solve(tmp_path, capsys)
     folder = Path(first["solution"])
     (folder / ".q.npy.k1ll3d_0.tmp").write_bytes(b"a killed writer's")
@@ -40,7 +26,9 @@ def test_a_sound_cache_in_a_read_only_data_root_is_read_from_it(root, read_only,
     assert (folder / ".q.npy.k1ll3d_0.tmp").is_file(), "left as it is: nothing can be removed there"
 
 
-def test_a_damaged_cache_in_a_read_only_data_root_is_solved_again_and_left_as_it_is(root, read_only, tmp_path, capsys):
+def test_a_damaged_cache_in_a_read_only_data_root_is_solved_again_and_left_as_it_is(
+    root, read_only, tmp_path, capsys, solve
+):
     first, _ = solve(tmp_path, capsys)
     folder = Path(first["solution"])
     (folder / "q.npy").write_bytes((folder / "q.npy").read_bytes()[:100])
