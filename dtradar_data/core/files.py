@@ -4,11 +4,13 @@ waits say what they wait for (:func:`waiting_lock`)."""
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import hashlib
 import json
 import math
 import os
+import random
 import re
 import socket
 import sys
@@ -58,7 +60,7 @@ def open_atomic(path: Path, mode: str = "w", **kwargs) -> Iterator[IO]:
     ``mode`` is ``"w"`` or ``"wb"`` (``"w+b"`` for writers that seek back); ``kwargs`` go to :func:`open`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _new_temp(path)
     try:
         with os.fdopen(fd, mode, **kwargs) as f:
             yield f
@@ -70,8 +72,23 @@ def open_atomic(path: Path, mode: str = "w", **kwargs) -> Iterator[IO]:
         raise
 
 
-#: What follows ``.<name>`` in a temp file of :func:`open_atomic`: a dot, ``tempfile``'s 8 characters, ``.tmp``.
+#: What follows ``.<name>`` in a temp file of :func:`open_atomic`: a dot, 8 characters of :data:`_TEMP_CHARS`, ``.tmp``.
 _TEMP_TAIL = r"\.[a-z0-9_]{8}\.tmp"
+_TEMP_CHARS = "abcdefghijklmnopqrstuvwxyz0123456789_"  # tempfile's own, so older writers' temp files still match
+
+
+def _new_temp(path: Path) -> tuple[int, str]:
+    """``(fd, name)`` of a new temp file ``.<name>.<8 random>.tmp`` beside ``path``, created with mode 0666 less the
+    umask, as :func:`open` creates a file (0644 under umask 022). Not :func:`tempfile.mkstemp`: its 0600 would stay on
+    the file renamed into place, and a shared mirror's files would be unreadable to everyone but their writer."""
+    rng = random.SystemRandom()
+    for _ in range(tempfile.TMP_MAX):
+        name = str(path.parent / f".{path.name}.{''.join(rng.choices(_TEMP_CHARS, k=8))}.tmp")
+        try:
+            return os.open(name, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666), name
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, f"no free temp file name beside {path}")
 
 
 def temp_siblings(path: Path) -> list[Path]:
