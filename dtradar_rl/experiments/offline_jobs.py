@@ -267,7 +267,7 @@ def check_ray(address: str | None) -> None:
     from dtradar_data.core.ray_cluster import check_ray_address
     from dtradar_rl.experiments.sweep import _import_ray
 
-    _import_ray()
+    _import_ray(instead="local")  # offline-bench has no serial executor
     check_ray_address(address)
 
 
@@ -282,7 +282,7 @@ def run_jobs_on_ray(
     from dtradar_data.core.ray_cluster import connect_ray, wait_for_cpus
     from dtradar_rl.experiments.sweep import _import_ray
 
-    ray = _import_ray()
+    ray = _import_ray(instead="local")  # offline-bench has no serial executor
     started = connect_ray(ray, address)  # bounded: a dead address fails in seconds, not minutes
     rows: list[dict[str, Any]] = []
     try:

@@ -109,13 +109,15 @@ def run_one(scene: str, seed: int, cfg: SweepConfig) -> dict[str, Any]:
     }
 
 
-def _import_ray():
+def _import_ray(instead: str = "serial"):
+    """Ray, or the typed error naming how to install it and the executor ``instead`` that needs none (each command
+    has its own: a sweep's is ``serial``, the offline benchmark's ``local``)."""
     try:
         import ray
     except ImportError as e:
         raise MissingDependencyError(
             "--executor ray needs Ray, which is not installed",
-            hint="pip install 'dtradar[ray]', or use --executor serial",
+            hint=f"pip install 'dtradar[ray]', or use --executor {instead}",
         ) from e
     return ray
 
