@@ -213,16 +213,9 @@ class RadioFilterAgent:
         obs = obs.to(self.device)
         if obs.shape[0] != self._n:
             self._start(obs.shape[0])
-        k4 = self.k * PER_TX
-        radio = obs[:, :k4].reshape(-1, self.k, PER_TX)
-        blocked_now = obs[:, k4 : k4 + 4] > 0.5
-        moved, last, fresh = obs[:, k4 + 4] > 0.5, obs[:, k4 + 5 : k4 + 9], obs[:, k4 + 9] > 0.5
-        self._predict(moved, last, fresh, obs[:, -2:])
-        self.log_belief += self._log_likelihood(radio[..., :-1], radio[..., -1] > 0.5, blocked_now)
-        top = self.log_belief.max(1, keepdim=True).values
-        self.log_belief = torch.maximum(self.log_belief - top, torch.full_like(top, -FLOOR_LOG))
-        belief = self.log_belief.exp()
-        belief /= belief.sum(1, keepdim=True)
+        blocked_now, moved, last, fresh = self.readings(obs)
+        self._new_episodes(fresh, obs[:, -2:])
+        self.log_belief, belief = self.belief_step(self.log_belief, obs)
         self._sense_obstacles(belief, blocked_now, moved, last, fresh)
         action = self._qmdp(belief, blocked_now)
         return self._escape(action, last, moved, fresh, blocked_now)
@@ -253,25 +246,44 @@ class RadioFilterAgent:
         return action
 
     # -- the filter ------------------------------------------------------------------------------------------------
-    def _predict(self, moved, last, fresh, target_xy) -> None:
-        if bool(fresh.any()):  # switched on: anywhere on the map
-            idx = torch.nonzero(fresh, as_tuple=True)[0]
-            self.log_belief[idx] = self.log_prior
-            self.target[idx] = torch.cdist(target_xy[idx], self.positions).argmin(1)
-            self.sensed[idx] = False
-            self._plan_target[idx] = -1
+    def readings(self, obs: torch.Tensor):
+        """``(blocked_now, moved, last, fresh)`` of honest observations: the proximity sensor's four flags, whether
+        the last move moved the robot, the last move one-hot, and whether the robot was just switched on."""
+        k4 = self.k * PER_TX
+        return obs[:, k4 : k4 + 4] > 0.5, obs[:, k4 + 4] > 0.5, obs[:, k4 + 5 : k4 + 9], obs[:, k4 + 9] > 0.5
+
+    def belief_step(self, log_belief: torch.Tensor, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(log_belief, belief)`` after one honest observation per robot (``float32[n, cells]`` each): the
+        prediction along the odometry and the weighing by what the robot senses (module docstring, steps 1 and 2). A
+        switched-on robot starts from the map's prior. Depends on nothing but ``log_belief`` and ``obs``: the offline
+        learners replay logged episodes through it (:mod:`dtradar_rl.offline.filter_senses`)."""
+        blocked_now, moved, last, fresh = self.readings(obs)
+        log_belief = torch.where(fresh[:, None], self.log_prior.expand_as(log_belief), log_belief)
         a = last.argmax(1)
         went = last.any(1) & ~fresh
         shift = went & moved
         if bool(shift.any()):
             idx = torch.nonzero(shift, as_tuple=True)[0]
             src = self.prev[a[idx]]  # [k, cells]
-            lb = self.log_belief[idx].gather(1, src) + self.log_move[a[idx]]
-            self.log_belief[idx] = lb
+            log_belief[idx] = log_belief[idx].gather(1, src) + self.log_move[a[idx]]
         bump = went & ~moved
         if bool(bump.any()):
             idx = torch.nonzero(bump, as_tuple=True)[0]
-            self.log_belief[idx] += self.log_bump[:, a[idx]].T
+            log_belief[idx] += self.log_bump[:, a[idx]].T
+        radio = obs[:, : self.k * PER_TX].reshape(-1, self.k, PER_TX)
+        log_belief = log_belief + self._log_likelihood(radio[..., :-1], radio[..., -1] > 0.5, blocked_now)
+        top = log_belief.max(1, keepdim=True).values
+        log_belief = torch.maximum(log_belief - top, torch.full_like(top, -FLOOR_LOG))
+        belief = log_belief.exp()
+        return log_belief, belief / belief.sum(1, keepdim=True)
+
+    def _new_episodes(self, fresh, target_xy) -> None:
+        """A switched-on robot's target cell on the map, and no obstacles sensed or plans made yet."""
+        if bool(fresh.any()):
+            idx = torch.nonzero(fresh, as_tuple=True)[0]
+            self.target[idx] = torch.cdist(target_xy[idx], self.positions).argmin(1)
+            self.sensed[idx] = False
+            self._plan_target[idx] = -1
 
     def _log_likelihood(self, measured, heard, blocked_now) -> torch.Tensor:
         """``float32[n, cells]``: log p(reading | cell), up to a constant per robot; robots in chunks, so that the

@@ -112,6 +112,11 @@ class HonestNavEnv:
     def reset_where(self, mask: torch.Tensor, starts=None, targets=None, t0=None) -> None:
         """New episodes where ``mask`` holds (see :meth:`BatchedNavEnv.reset_where`): the robots are switched on."""
         self.inner.reset_where(mask, starts=starts, targets=targets, t0=t0)
+        self.switched_on(mask)
+
+    def switched_on(self, mask: torch.Tensor) -> None:
+        """The robots where ``mask`` holds start new episodes of the inner env (reset there by whoever started them,
+        e.g. a logger's walk): their next observation is a switched-on robot's, with no odometry yet."""
         idx = torch.nonzero(mask.to(self.device), as_tuple=True)[0]
         self.fresh[idx], self.moved[idx], self.last[idx] = 1.0, 0.0, -1
         self._draw(idx)

@@ -158,6 +158,27 @@ def twin_env_spec(
     )
 
 
+def honest_env_spec(
+    dataset: str, version: str | None, *, sensing: str, noise: str, reward: str, max_steps: int
+) -> EnvSpec:
+    """The spec of the honest-sensing env (:class:`~dtradar_rl.envs.honest_gym.HonestGymEnv`) on ``dataset`` pinned
+    to ``version``, id :func:`honest_env_id`: what an honest logged dataset's Minari copy records."""
+    kwargs = {
+        "dataset": f"{dataset}@{version}" if version else dataset,
+        "sensing": sensing,
+        "noise": noise,
+        "reward": reward,
+        "max_steps": int(max_steps),
+    }
+    return EnvSpec(
+        id=honest_env_id(dataset),
+        entry_point="dtradar_rl.envs.honest_gym:HonestGymEnv",
+        max_episode_steps=None,
+        disable_env_checker=True,
+        kwargs=kwargs,
+    )
+
+
 __all__ = [
     "SYNTHETIC_ENV_ID",
     "TWIN_ENTRY_POINT",
@@ -165,6 +186,7 @@ __all__ = [
     "env_id",
     "make_twin_env",
     "honest_env_id",
+    "honest_env_spec",
     "register_dataset_envs",
     "twin_env_spec",
     "twin_version",

@@ -51,7 +51,9 @@ from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED, METRIC
 from dtradar_rl.offline import walks
 from dtradar_rl.offline.checkpoint_twin import check_logs_on_its_twin
 from dtradar_rl.task.config import ConfigError, TwinConfig
+from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.sensing import sensing_for
 from dtradar_rl.train.saved_runs import load_policy
 
 #: The dataset families (D4RL's names), in the order ``--behaviour all`` logs them.
@@ -249,6 +251,19 @@ class BehaviourConfig(TwinConfig):
     medium_budget: int = MEDIUM_BUDGET
     """medium, medium-replay, mixed: the medium agent's DQN budget in environment steps (its exploration decays over
     40 % of it); an agent that does not reach --medium-target within it is an error"""
+    sensing: str = "privileged"
+    """what a logged step records as the robot's observation: privileged (the --obs preset, which holds the robot's
+    exact x, y and, with neighbors, the neighbouring cells' radio: an upper bound) or an honest sensing of
+    dtradar_rl.task.sensing (radio, radio-no-proximity, no-angles, no-delay, no-gain, no-phase, rssi, no-radio: its
+    own cell's radio under --sensing-noise, proximity, odometry and bumps, the target on the map); the behaviour acts
+    the same either way"""
+    sensing_noise: str = "realistic"
+    """honest --sensing only: the receiver noise of the recorded readings (none, realistic, 2x)"""
+
+    @property
+    def honest(self) -> bool:
+        """Whether the logged observations are an honest sensing's (else the privileged --obs preset's)."""
+        return not sensing_for(self.sensing).privileged
 
     def spec(self) -> BehaviourSpec:
         return BehaviourSpec(
@@ -265,6 +280,13 @@ class BehaviourConfig(TwinConfig):
     def validate(self):
         super().validate()
         self.spec().validate()
+        noise_model(self.sensing_noise)
+        if self.honest and self.behaviour == "medium-replay":
+            raise ConfigError(
+                "medium-replay is the medium agent's replay buffer, which holds the privileged observations it "
+                f"trained on, not what --sensing {self.sensing} reads",
+                hint="log --behaviour medium with --sensing, or medium-replay with --sensing privileged",
+            )
         return self
 
 

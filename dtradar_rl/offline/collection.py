@@ -23,8 +23,10 @@ import torch
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import CorruptDatasetError
 from dtradar_rl.envs.batched import BatchedNavEnv
+from dtradar_rl.envs.honest import HonestNavEnv
 from dtradar_rl.offline.behaviours import Actor, BehaviourSpec, checkpoint_policy
 from dtradar_rl.task.observations import Normalizer
+from dtradar_rl.task.sensing import Readings, sensing_for
 from dtradar_rl.train.replay import replay_transitions
 
 #: Bytes per logged step of each column :func:`roll` records, as it records them (torch's dtypes: ``obs`` and
@@ -77,8 +79,15 @@ def roll(
     max_steps: int | None = None,
     seed: int = 0,
     device: str = "cpu",
+    sensing: str = "privileged",
+    sensing_noise: str = "realistic",
 ) -> Rollout:
-    """Run ``spec`` on ``ds`` for ``ceil(steps / num_envs)`` steps of all robots; see the module docstring."""
+    """Run ``spec`` on ``ds`` for ``ceil(steps / num_envs)`` steps of all robots; see the module docstring.
+
+    With an honest ``sensing`` (:mod:`dtradar_rl.task.sensing`) the recorded ``obs``/``next_obs`` are what the robot's
+    own sensors read (:class:`~dtradar_rl.envs.honest.HonestNavEnv`, receiver noise ``sensing_noise``); the behaviour
+    still acts on the env's own observation (a data collector may be privileged: the learner never sees it), so the
+    same seed logs the same moves whatever is recorded. Every new episode switches the robot on afresh."""
     spec.validate()
     t0 = time.perf_counter()
     normalizer = normalizer or Normalizer.fit(ds)
@@ -95,16 +104,20 @@ def roll(
     gen = torch.Generator(device=env.device)
     gen.manual_seed(seed + 1)
     actor = Actor(spec, env, gen, policy=checkpoint_policy(spec, obs, normalizer, device, ds=ds))
+    honest = None
+    if not sensing_for(sensing).privileged:
+        honest = HonestNavEnv(env, Readings.from_dataset(ds), sensing, sensing_noise, seed)
     horizon = -(-steps // num_envs)
     keys = ("obs", "action", "reward", "next_obs", "terminated", "truncated", "cell", "target")
     rec: dict[str, list[torch.Tensor]] = {k: [] for k in keys}
     o = env.reset()
+    seen = honest.observe() if honest is not None else o  # what is recorded as the robot's observation
     for _ in range(horizon):
         a = actor(o)
         rec["cell"].append(env.cell.clone())
         rec["target"].append(env.target.clone())
-        next_o, r, term, trunc, _ = env.step(a)
-        rec["obs"].append(o)
+        next_o, r, term, trunc, _ = (honest or env).step(a)
+        rec["obs"].append(seen)
         rec["action"].append(a)
         rec["reward"].append(r)
         rec["next_obs"].append(next_o)
@@ -115,6 +128,11 @@ def roll(
         else:
             env.reset_where(term | trunc)
         o = env.observe()
+        if honest is not None:
+            honest.switched_on(term | trunc)
+            seen = honest.observe()
+        else:
+            seen = o
 
     return _assemble(rec, num_envs, horizon, actor.component.cpu().numpy(), t0)
 

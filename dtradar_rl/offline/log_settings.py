@@ -25,13 +25,16 @@ def settings_of(cfg: BehaviourConfig, ds: Dataset) -> dict[str, Any]:
     """The logging settings that enter a log's version and a medium agent's key: robots, observation preset, reward,
     step limit (the twin's default when unset) and device kind."""
     max_steps = cfg.max_steps or GridMDP.from_dataset(ds).max_steps
-    return {
+    out = {
         "num_envs": cfg.num_envs,
         "obs": cfg.obs,
         "reward": cfg.reward,
         "max_steps": int(max_steps),
         "device_kind": "cuda" if cfg.device.startswith("cuda") else "cpu",
     }
+    if cfg.honest:  # only then: a privileged log's version stays what it was before sensings existed
+        out.update(sensing=cfg.sensing, sensing_noise=cfg.sensing_noise)
+    return out
 
 
 def check_compatible(logged: LoggedDataset, cfg: TwinConfig, ds: Dataset) -> None:
@@ -46,8 +49,13 @@ def check_compatible(logged: LoggedDataset, cfg: TwinConfig, ds: Dataset) -> Non
             f"it was logged on version {meta.get('parent_version')} of {ds.name}, the trainer loaded "
             f"{parent_version(ds)}"
         )
-    preset = (meta.get("observations") or {}).get("preset")
-    if preset != cfg.obs:
+    observations = meta.get("observations") or {}
+    preset = observations.get("preset")
+    logged_sensing = observations.get("sensing", "privileged")  # logs made before sensings existed: privileged
+    sensing = getattr(cfg, "sensing", "privileged")
+    if logged_sensing != sensing:
+        problems.append(f"it records --sensing {logged_sensing}, the trainer's is {sensing}")
+    elif logged_sensing == "privileged" and preset != cfg.obs:
         problems.append(f"its observation preset is {preset!r}, the trainer's {cfg.obs!r}")
     stored = meta.get("normalizer")
     if stored and not problems:
@@ -63,8 +71,8 @@ def check_compatible(logged: LoggedDataset, cfg: TwinConfig, ds: Dataset) -> Non
     if problems:
         raise SchemaMismatchError(
             f"logged dataset {logged.name}@{logged.version} does not fit: " + "; ".join(problems),
-            hint=f"train with --scene/--variant/--obs of the log (parent {meta.get('parent')}, "
-            f"preset {preset}), or log again on this twin",
+            hint=f"train with --scene/--variant/--obs/--sensing of the log (parent {meta.get('parent')}, "
+            f"preset {preset}, sensing {logged_sensing}), or log again on this twin",
         )
 
 

@@ -86,6 +86,7 @@ from dtradar_rl.offline.minari_copy import check_minari_free, export_minari
 from dtradar_rl.task.config import ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations, obs_dim
 from dtradar_rl.task.runtime import auto_threads
+from dtradar_rl.task.sensing import HONEST_PRESET, honest_dim, honest_names, sensing_for
 from dtradar_rl.task.twins import load_dataset
 
 
@@ -115,7 +116,10 @@ class LogConfig(BehaviourConfig):
 
     @property
     def logged_name(self) -> str:
-        return f"{self.scene}/{self.variant}/{self.name or self.behaviour}"
+        """``<scene>/<variant>/<name>``; by default the name is the behaviour, followed by the sensing when the log
+        records an honest one (``expert-radio``: a name says how the data was collected and what it holds)."""
+        default = f"{self.behaviour}-{self.sensing}" if self.honest else self.behaviour
+        return f"{self.scene}/{self.variant}/{self.name or default}"
 
     def families(self) -> list[LogConfig]:
         """``--behaviour all``: one config per dataset family (D4RL's, then OGBench's), else ``[self]``."""
@@ -137,6 +141,12 @@ class LogConfig(BehaviourConfig):
             raise ConfigError(
                 "--minari-memory writes a second Minari copy, and --no-minari writes none", hint="drop one"
             )
+        if self.minari_memory and self.honest:
+            raise ConfigError(
+                f"--minari-memory adds the privileged agents' memory window, and this log records --sensing "
+                f"{self.sensing}",
+                hint="drop --minari-memory (an honest log's Minari copy holds what the robot's own sensors read)",
+            )
         if self.minari_memory and self.obs != "neighbors":
             raise ConfigError(
                 "--minari-memory: the memory window extends the neighbors observation, and this log observes "
@@ -153,7 +163,8 @@ class LogConfig(BehaviourConfig):
         """:class:`LogTooLargeError` when rolling out ``--steps`` (observations of ``--obs`` on a twin of
         ``transmitters``; 1, the narrowest, before the twin is loaded) needs more memory than this machine has
         available (:func:`~dtradar_rl.offline.collection.rollout_bytes`); not checked where the system does not say."""
-        width = obs_dim(self.obs, transmitters)
+        width = honest_dim(transmitters) if self.honest else obs_dim(self.obs, transmitters)
+        what = f"--sensing {self.sensing}" if self.honest else self.obs
         need, have = rollout_bytes(self.steps, self.num_envs, width), available_memory()
         if have is None or need <= have:
             return
@@ -161,7 +172,7 @@ class LogConfig(BehaviourConfig):
         fit = have // per_step // self.num_envs * self.num_envs
         raise LogTooLargeError(
             f"--steps {self.steps}: logging {rollout_steps(self.steps, self.num_envs):,} steps of {width}-column "
-            f"{self.obs} observations holds about {human_size(need)} in memory ({per_step} bytes a step: "
+            f"{what} observations holds about {human_size(need)} in memory ({per_step} bytes a step: "
             "its observation, next observation and other columns, held twice while they are stacked); this machine "
             f"has {human_size(have)} available",
             hint=f"log fewer --steps (about {fit:,} fit now)" if fit else "free memory (other processes) and log again",
@@ -283,7 +294,7 @@ def _log(cfg: LogConfig, ds: Dataset, lid, inputs: dict[str, Any], say) -> Logge
                 hint=f"remove {agent.path} and log again (the agent is retrained)",
             )
     else:
-        r = roll(ds, spec, steps=cfg.steps, **env_kw)
+        r = roll(ds, spec, steps=cfg.steps, sensing=cfg.sensing, sensing_noise=cfg.sensing_noise, **env_kw)
     c = r.columns
     table = transitions_table(
         episode=c["episode"],
@@ -299,11 +310,10 @@ def _log(cfg: LogConfig, ds: Dataset, lid, inputs: dict[str, Any], say) -> Logge
         target=c["target"],
         component=c["component"],
     )
-    names = list(build_observations(ds, cfg.obs, normalizer).names)
     meta = {
         "behaviour_text": spec.describe(),
         "normalizer": normalizer.to_dict(),
-        "observations": {"preset": cfg.obs, "names": names},
+        "observations": observations_meta(cfg, ds, normalizer),
         "stats": {"rollout": r.stats},
         "score": behaviour_score(cfg, ds, spec, c, settings["max_steps"]),
     }
@@ -322,6 +332,22 @@ def _log(cfg: LogConfig, ds: Dataset, lid, inputs: dict[str, Any], say) -> Logge
         + f"{meta['score']['episodes']['normalized']:.1f} (logged episodes)"
     )
     return logged
+
+
+def observations_meta(cfg: LogConfig, ds: Dataset, normalizer: Normalizer) -> dict[str, Any]:
+    """``meta["observations"]``: what a logged step's ``obs`` holds. ``preset`` is the privileged preset's name, or
+    ``honest`` with the ``sensing``, its receiver ``noise`` and a line on what the robot observes."""
+    sensing = sensing_for(cfg.sensing)
+    if sensing.privileged:
+        names = list(build_observations(ds, cfg.obs, normalizer).names)
+        return {"preset": cfg.obs, "sensing": sensing.name, "observes": sensing.describe(), "names": names}
+    return {
+        "preset": HONEST_PRESET,
+        "sensing": sensing.name,
+        "noise": cfg.sensing_noise,
+        "observes": sensing.describe(),
+        "names": list(honest_names(ds.transmitters)),
+    }
 
 
 # -- the normalised score of a logged dataset ---------------------------------------------------------------------

@@ -6,6 +6,7 @@ Two processes training the same agent take turns; the second reuses the first's.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -65,7 +66,8 @@ def medium_key_inputs(cfg: BehaviourConfig, ds: Dataset) -> dict[str, Any]:
         "parent_version": parent_version(ds),
         "medium": cfg.spec().medium_recipe(),
         "seed": int(cfg.seed),
-        "settings": settings_of(cfg, ds),
+        # the agent acts on the privileged preset whatever the log records: one agent for every --sensing
+        "settings": settings_of(dataclasses.replace(cfg, sensing="privileged"), ds),
         "library_versions": library_versions(LOGGED_LIBRARIES),
     }
 

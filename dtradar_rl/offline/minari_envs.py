@@ -18,8 +18,9 @@ import numpy as np
 
 from dtradar_data.core.errors import DtradarError, SchemaMismatchError, unknown_name
 from dtradar_data.store.logged import LoggedDataset
-from dtradar_rl.envs.registration import twin_env_spec, twin_version
+from dtradar_rl.envs.registration import honest_env_spec, twin_env_spec, twin_version
 from dtradar_rl.offline.config import MEMORY_SETTINGS
+from dtradar_rl.task.sensing import HONEST_PRESET
 from dtradar_rl.task.twins import load_dataset
 
 
@@ -98,6 +99,24 @@ def minari_env_specs(logged: LoggedDataset, senses: str = "none"):
             f"{logged.name}@{logged.version}: its meta.json lacks {', '.join(lacking)} (not logged by log_dataset)",
             hint="log it again with `python -m dtradar_rl log ...` to give its Minari copy an env spec",
         )
+    obs_meta = meta.get("observations") or {}
+    if preset == HONEST_PRESET:  # what the robot's own sensors read: the honest-sensing env, same sensing and noise
+        if senses == "memory":
+            raise SchemaMismatchError(
+                f"{logged.name} records honest sensing; the memory copy extends the privileged observation",
+                hint="export its Minari copy with senses='none'",
+            )
+        honest_kw = {
+            "sensing": str(obs_meta.get("sensing")),
+            "noise": str(obs_meta.get("noise", "none")),
+            "reward": str(settings["reward"]),
+            "max_steps": int(settings["max_steps"]),
+        }
+        spec = honest_env_spec(str(parent), str(version), **honest_kw)
+        scene, _, variant = str(parent).partition("/")
+        dynamic = _dynamic_twin(scene) if variant == "blueprint" else None
+        eval_spec = spec if dynamic is None else honest_env_spec(f"{scene}/dynamic", twin_version(dynamic), **honest_kw)
+        return spec, eval_spec
     settings_kw = {
         "obs": str(preset),
         "reward": str(settings["reward"]),
@@ -108,14 +127,18 @@ def minari_env_specs(logged: LoggedDataset, senses: str = "none"):
     spec = twin_env_spec(str(parent), str(version), **settings_kw)
     eval_spec = spec
     scene, _, variant = str(parent).partition("/")
-    if variant == "blueprint":
-        try:
-            dynamic = load_dataset(f"{scene}/dynamic")
-        except DtradarError:  # not built or pulled here: evaluate on the logging twin
-            dynamic = None
-        if dynamic is not None:
-            eval_spec = twin_env_spec(f"{scene}/dynamic", twin_version(dynamic), **settings_kw)
+    dynamic = _dynamic_twin(scene) if variant == "blueprint" else None
+    if dynamic is not None:
+        eval_spec = twin_env_spec(f"{scene}/dynamic", twin_version(dynamic), **settings_kw)
     return spec, eval_spec
+
+
+def _dynamic_twin(scene: str):
+    """The scene's dynamic twin when it is here (a blueprint log's evaluation twin), else None."""
+    try:
+        return load_dataset(f"{scene}/dynamic")
+    except DtradarError:  # not built or pulled here: evaluate on the logging twin
+        return None
 
 
 def minari_envs(logged: LoggedDataset, senses: str = "none") -> MinariEnvs:
@@ -148,15 +171,25 @@ def minari_envs(logged: LoggedDataset, senses: str = "none") -> MinariEnvs:
                 raise SchemaMismatchError(f"logged {k} fall outside the env's observation space")
     except DtradarError as e:
         return MinariEnvs(
-            missing=f"twin {spec.kwargs['dataset']}@{spec.kwargs['version']}: {e.message}",
+            missing=f"twin {_pinned(spec)}: {e.message}",
             retry=not isinstance(e, SchemaMismatchError),
         )
     return MinariEnvs(env, spec, eval_spec, arrays=a)
 
 
+def _pinned(spec) -> str:
+    k = spec.kwargs
+    return k["dataset"] if "version" not in k else f"{k['dataset']}@{k['version']}"
+
+
 def env_text(spec) -> str:
     """A spec in one line, for the card and messages."""
     k = spec.kwargs
+    if "sensing" in k:  # the honest-sensing env
+        return (
+            f"{k['dataset']} (honest sensing {k['sensing']}, receiver noise {k['noise']}, reward {k['reward']}, "
+            f"max_steps {k['max_steps']})"
+        )
     return (
         f"{k['dataset']}@{k['version']} (obs {k['obs']}, reward {k['reward']}, max_steps {k['max_steps']}, noise "
         f"{k['noise']}" + (f", memory radius {k['memory_radius']}" if k.get("memory_radius") else "") + ")"

@@ -104,6 +104,9 @@ SENSINGS: dict[str, Sensing] = {
     )
 }
 DEFAULT_SENSING = "radio"
+#: The observation "preset" name of honest observations wherever a preset is recorded (a logged dataset's
+#: ``observations.preset``, an agent's ``obs_preset``): not one of the privileged presets.
+HONEST_PRESET = "honest"
 
 
 def sensing_for(name: str | Sensing) -> Sensing:
