@@ -19,13 +19,13 @@ the run's config). Tested against :class:`~dtradar_rl.envs.memory.MemoryGymEnv` 
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
 
 import numpy as np
 
 from dtradar_data.store.logged import LoggedDataset
 from dtradar_rl.envs.memory import VISITS_CAP, MemoryLayout, flag_columns
 from dtradar_rl.offline.config import MEMORY_SETTINGS
+from dtradar_rl.offline.log_cache import LogCache, log_content
 from dtradar_rl.task.grid_mdp import GridMDP
 
 #: Episodes whose memory maps are replayed together (each holds ``maps x padded cells`` int16 values).
@@ -40,6 +40,9 @@ class MemorySenses:
 
     def __init__(self, logged: LoggedDataset, mdp: GridMDP, *, radius: int, bumps: bool = False, visits: bool = True):
         t0 = time.perf_counter()
+        #: what the windows follow from (:func:`senses_content`): a d3rlpy dataset built with them is kept by it
+        self.content = senses_content(logged, mdp, radius, bumps, visits)
+        self.log = log_content(logged)  #: the sha256 of the transitions alone (a sampler checks its parts by it)
         self.layout = MemoryLayout(mdp.nx, mdp.ny, radius, bumps=bumps, visits=visits)
         a = logged.arrays()
         cell, action = a["cell"].astype(np.int64), a["action"].astype(np.int64)
@@ -133,23 +136,28 @@ class MemorySenses:
         }
 
 
-#: The memory windows of the most recently opened logs in this process (the benchmark trains many agents on each).
-_CACHE: OrderedDict[tuple, MemorySenses] = OrderedDict()
+#: The memory windows of the most recently opened logs in this process (the benchmark trains many agents on each),
+#: each served only for the transitions and twin it was built from (:mod:`dtradar_rl.offline.log_cache`).
 CACHE_SIZE = 2
+_CACHE: LogCache[MemorySenses] = LogCache("memory window", CACHE_SIZE)
+
+
+def senses_content(logged: LoggedDataset, mdp: GridMDP, radius: int, bumps: bool, visits: bool) -> str:
+    """What a log's memory windows follow from: its transitions, the twin's moves and the window's layout."""
+    return log_content(logged, mdp.next_cell, mdp.collides, f"{mdp.nx}x{mdp.ny} r{radius} b{bumps:d} v{visits:d}")
 
 
 def memory_senses(logged: LoggedDataset, mdp: GridMDP) -> MemorySenses:
-    """The :class:`MemorySenses` of a log with :data:`MEMORY_SETTINGS`, kept for the next runs in this process."""
-    key = (str(logged.path), logged.name, logged.version)
-    if key in _CACHE:
-        _CACHE.move_to_end(key)
-        return _CACHE[key]
+    """The :class:`MemorySenses` of a log with :data:`MEMORY_SETTINGS`, kept for the next runs in this process; a
+    kept one of other transitions or another twin under the same folder and version is built again, saying so."""
     s = MEMORY_SETTINGS
-    senses = MemorySenses(logged, mdp, radius=s["memory_radius"], bumps=s["memory_bumps"], visits=s["memory_visits"])
-    _CACHE[key] = senses
-    while len(_CACHE) > CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return senses
+    radius, bumps, visits = s["memory_radius"], s["memory_bumps"], s["memory_visits"]
+    return _CACHE.get(
+        (str(logged.path), logged.name, logged.version),
+        senses_content(logged, mdp, radius, bumps, visits),
+        lambda: MemorySenses(logged, mdp, radius=radius, bumps=bumps, visits=visits),
+        where=f"{logged.name}@{logged.version}",
+    )
 
 
 __all__ = ["MemorySenses", "memory_senses"]

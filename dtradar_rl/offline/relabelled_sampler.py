@@ -33,6 +33,7 @@ def _sampler_class():
                     f"the d3rlpy dataset holds {self.transition_count} transitions, the log {len(relabeller)}",
                     hint="relabel the log the d3rlpy dataset was built from",
                 )
+            _check_one_log(source, relabeller, senses)
             self.relabeller, self.config, self.senses = relabeller, cfg, senses
             self.rng = np.random.default_rng(cfg.seed)
             #: how many drawn goals came from each source (and how many fell back), over every minibatch
@@ -75,6 +76,25 @@ def _sampler_class():
             }
 
     return RelabelledSampler
+
+
+def _check_one_log(source, relabeller: Relabeller, senses) -> None:
+    """:class:`SchemaMismatchError` when the d3rlpy dataset, the relabeller and the memory windows were built from
+    different transitions (the sha256 each records: :mod:`dtradar_rl.offline.log_cache`). Two logs of one twin with
+    as many steps pass the count check, and their minibatches would pair one log's observations with the other's
+    relabelled rewards and memory windows; a d3rlpy dataset built elsewhere records none and is checked by count."""
+    parts = {
+        "the d3rlpy dataset": source.__dict__.get("_dtradar_log"),
+        f"the relabeller of {relabeller.name}": relabeller.log,
+        "the memory windows": getattr(senses, "log", None),
+    }
+    known = {what: log for what, log in parts.items() if log}
+    if len(set(known.values())) > 1:
+        raise SchemaMismatchError(
+            "the relabelled minibatches would mix different logs: "
+            + ", ".join(f"{what} was built from transitions {log}" for what, log in known.items()),
+            hint="build the d3rlpy dataset, the relabeller and the memory windows from one logged version",
+        )
 
 
 def relabelled_sampler(source, relabeller: Relabeller, cfg: RelabelConfig, senses=None):

@@ -9,7 +9,6 @@ What the sources and mixes mean: :mod:`dtradar_rl.offline.relabel`.
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,6 +18,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import SchemaMismatchError
 from dtradar_data.store.logged import LoggedDataset
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy
+from dtradar_rl.offline.log_cache import LogCache, log_content
 from dtradar_rl.offline.log_settings import parent_version
 from dtradar_rl.offline.relabel import (
     FALLBACK,
@@ -54,6 +54,8 @@ class Relabeller:
         meta = logged.meta
         ds = ds if ds is not None else load_dataset(meta["parent"])
         self.name = f"{logged.name}@{logged.version}"
+        #: the sha256 of the transitions it was built from (a sampler checks its parts are of one log)
+        self.log = log_content(logged)
         if ds.name != meta.get("parent") or parent_version(ds) != meta.get("parent_version"):
             raise SchemaMismatchError(
                 f"{self.name} was logged on {meta.get('parent')} version {meta.get('parent_version')}, not on "
@@ -248,24 +250,20 @@ class Relabeller:
         return self._transitions(rows, goal), source
 
 
-#: The relabellers of the most recently opened logged versions in this process (see :func:`relabeller`).
-_CACHE: OrderedDict[tuple[str, str, str, str], Relabeller] = OrderedDict()
 CACHE_SIZE = 2
+#: The relabellers of the most recently opened logged versions in this process (see :func:`relabeller`), each served
+#: only for the transitions it was built from (:mod:`dtradar_rl.offline.log_cache`).
+_CACHE: LogCache[Relabeller] = LogCache("relabeller", CACHE_SIZE)
 
 
 def relabeller(logged: LoggedDataset | str, ds: Dataset | None = None) -> Relabeller:
     """The :class:`Relabeller` of a logged version on its twin, kept for the next runs in this process (the
-    :data:`CACHE_SIZE` most recent): the benchmark trains many agents on each log. Relabelling never writes to it."""
+    :data:`CACHE_SIZE` most recent): the benchmark trains many agents on each log. Relabelling never writes to it.
+    A kept one built from other transitions under the same folder and version is built again, saying so."""
     logged = as_logged(logged)
     key = (str(logged.path), logged.name, logged.version, parent_version(ds) if ds is not None else "")
-    if key in _CACHE:
-        _CACHE.move_to_end(key)
-        return _CACHE[key]
-    out = Relabeller(logged, ds)
-    _CACHE[key] = out
-    while len(_CACHE) > CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return out
+    where = f"{logged.name}@{logged.version}"
+    return _CACHE.get(key, log_content(logged), lambda: Relabeller(logged, ds), where=where)
 
 
 @dataclass

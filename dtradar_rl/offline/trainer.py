@@ -40,7 +40,6 @@ import functools
 import json
 import os
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +55,7 @@ from dtradar_rl.evaluation.evaluate import write_results
 from dtradar_rl.offline.behaviours import BehaviourConfig
 from dtradar_rl.offline.config import ALGORITHMS, OFFLINE_FORMAT, OfflineConfig, check_algorithm
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, to_mdp_dataset
+from dtradar_rl.offline.log_cache import LogCache, log_content
 from dtradar_rl.offline.log_settings import check_compatible
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.memory_senses import MemorySenses, memory_senses
@@ -123,23 +123,22 @@ def fast_sampling(dataset):
 
 
 #: the d3rlpy datasets of the most recently opened logged versions in this process (see :func:`mdp_dataset`)
-_MDP_CACHE: OrderedDict[tuple[str, str, str], Any] = OrderedDict()
 MDP_CACHE_SIZE = 2
+_MDP_CACHE: LogCache[Any] = LogCache("d3rlpy dataset", MDP_CACHE_SIZE)
 
 
 def mdp_dataset(logged: LoggedDataset, senses: MemorySenses | None = None):
     """The d3rlpy dataset of a stored logged version (:func:`~dtradar_rl.offline.formats.to_mdp_dataset`; with
     ``senses``, its observations followed by their memory window), kept for the next runs in this process (the
     :data:`MDP_CACHE_SIZE` most recent): building one from 100 K rows takes seconds, and the benchmark trains (and
-    FQE-evaluates) eighteen agents on each. Training never writes to it."""
+    FQE-evaluates) eighteen agents on each. Training never writes to it. One kept of other transitions (or memory
+    windows) under the same folder and version is built again, saying so (:mod:`dtradar_rl.offline.log_cache`)."""
     key = (str(logged.path), logged.name, logged.version, senses is not None)
-    if key in _MDP_CACHE:
-        _MDP_CACHE.move_to_end(key)
-        return _MDP_CACHE[key]
-    data = to_mdp_dataset(logged) if senses is None else to_mdp_dataset(senses.arrays(logged.arrays()))
-    _MDP_CACHE[key] = data
-    while len(_MDP_CACHE) > MDP_CACHE_SIZE:
-        _MDP_CACHE.popitem(last=False)
+    content = log_content(logged) if senses is None else senses.content
+    arrays = None if senses is None else lambda: senses.arrays(logged.arrays())  # built only when not kept
+    build = lambda: to_mdp_dataset(logged if arrays is None else arrays())  # noqa: E731
+    data = _MDP_CACHE.get(key, content, build, where=f"{logged.name}@{logged.version}")
+    data._dtradar_log = log_content(logged)  # a relabelled sampler checks that its parts are of one log
     return data
 
 
