@@ -50,6 +50,11 @@ class SchemaMismatchError(DtradarError, ValueError):
     """A Parquet file whose columns or types differ from the expected schema."""
 
 
+class MissingChannelDataError(DtradarError, LookupError):
+    """Channels asked of a dataset version whose per-path table lacks the channel columns (built before them or
+    without ``--rt.path-channels``): rebuilding it adds them."""
+
+
 class RayTracerUnavailableError(DtradarError, RuntimeError):
     """Sionna RT / Mitsuba / a usable libLLVM is missing."""
 

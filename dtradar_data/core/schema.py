@@ -71,6 +71,44 @@ _PATH_FIELDS: list[tuple[str, pa.DataType, bool, str]] = [
 ]
 
 
+#: The version of the per-path channel columns (``--rt.path-channels``): hashed into the versions of twins built with
+#: them only (through the RT settings, :meth:`~dtradar_data.rt.settings.RTSettings.hashed`), so versions built without
+#: them keep their hashes. Bump it, with a new golden file ``paths_channels_v{N}.json``, when these columns change.
+CHANNEL_SCHEMA_VERSION = 1
+
+#: The per-path channel columns, after the static ones: each path's polarimetric transfer matrix between unit-gain
+#: isotropic ports and its interaction points (:mod:`dtradar_data.rt.polarimetric`, :mod:`dtradar_data.channels`).
+_CHANNEL_PATH_FIELDS: list[tuple[str, pa.DataType, bool, str]] = [
+    *(
+        (
+            f"pol_{r}{t}_{part}",
+            pa.float32(),
+            False,
+            f"{'real' if part == 're' else 'imaginary'} part of the transfer from the transmitter's isotropic "
+            f"{t.upper()} port to the receiver's isotropic {r.upper()} port (V = θ̂, H = φ̂ of the global spherical "
+            "basis at the departure / arrival direction), baseband-equivalent as a_re/a_im",
+        )
+        for r in "vh"
+        for t in "vh"
+        for part in ("re", "im")
+    ),
+    (
+        "vertices_m",
+        pa.list_(pa.float32()),
+        False,
+        "interaction points in order, x, y, z of each (3 · depth values; empty for line of sight), scene frame, metres",
+    ),
+]
+CHANNEL_PATH_COLUMNS: tuple[str, ...] = tuple(f[0] for f in _CHANNEL_PATH_FIELDS)
+CHANNEL_PATH_COLUMN_DESCRIPTIONS: dict[str, str] = {f[0]: f[3] for f in _CHANNEL_PATH_FIELDS}
+
+
+def meta_path_channels(meta: dict) -> bool:
+    """Whether a stored version's per-path table has the channel columns: its RT settings (``meta.json``'s ``rt``)
+    name ``path_channels``; versions built before they existed do not."""
+    return bool((meta.get("rt") or {}).get("path_channels"))
+
+
 #: The version of the moving-twin schemas (static schema + ``t`` + ``mover``): bump it, with new golden files, when
 #: the columns a moving twin adds change; hashed into moving twins' versions only.
 MOVING_SCHEMA_VERSION = 1
@@ -168,9 +206,18 @@ def cell_schema(moving: bool, transmitters: int = 1) -> pa.Schema:
     return _with_transmitters(schema, transmitters)
 
 
-def path_schema(moving: bool, transmitters: int = 1) -> pa.Schema:
+def path_schema(moving: bool, transmitters: int = 1, channels: bool = False) -> pa.Schema:
     """The per-path schema of a static twin, or of a moving one; with K > 1 transmitters an int16 ``tx`` column
-    precedes ``path`` (rows sorted by ``(iy, ix, tx, path)``)."""
+    precedes ``path`` (rows sorted by ``(iy, ix, tx, path)``); with ``channels`` (static twins only) the channel
+    columns follow (:data:`CHANNEL_PATH_COLUMNS`)."""
+    if channels:
+        if moving:
+            raise ValueError("a moving twin stores no channel columns in this version")
+        base = path_schema(False, transmitters)
+        fields = [(f.name, f.type, f.nullable, f.metadata[b"description"].decode()) for f in base]
+        schema = _schema([*fields, *_CHANNEL_PATH_FIELDS], "paths")
+        meta = {**(base.metadata or {}), b"dtradar.channel_schema_version": str(CHANNEL_SCHEMA_VERSION).encode()}
+        return schema.with_metadata(meta)
     if check_transmitters(transmitters) == 1:
         return MOVING_PATH_SCHEMA if moving else PATH_SCHEMA
     if moving:

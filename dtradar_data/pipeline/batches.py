@@ -95,9 +95,8 @@ def _reduce_cells(batch) -> dict[str, np.ndarray]:
         part = {}
         for f in dataclasses.fields(batch):
             x = getattr(batch, f.name)
-            if isinstance(x, np.ndarray):  # interactions is [D, N, P], the others [N, P]
-                x = x[:, rows, :w] if f.name == "interactions" else x[rows, :w]
-                x = np.ascontiguousarray(x)
+            if isinstance(x, np.ndarray):  # receivers and paths are the last two axes ([N, P], [D, N, P], ...)
+                x = np.ascontiguousarray(x[..., rows, :w])
             part[f.name] = x
         reduced = features.reduce_cells(dataclasses.replace(batch, **part))
         for k, v in reduced.items():

@@ -106,7 +106,7 @@ def path_rows(batch, ix: np.ndarray, iy: np.ndarray) -> dict[str, np.ndarray]:
     a = batch.a[r, p] * np.exp(-2j * np.pi * batch.frequency_hz * batch.tau[r, p])
     with np.errstate(divide="ignore"):
         power_db = 10.0 * np.log10(batch.gain[r, p])
-    return {  # a: baseband-equivalent, as in reduce_cells
+    rows = {  # a: baseband-equivalent, as in reduce_cells
         "ix": np.asarray(ix)[r].astype(np.int32),
         "iy": np.asarray(iy)[r].astype(np.int32),
         "path": k.astype(np.int16),
@@ -121,6 +121,24 @@ def path_rows(batch, ix: np.ndarray, iy: np.ndarray) -> dict[str, np.ndarray]:
         "depth": depth.astype(np.int8),
         "interactions": np.array(letters, dtype=object),
     }
+    if batch.transfer is not None:  # --rt.path-channels: the channel columns (schema.CHANNEL_PATH_COLUMNS)
+        rows.update(_channel_rows(batch, r, p, depth))
+    return rows
+
+
+def _channel_rows(batch, r: np.ndarray, p: np.ndarray, depth: np.ndarray) -> dict[str, np.ndarray]:
+    """The transfer matrices (baseband-equivalent, as ``a``) and interaction points of the paths ``(r, p)``."""
+    carrier = np.exp(-2j * np.pi * batch.frequency_hz * batch.tau[r, p])
+    out = {}
+    for i, rx in enumerate("vh"):
+        for j, tx in enumerate("vh"):
+            t = batch.transfer[i, j, r, p] * carrier
+            out[f"pol_{rx}{tx}_re"], out[f"pol_{rx}{tx}_im"] = t.real, t.imag
+    points = batch.vertices[:, :, r, p].transpose(2, 0, 1)  # [M, D, 3]
+    vertices = np.empty(len(r), dtype=object)
+    vertices[:] = [pts[:d].ravel() for pts, d in zip(points, depth)]
+    out["vertices_m"] = vertices
+    return out
 
 
 def radio_keys(transmitters: int = 1) -> tuple[str, ...]:
@@ -170,12 +188,14 @@ def cells_table(
 def paths_table(rows: list[dict[str, np.ndarray]], transmitters: int = 1) -> pa.Table:
     """Concatenate :func:`path_rows` outputs into a ``PATH_SCHEMA`` table, sorted by (iy, ix, path); with several
     transmitters (rows with a ``tx`` key) by (iy, ix, tx, path)."""
-    schema = path_schema(False, transmitters)
+    channels = any("vertices_m" in r for r in rows)  # traced with --rt.path-channels
+    schema = path_schema(False, transmitters, channels)
     cols = {}
     for f in schema:
+        listed = f.name in ("interactions", "vertices_m")  # object arrays: one string / float array per path
         parts = [r[f.name] for r in rows]
-        values = np.concatenate(parts) if parts else np.array([], dtype=object if f.name == "interactions" else None)
-        cols[f.name] = pa.array(values.tolist() if f.name == "interactions" else values, f.type)
+        values = np.concatenate(parts) if parts else np.array([], dtype=object if listed else None)
+        cols[f.name] = pa.array(values.tolist() if listed else values, f.type)
     table = pa.Table.from_pydict(cols, schema=schema)
     keys = ["iy", "ix", "path"] if transmitters == 1 else ["iy", "ix", "tx", "path"]
     return table.sort_by([(k, "ascending") for k in keys])

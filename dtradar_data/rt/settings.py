@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from dtradar_data.core.errors import InvalidSettingError
+from dtradar_data.core.schema import CHANNEL_SCHEMA_VERSION
 from dtradar_data.scenes.materials import ITU_VALID_GHZ, material_valid_at
 from dtradar_data.scenes.model import PATTERNS, POLARIZATIONS
 
@@ -20,6 +21,14 @@ Device = Literal["auto", "cpu", "cuda"]
 #: What --rt.batch-independent means, hashed into the version: change it with anything that changes its rows
 #: (dtradar_data.rt.batch_independent_solver.HASH_SLOTS_PER_RX, the packet width, the patched Sionna code).
 BATCH_INDEPENDENT_ENGINE = "dtradar-1: 65536 hash slots per receiver, 32-lane packets, buffer split (sionna-rt 2.2.0)"
+
+
+#: What --rt.path-channels stores, hashed into the version (and recorded in meta.json's ``rt``): change it with the
+#: channel columns (dtradar_data.core.schema.CHANNEL_SCHEMA_VERSION) or how they are computed.
+PATH_CHANNELS_ENGINE = (
+    "dtradar-1: 2x2 transfer at isotropic V/H ports, world frame, baseband; interaction points; "
+    f"channel columns v{CHANNEL_SCHEMA_VERSION}"
+)
 
 
 def flag(name: str) -> str:
@@ -92,6 +101,11 @@ class RTSettings:
     ~25 % of paths Sionna's shared hash table drops and costs time (cubicle ~1.5-2x, a Dallas quadrant ~1.15x).
     CPU (LLVM) only: with --rt.device auto it traces on the CPU even where a GPU is found;
     --rt.no-batch-independent is Sionna's own solver (CPU or GPU), the engine of the versions built before."""
+    path_channels: bool = False
+    """Also store, per path, the 2x2 polarimetric transfer matrix between isotropic V/H ports and the interaction
+    points (paths.parquet's channel columns, dtradar_data.rt.polarimetric), so that the channel of any antenna array
+    can be generated from the dataset (dtradar_data.channels). Off by default for now: it adds a setting to the
+    version hash, so versions built without it keep theirs. Needs --rt.synthetic-array and the per-path table."""
     deterministic: bool = True
     """Bit-identical tables for the same inputs. On the CPU: pin Dr.Jit to one thread while tracing (its
     multi-threaded path collection changes the weak-path count from run to run; measured no slower on 2 cores, and
@@ -126,6 +140,8 @@ class RTSettings:
             problems.append(
                 f"{flag('rx_polarization')} {self.rx_polarization!r} is not a polarization ({', '.join(POLARIZATIONS)})"
             )
+        if self.path_channels and not self.synthetic_array:
+            problems.append(f"{flag('path_channels')} needs {flag('synthetic_array')} (one transfer matrix per path)")
         if self.device not in ("auto", "cpu", "cuda"):
             problems.append(f"{flag('device')} {self.device!r} must be 'auto', 'cpu' or 'cuda'")
         if problems:
@@ -158,6 +174,10 @@ class RTSettings:
             d["batch_independent"] = BATCH_INDEPENDENT_ENGINE
         else:
             d.pop("batch_independent")  # the versions traced with Sionna's own solver keep their hashes
+        if self.path_channels:
+            d["path_channels"] = PATH_CHANNELS_ENGINE
+        else:
+            d.pop("path_channels")  # versions built without the channel columns keep their hashes
         return d
 
     def solver_kwargs(self) -> dict[str, Any]:

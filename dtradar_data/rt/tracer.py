@@ -70,6 +70,10 @@ class PathBatch:
     phi_r: np.ndarray
     interactions: np.ndarray  # uint32 [D, N, P]
     frequency_hz: float
+    # with --rt.path-channels (dtradar_data.rt.polarimetric), else None: receivers and paths are the last two axes of
+    # every array field, which is how _concat and the batch helpers slice them
+    transfer: np.ndarray | None = None  # complex64 [2, 2, N, P]: passband, receive port (V, H) x transmit port
+    vertices: np.ndarray | None = None  # float32 [D, 3, N, P]: interaction points, zero past a path's depth
 
     @property
     def num_receivers(self) -> int:
@@ -185,6 +189,10 @@ class RayTracer:
             self._solver = BatchIndependentPathSolver()
         else:
             self._solver = rt.PathSolver(deterministic=settings.deterministic and self.variant.startswith("cuda"))
+        if settings.path_channels:
+            from dtradar_data.rt import polarimetric  # imports Sionna's internals: only once the variant is set
+
+            polarimetric.install(self._solver)
         self._rx_names: list[str] = []
         self.solver_calls = 0
         """PathSolver calls so far."""
@@ -321,6 +329,13 @@ class RayTracer:
             interactions=inter.astype(np.uint32),
             frequency_hz=float(self.settings.frequency_hz),
         )
+        if self.settings.path_channels:  # synthetic arrays only (RTSettings refuses the rest)
+            from dtradar_data.rt import polarimetric
+
+            t = polarimetric.transfer_matrices(paths)[:, k]  # [N, P, 2, 2]
+            batch.transfer = np.ascontiguousarray(t.transpose(2, 3, 0, 1))
+            v = polarimetric.vertices(paths)[:, :, k]  # [D, N, P, 3]
+            batch.vertices = np.ascontiguousarray(v.transpose(0, 3, 1, 2))
         if batch.valid.shape[0] != n:  # pragma: no cover - guards against a Sionna layout change
             raise RuntimeError(f"Sionna returned {batch.valid.shape[0]} receivers for {n} requested")
         return batch
@@ -378,8 +393,8 @@ def _concat(parts: list[PathBatch]) -> PathBatch:
     out = {}
     for f in dataclasses.fields(PathBatch):
         values = [getattr(p, f.name) for p in parts]
-        if isinstance(values[0], np.ndarray):
-            out[f.name] = np.concatenate([pad(v) for v in values], axis=1 if f.name == "interactions" else 0)
+        if isinstance(values[0], np.ndarray):  # receivers are the second-to-last axis of every array field
+            out[f.name] = np.concatenate([pad(v) for v in values], axis=values[0].ndim - 2)
         else:
             out[f.name] = values[0]
     return PathBatch(**out)

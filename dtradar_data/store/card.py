@@ -310,8 +310,10 @@ def _table_values(rec: VersionRecord, moving: dict[str, Any] | None) -> dict[str
     cells = (MOVING_CELL_SCHEMA, MOVING_COLUMN_DESCRIPTIONS) if moving else (CELL_SCHEMA, COLUMN_DESCRIPTIONS)
     paths = (MOVING_PATH_SCHEMA, MOVING_PATH_COLUMN_DESCRIPTIONS) if moving else (PATH_SCHEMA, PATH_COLUMN_DESCRIPTIONS)
     k = len(rec.transmitters or []) or 1  # several transmitters: their schemas, descriptions from the fields
-    if k > 1:
-        cells, paths = ((s, _field_descriptions(s)) for s in (cell_schema(False, k), path_schema(False, k)))
+    channels = bool((rec.rt or {}).get("path_channels"))  # --rt.path-channels: the channel columns too
+    if k > 1 or channels:
+        cells = (cell_schema(False, k), _field_descriptions(cell_schema(False, k))) if k > 1 else cells
+        paths = (path_schema(False, k, channels), _field_descriptions(path_schema(False, k, channels)))
     ranges = stats.get("columns") or {}
     return {
         "num_rows": n,

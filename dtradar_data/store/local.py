@@ -27,7 +27,7 @@ from dtradar_data.core.errors import (
 from dtradar_data.core.files import sha256_file
 from dtradar_data.core.ids import HASH_RE, DatasetId
 from dtradar_data.core.record import VersionRecord
-from dtradar_data.core.schema import cell_schema, meta_transmitters, path_schema
+from dtradar_data.core.schema import cell_schema, meta_path_channels, meta_transmitters, path_schema
 from dtradar_data.store.catalog import as_id, build_command, missing_twin
 from dtradar_data.store.versions import Refs, one_revision, read_refs, resolve_revision
 
@@ -228,7 +228,8 @@ def load(name: str | DatasetId, revision: str | None = None, *, paths: bool = Fa
         path_file = _stored_file(vdir, P.PATHS_FILE, what, fix)  # listed in meta.json, so stored: missing is damage
         if verify:
             _check_hash(vdir, P.PATHS_FILE, meta, fix)
-        paths_table = read_table(path_file, path_schema(moving, meta_transmitters(meta)), fix=fix)
+        schema = path_schema(moving, meta_transmitters(meta), meta_path_channels(meta))
+        paths_table = read_table(path_file, schema, fix=fix)
     refs = read_refs(P.refs_path(did.scene, did.variant))
     meta["tag"] = refs.tag_of(version)  # tags live in refs.json; handed to consumers for logging
     grid = meta.get("grid", {})
@@ -266,7 +267,10 @@ def verify_dir(vdir: Path) -> list[str]:
             problems.append(f"{fname}: sha256 differs from meta.json (changed or damaged)")
     moving = _is_moving(meta)
     k = meta_transmitters(meta)
-    for fname, schema in ((P.CELLS_FILE, cell_schema(moving, k)), (P.PATHS_FILE, path_schema(moving, k))):
+    for fname, schema in (
+        (P.CELLS_FILE, cell_schema(moving, k)),
+        (P.PATHS_FILE, path_schema(moving, k, meta_path_channels(meta))),
+    ):
         if (vdir / fname).is_file():
             try:
                 read_table(vdir / fname, schema)

@@ -40,6 +40,7 @@ from dtradar_data.core.schema import (
     MOVING_SCHEMA_VERSION,
     SCHEMA_VERSION,
     cell_schema,
+    meta_path_channels,
     meta_transmitters,
     path_schema,
 )
@@ -327,7 +328,8 @@ def _conformed_tables(
             *([("tx", "ascending")] if k > 1 else []),
             ("path", "ascending"),
         ]
-        paths = conform(paths, path_schema(is_moving, k), f"paths table of {did.name}").sort_by(
+        schema = path_schema(is_moving, k, meta_path_channels(meta))
+        paths = conform(paths, schema, f"paths table of {did.name}").sort_by(
             [("t", "ascending"), *keys] if is_moving else keys
         )
     return cells, paths
