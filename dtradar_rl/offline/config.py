@@ -28,9 +28,10 @@ ALGORITHMS: dict[str, str] = {
 }
 
 
-#: The senses an offline agent can train with: ``none`` (what the log holds: the memoryless observation) or
-#: ``memory`` (the default online agent's memory window, rebuilt from the log: dtradar_rl.offline.memory_senses).
-SENSES = ("auto", "none", "memory")
+#: The senses an offline agent can train with: ``none`` (what the log holds: the memoryless observation),
+#: ``memory`` (the default online agent's memory window, rebuilt from the log: dtradar_rl.offline.memory_senses) or,
+#: on an honest log (``--sensing``), ``filter`` (the localisation filter's belief: dtradar_rl.offline.filter_senses).
+SENSES = ("auto", "none", "memory", "filter")
 
 #: ``--senses auto``: each algorithm's best measured (Dallas Q3 expert and medium, 4 000 updates, relabelled; the
 #: cubicle within a few points either way: docs/logged-datasets.md). The imitation-anchored learners (bc; cql, whose
@@ -118,7 +119,9 @@ class OfflineConfig(BehaviourConfig):
     nfq; none for bc and cql), none (the logged observation, memoryless: every run before senses existed) or memory
     (the online default agent's senses: the logged observation followed by the memory window of what it sensed and
     visited this episode and its earlier stands on its cell, rebuilt exactly from the log; evaluated in the same memory
-    env, with its loop escape: dtradar_rl.offline.memory_senses)"""
+    env, with its loop escape: dtradar_rl.offline.memory_senses); with an honest --sensing, filter (the only one, and
+    what auto picks: the default agent's localisation filter replayed along each logged episode, its belief summarised
+    as the learner's input: dtradar_rl.offline.filter_senses)"""
     precision: str = "fp32"
     """arithmetic of the training updates: fp32 (the default), bf16 (each update under torch.autocast in bfloat16;
     weights, optimiser and evaluation in fp32; bcq, dqn, ddqn and nfq only; needs a CPU with bf16 matrix units, AMX or
@@ -152,6 +155,8 @@ class OfflineConfig(BehaviourConfig):
         than ``neighbors``, whose flags the memory reads): ``none`` or ``memory``."""
         if self.senses != "auto":
             return self.senses
+        if self.honest:  # honest readings localise only through the filter over the map
+            return "filter"
         return AUTO_SENSES.get(self.algorithm, "none") if self.obs == "neighbors" else "none"
 
     # The memory env's settings (read by Policy.env_for and the loop escape): the default online preset's with
@@ -212,6 +217,23 @@ class OfflineConfig(BehaviourConfig):
             raise ConfigError(
                 f"--precision bf16 does not train --algorithm {self.algorithm} (d3rlpy's loss logging needs fp32)",
                 hint=f"use --precision fp32, or one of {', '.join(BF16_ALGORITHMS)}",
+            )
+        if self.honest and self.senses not in ("auto", "filter"):
+            raise ConfigError(
+                f"--sensing {self.sensing}: an honest agent senses through the localisation filter, not --senses "
+                f"{self.senses} (which extends the privileged observation)",
+                hint="drop --senses (auto is filter) or pass --senses filter",
+            )
+        if self.senses == "filter" and not self.honest:
+            raise ConfigError(
+                "--senses filter localises from honest readings, and --sensing privileged records the position",
+                hint="pass --sensing radio (and train on a log made with it)",
+            )
+        if self.honest and self.relabel.strip() not in ("auto", "none"):
+            raise ConfigError(
+                f"--relabel {self.relabel}: goal relabelling is not built for honest logs (the relabeller rebuilds "
+                "observations from cells, which an honest agent does not observe)",
+                hint="drop --relabel (auto trains on the logged targets) or pass --relabel none",
             )
         if self.senses == "memory" and self.obs != "neighbors":  # (auto: memoryless where the log has no flags)
             raise ConfigError(

@@ -74,7 +74,8 @@ class OfflinePolicy(Policy):
 
 
 def load_offline_policy(path: str | Path, device: str = "cpu") -> OfflinePolicy:
-    """Reload ``model.d3`` (or its directory) with the ``config.json`` written beside it."""
+    """Reload ``model.d3`` (or its directory) with the ``config.json`` written beside it; a run trained on an honest
+    log comes back as a :class:`~dtradar_rl.offline.filter_senses.FilteredPolicy`."""
     path = Path(path)
     model = path / "model.d3" if path.is_dir() else path
     meta_path = model.parent / "config.json"
@@ -96,6 +97,12 @@ def load_offline_policy(path: str | Path, device: str = "cpu") -> OfflinePolicy:
     with quiet_d3rlpy():
         algo = d3rlpy.load_learnable(str(model), device=d3rlpy_device(device))
     cfg = OfflineConfig.from_dict(meta["config"])
+    if cfg.honest:  # it acts through the localisation filter on honest sensing (dtradar_rl.offline.filter_senses)
+        from dtradar_rl.offline.filter_senses import FilteredPolicy, map_agent
+
+        info = {"dataset": meta["dataset"], "stats": meta["stats"], "path": str(model), "sensing": cfg.sensing}
+        agent = map_agent(cfg.scene, cfg.sensing, cfg.sensing_noise, device)
+        return FilteredPolicy(algo, ActionScores(algo, cfg.algorithm), agent, cfg, info)
     return OfflinePolicy(
         q=ActionScores(algo, cfg.algorithm),
         config=cfg,
@@ -124,6 +131,8 @@ def evaluate_offline(
         shield=cfg.shield,
         datasets=datasets,
         latency=cfg.latency,
+        # an honest agent is evaluated under the receiver noise it was logged with (what its filter assumes)
+        noise=cfg.sensing_noise if cfg.honest else "none",
     )
     return [{**row, "algorithm": cfg.algorithm} for row, _, _ in rows]
 

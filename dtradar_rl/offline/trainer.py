@@ -58,17 +58,18 @@ from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, t
 from dtradar_rl.offline.log_cache import LogCache, log_content
 from dtradar_rl.offline.log_settings import check_compatible
 from dtradar_rl.offline.logged import LogConfig, log_dataset
-from dtradar_rl.offline.memory_senses import MemorySenses, memory_senses
+from dtradar_rl.offline.memory_senses import MemorySenses
 from dtradar_rl.offline.policy import OfflinePolicy, d3rlpy_device, evaluate_offline, load_offline_policy
 from dtradar_rl.offline.precision import update_autocast
 from dtradar_rl.offline.relabel import RelabelConfig, not_relabellable
 from dtradar_rl.offline.relabelled_sampler import relabelled_sampler
 from dtradar_rl.offline.relabeller import relabeller
+from dtradar_rl.offline.senses import learner_senses
 from dtradar_rl.task.config import ConfigError
-from dtradar_rl.task.grid_mdp import GridMDP, MovingGridMDP
 from dtradar_rl.task.observations import Normalizer, build_observations
 from dtradar_rl.task.runs import no_empty_folder_on_failure
 from dtradar_rl.task.runtime import auto_threads
+from dtradar_rl.task.sensing import HONEST_PRESET
 from dtradar_rl.task.twins import load_dataset
 
 
@@ -133,7 +134,7 @@ def mdp_dataset(logged: LoggedDataset, senses: MemorySenses | None = None):
     :data:`MDP_CACHE_SIZE` most recent): building one from 100 K rows takes seconds, and the benchmark trains (and
     FQE-evaluates) eighteen agents on each. Training never writes to it. One kept of other transitions (or memory
     windows) under the same folder and version is built again, saying so (:mod:`dtradar_rl.offline.log_cache`)."""
-    key = (str(logged.path), logged.name, logged.version, senses is not None)
+    key = (str(logged.path), logged.name, logged.version, type(senses).__name__ if senses is not None else None)
     content = log_content(logged) if senses is None else senses.content
     arrays = None if senses is None else lambda: senses.arrays(logged.arrays())  # built only when not kept
     build = lambda: to_mdp_dataset(logged if arrays is None else arrays())  # noqa: E731
@@ -289,7 +290,7 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
 
     ds, normalizer, store_log = _twin_and_log(cfg, dataset)
     cfg = _auto_senses(cfg, ds, say)
-    senses = _memory_senses(cfg, store_log, ds)
+    senses = learner_senses(cfg, store_log, ds)
     logged_data = mdp_dataset(store_log, senses)
     source = {"name": store_log.name, "version": store_log.version, "tag": store_log.tag}
     stats = {**store_log.meta["stats"], "source": f"{store_log.name}@{store_log.version}"}
@@ -311,7 +312,12 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
         "format": OFFLINE_FORMAT,
         "config": cfg.to_dict(),
         "normalizer": normalizer.to_dict(),
-        "obs": {"preset": cfg.obs, "senses": cfg.resolved_senses, "names": obs_names},
+        "obs": {
+            "preset": HONEST_PRESET if cfg.honest else cfg.obs,
+            "sensing": cfg.sensing,
+            "senses": cfg.resolved_senses,
+            "names": obs_names,
+        },
         "dataset": {"name": ds.name, "version": ds.version},
         "logged": source,
         "stats": {"logged": stats, "n_steps": cfg.n_steps, "train_s": train_s, **threads},
@@ -364,7 +370,8 @@ def _auto_senses(cfg: OfflineConfig, ds: Dataset, say) -> OfflineConfig:
 def _obs_names(cfg: OfflineConfig, ds: Dataset, normalizer: Normalizer, senses: MemorySenses | None, data) -> list[str]:
     """The observation's feature names, refused when the log's observations are not as wide: a log made with
     another preset would train an agent that cannot be evaluated."""
-    obs_names = list(build_observations(ds, cfg.obs, normalizer).names) + list(senses.names if senses else ())
+    preset = [] if cfg.honest else list(build_observations(ds, cfg.obs, normalizer).names)  # honest: the filter's
+    obs_names = preset + list(senses.names if senses else ())
     obs_dim = data.episodes[0].observations.shape[-1]
     if obs_dim != len(obs_names):
         raise ConfigError(
@@ -379,7 +386,9 @@ def _training_data(cfg: OfflineConfig, ds: Dataset, store_log: LoggedDataset, lo
     replayed towards relabelled goals)."""
     relabel = cfg.relabel_config()
     train_data = logged_data
-    why = not_relabellable(ds, cfg.obs) if cfg.relabel.strip() == "auto" and not relabel.is_identity else None
+    why = None
+    if cfg.relabel.strip() == "auto" and not relabel.is_identity:
+        why = "not built for honest logs" if cfg.honest else not_relabellable(ds, cfg.obs)
     if why:  # the default meets a log it cannot relabel: train on the logged targets, and say so
         say(f"relabelling goals: auto does not apply ({why}), training on the logged targets")
         relabel = RelabelConfig.parse("none", cfg.algorithm, seed=cfg.seed)
@@ -412,21 +421,6 @@ def _save_model(algo, out: Path) -> Path:
     algo.save(str(tmp_model))
     os.replace(tmp_model, model)  # a kill mid-save leaves the previous model, never half of one
     return model
-
-
-def _memory_senses(cfg: OfflineConfig, logged: LoggedDataset, ds: Dataset) -> MemorySenses | None:
-    """The memory windows of the log's steps with ``--senses memory`` (None without); a moving twin's log is refused:
-    its cells' moves depend on the snapshot, which the table does not keep."""
-    if cfg.resolved_senses != "memory":
-        return None
-    mdp = GridMDP.from_dataset(ds)
-    if isinstance(mdp, MovingGridMDP):
-        raise ConfigError(
-            f"--senses memory rebuilds the memory of each logged episode from its moves, which on the moving twin "
-            f"{ds.name} depend on the snapshot the log does not keep",
-            hint="train on a log of a static twin (blueprint, dynamic), or with --senses none",
-        )
-    return memory_senses(logged, mdp)
 
 
 def _write_losses(losses: list[dict[str, float]], path: Path) -> None:
