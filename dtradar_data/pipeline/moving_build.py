@@ -34,6 +34,11 @@ def build_moving(config: BuildConfig, *, snapshots: int | None = None) -> list[D
     """Build (or reuse) the moving twin(s) of ``config.scene``: every check (scene, resources, Ray cluster) before
     the first trace. ``snapshots`` (tests, quick looks): only the first this many snapshots (a twin of its own:
     its scene says so, so it has its own version)."""
+    if config.rt.path_channels:  # the moving schemas have no channel columns yet: refused before any trace
+        raise InvalidSettingError(
+            "--rt.path-channels is for static twins in this version (a moving twin stores no channel columns)",
+            hint="build the moving twin without --rt.path-channels, or its blueprint with it",
+        )
     scenes = moving_scenes(config)
     if snapshots is not None:
         scenes = [_cut_short(m, snapshots) for m in scenes]
