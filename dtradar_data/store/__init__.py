@@ -27,12 +27,13 @@ from dtradar_data.store.local import (
     resolve,
     version_exists,
 )
-from dtradar_data.store.staging import held_stage
+from dtradar_data.store.staging import clean_stale_stages, held_stage
 from dtradar_data.store.versions import library_versions, read_refs, version_id
 from dtradar_data.store.writing import InvalidTableError, install_staged, write_version
 
 __all__ = [
     "as_id",
+    "clean_stale_stages",
     "DatasetEntry",
     "held_stage",
     "history",

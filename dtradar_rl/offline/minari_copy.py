@@ -13,7 +13,9 @@ import io
 import json
 import os
 import shutil
+import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +23,7 @@ import numpy as np
 
 from dtradar_data.core import layout as P
 from dtradar_data.core.files import sha256_file, waiting_lock
-from dtradar_data.store import held_stage
+from dtradar_data.store import clean_stale_stages, held_stage
 from dtradar_data.store.logged import (
     MINARI_DIR,
     MINARI_ENV,
@@ -304,12 +306,35 @@ def _ensure_namespace(stage: Path, root: Path, mid: str) -> None:
         os.replace(tmp, dst)
 
 
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _remove_killed_stages(root: Path, say: Callable[[str], None]) -> None:
+    """Remove the staging folders of killed writers of any copy in ``root`` (each as large as its copy), saying so:
+    a stage whose lock is free has no live writer (:func:`~dtradar_data.store.clean_stale_stages`). Done on every
+    export, a complete copy found too: the writer killed may have been another copy's, never written again."""
+    gone = clean_stale_stages(root, STAGE_PREFIX, lockless=lambda _: True)  # .dtradar-stage-*: only ours
+    if gone:
+        say(f"removed what a killed Minari write left in {root}: {', '.join(p.name for p in gone)}")
+
+
+def _rewriting(mid: str, state: str, why: str) -> str:
+    """The line that says why the copy ``mid`` found in ``state`` is written again."""
+    if state == "stale":
+        return f"the Minari copy {mid} holds {why}, which no data root holds any more: replacing it"
+    if state in ("other", "foreign"):
+        return f"the Minari copy {mid} holds {why}: replacing it (overwrite)"
+    return f"the Minari copy {mid} cannot be used: {why}; writing it again"
+
+
 def export_minari(
     data: LoggedDataset | str | LoggedId,
     *,
     dataset_id: str | None = None,
     overwrite: bool = False,
     senses: str = "none",
+    say: Callable[[str], None] = _stderr,
 ) -> str:
     """Write the Minari copy of a logged version into :func:`minari_root` and return its id.
 
@@ -318,7 +343,8 @@ def export_minari(
     and renamed into place, under a lock per id (a second process says what it waits for, then finds the copy). A
     complete copy of the same version is kept; an incomplete or damaged one (a killed write, an older dtradar's
     copy) is rewritten; a copy of another version that another data root still holds under this id is refused
-    (:class:`ConfigError`, naming ``MINARI_DATASETS_PATH`` and ``--no-minari``) unless ``overwrite``.
+    (:class:`ConfigError`, naming ``MINARI_DATASETS_PATH`` and ``--no-minari``) unless ``overwrite``. A copy written
+    again gets one line to ``say`` (default: stderr) naming why, as the stages of killed writers removed do.
     ``senses="memory"`` writes the copy whose observations carry the default agent's memory window and whose
     ``recover_environment()`` is the memory env (:func:`copy_id`: ``<id>-memory``; see
     :mod:`dtradar_rl.offline.minari_envs`)."""
@@ -330,6 +356,7 @@ def export_minari(
     root.mkdir(parents=True, exist_ok=True)
     lock = root / f".dtradar-{mid.replace('/', '--')}.lock"
     with waiting_lock(lock, f"writing the Minari copy {mid}", then="this process uses that copy if it is whole"):
+        _remove_killed_stages(root, say)
         state, why = copy_state(folder, logged, senses)
         if state == "complete":
             return mid
@@ -337,6 +364,8 @@ def export_minari(
             raise claimed_error(
                 folder, logged.name, logged.tag, state, why, f"the logged dataset itself is stored in {logged.path}"
             )
+        if state != "absent":
+            say(_rewriting(mid, state, why))
         envs = minari_envs(logged, senses)
         if envs.spec is None:
             warnings.warn(
