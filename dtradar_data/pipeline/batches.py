@@ -7,12 +7,16 @@ The unit of resumable work: ``batch_<b>.npz`` files in a build's work folder are
 
 from __future__ import annotations
 
+import hashlib
 import io
-import os
+import pickle
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
+from dtradar_data.core.files import write_atomic
 from dtradar_data.core.schema import tx_column
 from dtradar_data.rt import features
 
@@ -106,17 +110,45 @@ def _reduce_cells(batch) -> dict[str, np.ndarray]:
     return out
 
 
+#: The member of a batch file holding the sha256 of its other members' bytes (written last, checked on load).
+HASH_MEMBER = "sha256.txt"
+
+
+class DamagedBatchError(ValueError):
+    """A batch file that cannot be trusted (damaged, cut short, unreadable): it is traced again."""
+
+
+def _members_digest(zf: zipfile.ZipFile) -> str:
+    """The sha256 of every array member of a batch file (name and stored ``.npy`` bytes), in name order."""
+    h = hashlib.sha256()
+    for name in sorted(n for n in zf.namelist() if n != HASH_MEMBER):
+        h.update(name.encode() + b"\0")
+        h.update(zf.read(name))
+    return h.hexdigest()
+
+
 def save_batch(path: Path, cells: dict[str, np.ndarray], paths: dict[str, np.ndarray]) -> None:
-    """Write a finished batch through a temporary file and a rename: a batch file is whole or absent."""
+    """Write a finished batch through a temporary file and a rename: a batch file is whole or absent, and carries
+    the sha256 of its arrays (:data:`HASH_MEMBER`), so a file damaged in place is noticed on load, not traced from."""
     buf = io.BytesIO()
     np.savez(buf, **{f"c_{k}": v for k, v in cells.items()}, **{f"p_{k}": v for k, v in paths.items()})
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_bytes(buf.getvalue())
-    os.replace(tmp, path)
+    with zipfile.ZipFile(buf, "a") as zf:
+        zf.writestr(HASH_MEMBER, _members_digest(zf))
+    write_atomic(path, buf.getvalue())
 
 
 def load_batch(path: Path) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    with np.load(path, allow_pickle=True) as z:
-        cells = {k[2:]: z[k] for k in z.files if k.startswith("c_")}
-        paths = {k[2:]: z[k] for k in z.files if k.startswith("p_")}
+    """The arrays of a batch file; :class:`DamagedBatchError` naming it when its bytes differ from its sha256, or it
+    cannot be read whole (a batch written before the hash was recorded is checked by the zip's CRC-32 alone)."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            if HASH_MEMBER in zf.namelist() and zf.read(HASH_MEMBER).decode() != _members_digest(zf):
+                raise DamagedBatchError(f"{path} does not match its content hash (damaged)")
+        with np.load(path, allow_pickle=True) as z:
+            cells = {k[2:]: z[k] for k in z.files if k.startswith("c_")}
+            paths = {k[2:]: z[k] for k in z.files if k.startswith("p_")}
+    except DamagedBatchError:
+        raise
+    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile, zlib.error, pickle.UnpicklingError) as e:
+        raise DamagedBatchError(f"{path} cannot be read whole ({type(e).__name__}: {e})") from e
     return cells, paths

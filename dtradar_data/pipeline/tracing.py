@@ -9,6 +9,7 @@ table from the work folder exactly as a serial build does: both give the same ta
 from __future__ import annotations
 
 import contextlib
+import sys
 from pathlib import Path
 from typing import NamedTuple
 
@@ -18,7 +19,15 @@ from tqdm.auto import tqdm
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.geometry.xml_meshes import ground_height
-from dtradar_data.pipeline.batches import batch_dir, batch_layout, batch_path, load_batch, save_batch, trace_batch
+from dtradar_data.pipeline.batches import (
+    DamagedBatchError,
+    batch_dir,
+    batch_layout,
+    batch_path,
+    load_batch,
+    save_batch,
+    trace_batch,
+)
 from dtradar_data.pipeline.config import BuildConfig
 from dtradar_data.pipeline.executors import RaySession, trace_on_ray
 from dtradar_data.rt import features
@@ -120,8 +129,11 @@ def _load_or_trace(cache: Path | None, spec, settings: RTSettings, rx: _Receiver
     """Batch ``sl``: loaded from its ``cache`` file when an earlier run (or a Ray worker) finished it, else traced in
     this process (the tracer made at the first such batch) and saved there. Returns ``(cells, paths, tracer)``."""
     if cache is not None and cache.exists():
-        cells, paths = load_batch(cache)
-        return cells, paths, tracer
+        try:
+            cells, paths = load_batch(cache)
+            return cells, paths, tracer
+        except DamagedBatchError as e:  # traced again below and rewritten: a damaged file never enters a table
+            print(f"a finished batch cannot be used: {e}; tracing it again", file=sys.stderr, flush=True)
     if tracer is None:
         tracer = RayTracer(spec, settings)
         tracer.check_points(rx.points)  # the cheap check, once, before the first expensive trace
