@@ -87,7 +87,7 @@ MOVING_ARGS ?= --sense-radius 4 --wait-action --clock sincos --mover-penalty 4
 # DQN instead -> runs/$(SCENE)/dqn/model.pt (privileged: its observation holds the robot's x, y; ARGS="--preset
 # paper" etc.); VARIANT=moving trains that DQN among the movers of
 # the moving twin with $(MOVING_ARGS) -> runs/$(SCENE)/dqn-moving/model.pt: the best measured among movers
-# (docs/navigation.md, "Waiting, the clock and the mover penalty"): the cells up to 4 away sensed, a wait action, the
+# (docs/explanation/learnt-agents.md, "Among movers"): the cells up to 4 away sensed, a wait action, the
 # schedule's phase, a 4x mover penalty, the margin loss towards the shortest paths in time, twice the static budget.
 train:
 	$(if $(or $(filter dqn,$(AGENT)),$(filter moving,$(VARIANT)),$(findstring --preset,$(ARGS))),$(PY) -m dtradar_rl train --scene $(SCENE) $(if $(filter moving,$(VARIANT)),--variant moving $(MOVING_ARGS) --out runs/$(SCENE)/dqn-moving) $(ARGS),$(PY) -m dtradar_rl agent --scene $(SCENE) $(ARGS))

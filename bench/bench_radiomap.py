@@ -286,7 +286,7 @@ def interactions(b: Bench, grid, args, s: RTSettings, rows: list) -> None:
 
 def samples(b: Bench, grid, args, s: RTSettings, rows: list, ref: dict) -> None:
     """Hypothesis 4: Monte-Carlo budgets on both sides, and Sionna's own PathSolver in one call and one receiver per
-    call (its shared hash table drops chains of the call's receivers: docs/ray-tracing.md)."""
+    call (its shared hash table drops chains of the call's receivers: docs/explanation/ray-tracing.md)."""
     points, rm = grid["points"], ref["rm"]
     for n in args.rm_sweep:
         other, rm_s = _timed(b.radio_map, grid, s, n)

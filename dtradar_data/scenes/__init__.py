@@ -181,7 +181,8 @@ def load_moving_scene(scene: str | Path, *, footprints: str | None = None, cell_
 def _no_moving_twin(scene: str, what: str) -> SceneFileError:
     return SceneFileError(
         f"{scene} is {what}: it has no moving twin",
-        hint="movers are declared in the [moving] section of a room or city scene file (.toml); see docs/scenes.md",
+        hint="movers are declared in the [moving] section of a room or city scene file (.toml); "
+        "see docs/reference/scene-files.md",
     )
 
 

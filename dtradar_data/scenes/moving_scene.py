@@ -8,7 +8,7 @@ boxes whose place changed between two snapshots, the objects a differential re-t
 movers in a ``[moving]`` section that only the variant ``"moving"`` reads
 (:func:`~dtradar_data.scenes.moving_section.moving_scene_from_section`): the blueprint and dynamic twins of a file
 never see it, so their digests do not change when movers are added. The defaults (:data:`ROBOT_SPEED_MPS`,
-:data:`DEFAULT_MAX_SNAPSHOTS`, :data:`MAX_SNAPSHOTS`) and the validation rules are in ``docs/scenes.md``
+:data:`DEFAULT_MAX_SNAPSHOTS`, :data:`MAX_SNAPSHOTS`) and the validation rules are in ``docs/reference/scene-files.md``
 ("Movers and moving twins").
 
 Every mistake is a :class:`~dtradar_data.core.errors.SceneFileError` that names the mover and says what to change:

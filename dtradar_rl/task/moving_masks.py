@@ -25,7 +25,7 @@ def moving_masks(ds: Dataset) -> tuple[np.ndarray, np.ndarray]:
     if "mover" not in table.column_names:
         raise SchemaMismatchError(
             f"{ds.name}: a moving twin needs a bool 'mover' column (the blocked cells a mover covers at snapshot t)",
-            hint="rebuild it with make dataset SCENE=<scene> VARIANT=moving (its format: docs/navigation.md, "
+            hint="rebuild it with make dataset SCENE=<scene> VARIANT=moving (its format: docs/explanation/mdp.md, "
             "Navigation among movers)",
         )
     col = lambda name: table.column(name).to_numpy(zero_copy_only=False)  # noqa: E731
