@@ -23,6 +23,7 @@ from typing import Annotated
 
 import tyro
 
+from dtradar_data.channels.export import ChannelsCmd
 from dtradar_data.core.boundary import DEBUG_HELP, EXIT_FAILED_CHECK, run_cli
 from dtradar_data.core.errors import DtradarError, InvalidSettingError
 from dtradar_data.pipeline import builder
@@ -230,13 +231,14 @@ def _parse_and_run(argv: list[str]) -> int:
         "pull": PullCmd,
         "check": CheckCmd,
         "place": PlaceCmd,
+        "channels": ChannelsCmd,
     }
     cfg = parse_command(
         commands,
         argv,
         prog="python -m dtradar_data",
-        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull, place. "
-        + DEBUG_HELP,
+        description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull, place; "
+        "generate channels from a stored one. " + DEBUG_HELP,
     )
     return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()
 

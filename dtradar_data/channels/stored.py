@@ -52,12 +52,14 @@ class StoredPaths:
         (transmitter ``tx`` of a twin with several)."""
         missing = [c for c in CHANNEL_PATH_COLUMNS if c not in paths.column_names]
         if missing:
+            scene, _, variant = name.partition("@")[0].partition("/")
+            build = f"--scene {scene} --variant {variant}" if variant else "--scene <scene>"
             raise MissingChannelDataError(
                 f"{name} stores no per-path transfer matrices (its paths.parquet lacks {', '.join(missing[:2])}, ...): "
                 "it was built before they existed or without --rt.path-channels, and its port-reduced a_re/a_im give "
                 "the channel of its own array pair only",
-                hint="rebuild it with the channel columns: `python -m dtradar_data build --scene <scene> "
-                "--rt.path-channels` (a new version; the old one stays loadable)",
+                hint=f"rebuild it with the channel columns: `python -m dtradar_data build {build} --rt.path-channels` "
+                "(a new version, with the same settings otherwise; the old one stays loadable)",
             )
         cells = np.asarray(cells, np.int64).reshape(-1, 2)
         if "tx" in paths.column_names:

@@ -72,3 +72,25 @@ def test_a_version_without_the_channel_columns_keeps_its_version_loads_and_says_
     with pytest.raises(MissingChannelDataError, match="--rt.path-channels") as caught:
         ChannelGenerator(ds, Array(), Array()).generate()
     assert "rebuild" in caught.value.hint
+
+
+def test_the_channels_command_writes_the_frequency_response_and_refuses_a_version_without_the_columns(
+    root, small_cubicle, tmp_path, capsys
+):
+    from dtradar_data import cli
+    from dtradar_data.pipeline.static_build import build_one
+
+    with_columns = build_one(small_cubicle, _config(True))
+    out = tmp_path / "ch.npz"
+    args = ["channels", f"cubicle/blueprint@{with_columns.version}", "--out", str(out), "--subcarriers", "8"]
+    assert cli.main([*args, "--tx-rows", "4", "--tx-cols", "4", "--rx-cols", "2", "--cir"]) == 0
+    with np.load(out) as z:
+        cells = int((~with_columns.blocked).sum())
+        assert z["h"].shape == (cells, 2, 32, 8) and z["a"].shape[:3] == (cells, 2, 32)
+        assert (z["num_paths"] > 0).all() and z["carrier_hz"] == with_columns.meta["rt"]["frequency_hz"]
+    plain = build_one(small_cubicle, _config(False))
+    capsys.readouterr()
+    assert cli.main(["channels", f"cubicle/blueprint@{plain.version}", "--out", str(tmp_path / "no.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "--rt.path-channels" in err and "build --scene cubicle --variant blueprint" in err
+    assert not (tmp_path / "no.npz").exists()
