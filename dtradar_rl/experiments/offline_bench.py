@@ -50,14 +50,13 @@ import json
 import math
 import threading
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from dtradar_data.core.files import write_atomic
 from dtradar_data.store.logged import episode_stats
-from dtradar_rl.evaluation.evaluate import METRICS, evaluate_twins, metrics_from_rollouts, rollout, sample_eval_pairs
-from dtradar_rl.evaluation.normalized import normalized, reference_scores
+from dtradar_rl.evaluation.evaluate import metrics_from_rollouts, rollout, sample_eval_pairs
+from dtradar_rl.evaluation.normalized import reference_scores
 from dtradar_rl.experiments.offline_bench_config import (  # re-exported: the benchmark's settings
     BENCH_FQE_STEPS,
     BENCH_UPDATES,
@@ -77,6 +76,8 @@ from dtradar_rl.experiments.offline_jobs import (
     run_jobs_on_ray,
     save_row,
 )
+from dtradar_rl.experiments.offline_online import online_reference
+from dtradar_rl.experiments.offline_online import scores as _scores
 from dtradar_rl.experiments.offline_plan import bench_jobs, reused_rows, training_layout
 from dtradar_rl.experiments.offline_report import markdown, ope_summary, summarize
 from dtradar_rl.experiments.offline_tabular import tabular_section
@@ -85,43 +86,9 @@ from dtradar_rl.offline.config import ALGORITHMS
 from dtradar_rl.offline.formats import as_logged
 from dtradar_rl.offline.logged import LogConfig, log_dataset
 from dtradar_rl.offline.medium_agent import resolve_spec
-from dtradar_rl.task.runs import dqn_checkpoint, held_out_folder
+from dtradar_rl.task.runs import held_out_folder
 from dtradar_rl.task.runtime import machine
 from dtradar_rl.task.twins import load_dataset
-from dtradar_rl.train.config import config_for
-from dtradar_rl.train.saved_runs import load_policy
-
-
-def _memoryless(path: Path) -> bool:
-    """A checkpoint the epsilon-greedy behaviour can act with (a memory agent's memory is not in a logged step)."""
-    return path.is_file() and not getattr(load_policy(path).config, "memory_radius", 0)
-
-
-def _online_checkpoint(cfg: OfflineBenchConfig, say) -> tuple[Path, dict[str, Any]]:
-    path = Path(cfg.checkpoint) if cfg.checkpoint else dqn_checkpoint(cfg.scene)
-    if cfg.checkpoint or _memoryless(path):
-        return path, {"trained_here": False}
-    own = cfg.out_dir / "online_dqn" / "model.pt"  # make train's default agent has a memory: train a tuned one
-    if own.is_file():
-        return own, {"trained_here": False}
-    from dtradar_rl.train.dqn import train
-
-    say(f"no memoryless online DQN at {path}: training one (tuned, {cfg.online_steps} env steps)")
-    t0 = time.perf_counter()
-    dqn_cfg = replace(
-        config_for("tuned", scene=cfg.scene),
-        total_env_steps=cfg.online_steps,
-        device=cfg.device,
-        out=str(cfg.out_dir / "online_dqn"),
-        verbose=False,
-    )
-    result = train(dqn_cfg.validate())
-    return result.checkpoint, {"trained_here": True, "train_s": time.perf_counter() - t0, "env_steps": result.env_steps}
-
-
-def _scores(metrics: dict[str, Any], refs: dict[str, float]) -> dict[str, float]:
-    """``metrics`` (success rate, SPL, collisions) with the normalised score of its SPL first."""
-    return {"normalized": normalized(metrics["spl"], refs), **{m: float(metrics[m]) for m in METRICS}}
 
 
 def evaluate_behaviour(
@@ -183,46 +150,6 @@ def _finish(
     return result
 
 
-def _online(cfg: OfflineBenchConfig, twins: dict[str, Any], refs: dict[str, Any], say) -> tuple[Path | None, dict]:
-    """The online agent's checkpoint (None when there is none and no behaviour needs one) and its scores."""
-    if any(b in NEED_ONLINE for b in cfg.behaviours):
-        ckpt, info = _online_checkpoint(cfg, say)
-    elif cfg.checkpoint or dqn_checkpoint(cfg.scene).is_file():
-        ckpt, info = Path(cfg.checkpoint) if cfg.checkpoint else dqn_checkpoint(cfg.scene), {"trained_here": False}
-    else:
-        return None, {}
-    policy = load_policy(ckpt, cfg.device)
-    rows = [
-        r
-        for r, _, _ in evaluate_twins(
-            policy,
-            cfg.scene,
-            cfg.variants,
-            pairs=cfg.pairs,
-            seed=EVAL_SEED,
-            device=cfg.device,
-            shield=False,
-            datasets=twins,
-        )
-    ]
-    preset = getattr(policy.config, "preset", "") or "?"
-    online = {
-        "checkpoint": str(ckpt),
-        "label": f"online DQN, {preset} preset" + (", trained here" if info.get("trained_here") else ""),
-        **info,
-        **{r["dataset"].split("/")[1]: _scores(r, refs[r["dataset"].split("/")[1]]) for r in rows},
-    }
-    say(
-        f"online agent {ckpt}: "
-        + ", ".join(
-            f"{v} score {online[v]['normalized']:.1f} (success {online[v]['success_rate']:.3f})"
-            for v in cfg.variants
-            if v in online
-        )
-    )
-    return ckpt, online
-
-
 def log_datasets(
     cfg: OfflineBenchConfig, ckpt: Path | None, twins: dict[str, Any], blueprint: Any, refs: dict[str, Any]
 ) -> tuple[dict[str, Any], dict[str, str]]:
@@ -242,6 +169,8 @@ def log_datasets(
             device=cfg.device,
             minari=False,
             verbose=cfg.verbose,
+            sensing=cfg.sensing,
+            sensing_noise=cfg.sensing_noise,
         )
         t0 = time.perf_counter()
         logged = log_dataset(log_cfg, blueprint)
@@ -270,7 +199,7 @@ def _tables(cfg: OfflineBenchConfig, ids, twins, refs, say, *, overlap: bool):
     """A callable giving ``(tabular section, seconds)``: computed now, or (``overlap``) in a thread of this process
     while the trainings run in other processes (the section is numpy, one core; it left a core idle for minutes
     when it ran before them). An error in the thread is raised by the callable."""
-    if not cfg.tabular:
+    if not cfg.tabular or cfg.honest:  # the tables act on the robot's cell (privileged): not run with honest sensing
         return lambda: (None, 0.0)
     logged = {b: as_logged(i) for b, i in ids.items()}
 
@@ -320,7 +249,7 @@ def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
     m_start = machine()
     twins, blueprint, refs = _twins_and_references(cfg)
-    ckpt, online = _online(cfg, twins, refs, say)
+    ckpt, online = online_reference(cfg, twins, refs, say)
     datasets, ids = log_datasets(cfg, ckpt, twins, blueprint, refs)
     head = {"references": refs, "online_dqn": online, "datasets": datasets}
     head["setup_s"] = time.perf_counter() - t_start
@@ -332,7 +261,7 @@ def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     runs: list[dict[str, Any]] = []
     done = _gatherer(cfg, jobs, refs, head, runs, m_start, t_start, layout, say)
     _train(cfg, reused, todo, workers, done)
-    if cfg.tabular:
+    if cfg.tabular and not cfg.honest:
         head["tabular"], head["tabular_s"] = tables()
     runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
     result = _finish(cfg, head, runs, m_start, t_start, layout=layout, planned=len(jobs), complete=True)

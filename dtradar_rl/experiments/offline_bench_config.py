@@ -14,6 +14,7 @@ from dtradar_rl.offline.config import ALGORITHMS, OfflineConfig, check_algorithm
 from dtradar_rl.offline.ope import FQE_GAMMA
 from dtradar_rl.offline.relabel import AUTO, RelabelConfig
 from dtradar_rl.task.config import Config, ConfigError, check_unique
+from dtradar_rl.task.sensing import sensing_for
 
 NAMES = {
     "cql": "DiscreteCQL",
@@ -65,6 +66,13 @@ class OfflineBenchConfig(Config):
     """what the deep learners observe (dtradar_rl.offline.memory_senses): auto (each algorithm's best measured: memory
     for bcq, dqn, ddqn, nfq, none for bc and cql), none (the logged, memoryless observation: the benchmark before
     senses) or memory (the online default agent's memory window, rebuilt from each log; evaluated in the memory env)"""
+    sensing: str = "privileged"
+    """what the logged datasets record and the agents observe: privileged (the neighbors preset: the robot's exact
+    x, y and its neighbours' radio, the benchmark's upper bound) or an honest sensing (radio, rssi, no-radio... of
+    dtradar_rl.task.sensing: the learners observe the localisation filter's belief, the online reference is the
+    default radio-filter agent, and the tabular learners, which act on cells, are not run)"""
+    sensing_noise: str = "realistic"
+    """honest --sensing only: the receiver noise of the logged readings and of the evaluations"""
     shortest_prob: float = 0.5
     """noisy-shortest: probability of the shortest-path move"""
     epsilon: float = 0.3
@@ -114,8 +122,13 @@ class OfflineBenchConfig(Config):
     """print progress"""
 
     @property
+    def honest(self) -> bool:
+        return not sensing_for(self.sensing).privileged
+
+    @property
     def out_dir(self) -> Path:
-        return Path(self.out or f"results/offline_bench/{self.scene}")
+        """``--out``, by default results/offline_bench/<scene> (``<scene>-<sensing>`` with an honest sensing)."""
+        return Path(self.out or f"results/offline_bench/{self.scene}" + (f"-{self.sensing}" if self.honest else ""))
 
     def check_ranges(self) -> None:
         super().check_ranges()
@@ -140,8 +153,15 @@ class OfflineBenchConfig(Config):
             raise ConfigError("--seeds, --algorithms and --behaviours must each list at least one value")
         for a in self.algorithms:
             OfflineConfig(algorithm=a, relabel=self.relabel).relabel_config()  # a mix that does not parse
-        # an unknown --senses or --precision (bcq: an algorithm that trains in either precision)
-        OfflineConfig(algorithm="bcq", senses=self.senses, precision=self.precision).validate()
+        # an unknown --senses, --precision or --sensing (bcq: an algorithm that trains in either precision)
+        OfflineConfig(
+            algorithm="bcq",
+            senses=self.senses,
+            precision=self.precision,
+            sensing=self.sensing,
+            sensing_noise=self.sensing_noise,
+            relabel="auto" if self.relabel.strip() == "auto" else self.relabel,
+        ).validate()
         if self.workers < 0:
             raise ConfigError("--workers must be >= 0 (0 = one per CPU core)")
         check_address_given(self.ray_address, error=ConfigError)

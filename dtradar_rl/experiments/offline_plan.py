@@ -30,6 +30,8 @@ def bench_jobs(cfg: OfflineBenchConfig, ids: dict[str, str]) -> list[BenchJob]:
                 precision="fp32" if cfg.precision == "bf16" and algo not in BF16_ALGORITHMS else cfg.precision,
                 relabel=cfg.relabel,
                 senses=cfg.senses,
+                sensing=cfg.sensing,
+                sensing_noise=cfg.sensing_noise,
                 pairs=cfg.pairs,
                 eval_variants=tuple(cfg.variants),
                 shield=False,

@@ -216,6 +216,8 @@ def _heading(result: dict[str, Any]) -> list[str]:
         f"mean ± std over seeds; evaluated greedy and unshielded on {cfg['pairs']} seeded (start, target) pairs "
         "(seed 2024) of each twin.",
         "",
+        _sensing_line(cfg),
+        "",
         "Normalised score: 100 · (SPL − random) / (expert − random), 0 = uniformly random moves, 100 = the "
         "breadth-first shortest-path expert (dtradar_rl.evaluation.normalized); the best algorithm per dataset in bold."
         + (
@@ -226,6 +228,21 @@ def _heading(result: dict[str, Any]) -> list[str]:
             else ""
         ),
     ]
+
+
+def _sensing_line(cfg: dict[str, Any]) -> str:
+    """What the logged datasets hold and the agents observe (benchmarks from before sensings: privileged)."""
+    sensing = cfg.get("sensing", "privileged")
+    if sensing == "privileged":
+        return (
+            "Sensing: **privileged** (the `neighbors` preset: the robot's exact x, y and its neighbouring cells' "
+            "radio; an upper bound, not navigation from radio)."
+        )
+    return (
+        f"Sensing: **{sensing}**, honest (the logs record what the robot's own sensors read, receiver noise "
+        f"{cfg.get('sensing_noise')}; the learners observe the localisation filter's belief along each episode, "
+        "and are evaluated under the same noise; the tabular learners act on cells and are not run)."
+    )
 
 
 def _tabular_section(result: dict[str, Any]) -> list[str]:

@@ -160,10 +160,11 @@ class FilteredPolicy:
     meta: dict[str, Any]
     obs_preset: str = "honest"
 
-    def env_for(self, ds: Dataset, num_envs: int, *, noise="none", seed: int = 0, **kwargs) -> HonestNavEnv:
-        """The honest env of ``ds`` with the run's sensing (a fresh belief per robot)."""
+    def env_for(self, ds: Dataset, num_envs: int, *, noise=None, seed: int = 0, **kwargs) -> HonestNavEnv:
+        """The honest env of ``ds`` with the run's sensing (a fresh belief per robot), under ``noise`` (default: the
+        receiver noise the run's log was recorded with, which its filter assumes)."""
         self._log_belief = self.agent.log_prior.expand(num_envs, -1).clone()
-        sensing = sensing_for(self.config.sensing)
+        sensing, noise = sensing_for(self.config.sensing), noise or self.config.sensing_noise
         return HonestNavEnv.from_dataset(ds, num_envs, sensing=sensing, noise=noise, seed=seed, **kwargs)
 
     def act(self, obs: torch.Tensor, shield: bool = False) -> torch.Tensor:
