@@ -25,8 +25,15 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
-from dtradar_data.core.errors import InvalidCoordinatesError, SchemaMismatchError
+from dtradar_data.core.errors import (
+    CorruptDatasetError,
+    InvalidCoordinatesError,
+    MissingSceneError,
+    SchemaMismatchError,
+)
+from dtradar_data.core.files import sha256_file
 from dtradar_data.core.grid import Grid
+from dtradar_data.core.layout import SCENE_XML, is_scene_file
 from dtradar_data.core.schema import RADIO_COLUMNS, tx_column
 
 #: The grid of a stored dataset is the scene's receiver grid (``meta["grid"]``); one class for both.
@@ -158,6 +165,44 @@ class Dataset:
             col = self.table.column(name).cast(pa.float32()).fill_null(fill)
             out[..., k] = col.to_numpy(zero_copy_only=False).reshape(h, w)
         return out
+
+    @property
+    def scene_xml(self) -> Path:
+        """The Mitsuba XML of the scene this version was traced from, stored in it with its meshes
+        (``<version>/scene/scene.xml``): ``sionna.rt.load_scene(str(ds.scene_xml))`` opens it. Its files are checked
+        against the sha256 ``meta.json`` records (:class:`CorruptDatasetError`); a version that stores no scene
+        raises :class:`MissingSceneError`, which says how to get one."""
+        files = self.meta.get("files") or {}
+        if self.path is None or SCENE_XML not in files:
+            raise self._no_scene()
+        for name, rec in sorted(files.items()):
+            if is_scene_file(name) and not (
+                (self.path / name).is_file() and sha256_file(self.path / name) == rec.get("sha256")
+            ):
+                raise CorruptDatasetError(
+                    f"{self.path / name} is missing or does not match the sha256 recorded in meta.json",
+                    hint=f"`python -m dtradar_data verify {self.name}` lists every problem; re-pull or rebuild it",
+                )
+        return self.path / SCENE_XML
+
+    def _no_scene(self) -> MissingSceneError:
+        if self.path is None:
+            return MissingSceneError(
+                f"{self.name} is a table in memory: it has no stored scene", hint="load a stored version"
+            )
+        if self.is_moving:
+            return MissingSceneError(
+                f"{self.name} is a moving twin: its world changes every snapshot, and it stores no scene",
+                hint=f"open the scene of its static twin, {self.meta.get('scene')}/blueprint",
+            )
+        build = f"python -m dtradar_data build --scene {self.meta.get('scene')} --variant {self.meta.get('variant')}"
+        return MissingSceneError(
+            f"{self.name}@{self.version} stores no scene (no {SCENE_XML} in {self.path}): it was built before "
+            "versions carried the scene they were traced from",
+            hint=f"build it again: remove the version (`rm -r {self.path}`), then `{build}` with the flags it was "
+            "built with; the same version comes back, now with its scene (the scene files do not enter the version "
+            "hash), and its tag stays",
+        )
 
     def __repr__(self) -> str:
         h, w = self.shape

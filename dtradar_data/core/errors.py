@@ -55,6 +55,11 @@ class MissingChannelDataError(DtradarError, LookupError):
     without ``--rt.path-channels``): rebuilding it adds them."""
 
 
+class MissingSceneError(DtradarError, LookupError):
+    """The scene files asked of a dataset version that stores none (built before versions carried their scene, a
+    moving twin, or a table made in memory): rebuilding it stores them."""
+
+
 class RayTracerUnavailableError(DtradarError, RuntimeError):
     """Sionna RT / Mitsuba / a usable libLLVM is missing."""
 

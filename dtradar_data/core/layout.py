@@ -3,6 +3,7 @@
 Layout (docs: Datasets, where datasets live)::
 
     <root>/datasets/<scene>/<variant>/<version>/{cells.parquet, paths.parquet?, coverage.png?, meta.json, README.md}
+    <root>/datasets/<scene>/<variant>/<version>/scene/{scene.xml, meshes/*.ply, base/...}   the traced scene
     <root>/datasets/<scene>/<variant>/refs.json      {"tags": {"v0": "<version>", ...}, "latest": "<version>"}
     <root>/work/                                      staging (temp dirs renamed into place), pipeline scratch
 
@@ -13,7 +14,7 @@ Layout (docs: Datasets, where datasets live)::
 from __future__ import annotations
 
 import os
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from dtradar_data.core.errors import DataRootError
 
@@ -28,6 +29,11 @@ COVERAGE_FILE = "coverage.png"
 CITY_FILE = "city.png"
 MOVING_GIF_FILE = "moving.gif"
 META_FILE = "meta.json"
+#: The folder holding the Mitsuba scene a version was traced from (``scene.xml`` and the meshes it names, by relative
+#: paths), so that ``sionna.rt.load_scene`` opens it without dtradar; files in it are listed in ``meta.json`` by their
+#: path below the version folder (``scene/meshes/wood.ply``).
+SCENE_DIR = "scene"
+SCENE_XML = f"{SCENE_DIR}/scene.xml"
 CARD_FILE = "README.md"
 REFS_FILE = "refs.json"
 
@@ -93,3 +99,15 @@ def version_dir(scene: str, variant: str, version: str) -> Path:
 
 def refs_path(scene: str, variant: str) -> Path:
     return dataset_dir(scene, variant) / REFS_FILE
+
+
+def is_scene_file(name: str) -> bool:
+    """Whether ``name`` (as ``meta.json`` lists a version's files) is a relative path inside the version's scene
+    folder, without ``..`` or hidden parts: the one place of a version with sub-folders."""
+    parts = PurePosixPath(name).parts
+    return (
+        len(parts) >= 2
+        and parts[0] == SCENE_DIR
+        and "\\" not in name
+        and all(p not in ("", ".", "..") and not p.startswith(".") for p in parts)
+    )

@@ -21,6 +21,7 @@ from dtradar_data.core.layout import work_root
 from dtradar_data.core.schema import tx_column
 from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
+from dtradar_data.geometry.scene_files import write_stored_scene
 from dtradar_data.geometry.xml_transmitter import check_transmitter_in_mesh
 from dtradar_data.pipeline import differential
 from dtradar_data.pipeline.batches import batch_dir, batch_layout, load_batch
@@ -193,12 +194,14 @@ def _trace_differential(job: _Job) -> _Traced:
 
 
 def _new_version(job: _Job, work_dir: Path, tmp: Path, traced: _Traced) -> NewVersion:
-    """Render the coverage map and a city quadrant's overview into ``tmp``, then the metadata: after the map, since
-    the metadata records the Mitsuba variant, which the map's tracer sets when every batch was reused."""
+    """Write the scene, render the coverage map and a city quadrant's overview into ``tmp``, then the metadata: after
+    the map, since the metadata records the Mitsuba variant, which the map's tracer sets when every batch was
+    reused."""
     spec, config = job.spec, job.config
     settings = config.rt
     tracer = traced.tracer
-    extra = {}
+    # the scene the tables were traced from, as the tracer wrote it, made self-contained (plain Sionna opens it)
+    extra = write_stored_scene(spec, tmp / "scene")
     if config.coverage_map:
         if tracer is None:
             tracer = RayTracer(spec, settings)

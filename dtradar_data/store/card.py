@@ -257,6 +257,7 @@ def _version_values(rec: VersionRecord, tag: str | None) -> dict[str, Any]:
         ],
         "coverage": P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None,
         "city_png": CITY_FILE if CITY_FILE in rec.files else None,
+        "scene_xml": P.SCENE_XML if P.SCENE_XML in rec.files else None,
     }
 
 

@@ -259,7 +259,8 @@ def write_version(
 
     An existing ``version`` is reused as is (same inputs, same content). ``meta`` is stored verbatim plus
     ``name``, ``scene``, ``variant``, ``version``, ``schema_version`` and ``files`` (sha256 + bytes per file).
-    ``extra_files`` maps a file name in the version directory (e.g. ``coverage.png``) to a source path.
+    ``extra_files`` maps a file name in the version directory (e.g. ``coverage.png``, or a path in its scene folder,
+    ``scene/scene.xml``) to a source path.
     """
     did = as_id(dataset_id, check_known=False)
     _check_name_and_version(did, version)
@@ -339,10 +340,14 @@ def _checked_extra_files(extra_files: dict[str, Path] | None) -> dict[str, Path]
     """A copy of ``extra_files``, each a plain, unreserved name whose source file exists."""
     extra_files = dict(extra_files or {})
     for fname, src in extra_files.items():
-        if fname in RESERVED_FILES or Path(fname).name != fname or fname.startswith("."):
+        if (
+            fname in RESERVED_FILES
+            or not (Path(fname).name == fname or P.is_scene_file(fname))
+            or fname.startswith(".")
+        ):
             raise InvalidTableError(
                 f"extra file name {fname!r} is reserved or not a plain file name",
-                hint=f"use a plain name other than {sorted(RESERVED_FILES)}",
+                hint=f"use a plain name other than {sorted(RESERVED_FILES)}, or a path under {P.SCENE_DIR}/",
             )
         if not Path(src).is_file():
             raise InvalidTableError(f"extra file {fname!r}: {src} does not exist", hint="write it before storing")
@@ -378,14 +383,15 @@ def _write_stage(
     if paths is not None:
         _write_parquet(paths, stage / P.PATHS_FILE, meta_json)
     for fname, src in sorted(extra_files.items()):
+        (stage / fname).parent.mkdir(parents=True, exist_ok=True)  # the scene's files sit in sub-folders
         shutil.copyfile(src, stage / fname)
 
 
 def _file_sums(stage: Path) -> dict[str, dict[str, Any]]:
-    """``{name: {sha256, bytes}}`` of every file in ``stage``, by name (meta.json's ``files``)."""
-    return {
-        f.name: {"sha256": sha256_file(f), "bytes": f.stat().st_size} for f in sorted(stage.iterdir()) if f.is_file()
-    }
+    """``{name: {sha256, bytes}}`` of every file in ``stage``, by its path below it (meta.json's ``files``; only the
+    scene's files have a folder in it: ``scene/meshes/wood.ply``)."""
+    files = sorted(f for f in stage.rglob("*") if f.is_file())
+    return {f.relative_to(stage).as_posix(): {"sha256": sha256_file(f), "bytes": f.stat().st_size} for f in files}
 
 
 def _install(did: DatasetId, version: str, stage: Path, meta: dict[str, Any], preferred_tag: str | None = None) -> Path:
