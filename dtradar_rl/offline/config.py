@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 from dtradar_data.core.errors import unknown_name
 from dtradar_rl.offline.behaviours import BehaviourConfig
 from dtradar_rl.offline.precision import AUTO_BATCH, BF16_ALGORITHMS, PRECISIONS, resolve_precision
 from dtradar_rl.offline.relabel import DEFAULT_DISCOUNT, RelabelConfig
-from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.config import DEFAULT_IN_HELP, ConfigError
 from dtradar_rl.task.runs import run_dir
 
 OFFLINE_FORMAT = "dtradar-offline/1"
@@ -98,7 +99,7 @@ class OfflineConfig(BehaviourConfig):
     latency: bool = True
     """time one greedy decision on every evaluated twin (the results' latency columns; the offline benchmark, which
     does not report them, skips it: ~0.5 s per twin)"""
-    logged: str = ""
+    logged: Annotated[str, DEFAULT_IN_HELP] = ""
     """train on this stored logged dataset (e.g. cubicle/blueprint/mixture@v0, see `dtradar_rl log`); default: log
     (or reuse) <scene>/<variant>/<behaviour> with --behaviour, --transitions and --seed"""
     relabel: str = "auto"
@@ -129,8 +130,8 @@ class OfflineConfig(BehaviourConfig):
     Xeon with AMX, Dallas Q3 expert BCQ in bf16 at batch 512 trained in about fp32's time at 256 to 82.0 against 75.3;
     the full offline benchmark with auto gained 3.8-8.2 per family but took 35.2 min against its 30, so fp32 stays the
     default (docs/logged-datasets.md)"""
-    out: str = ""
-    """output directory (default runs/<scene>/offline/<algorithm>)"""
+    out: Annotated[str, DEFAULT_IN_HELP] = ""
+    """output directory (default: runs/<scene>/offline/<algorithm>)"""
 
     @classmethod
     def from_dict(cls, d):

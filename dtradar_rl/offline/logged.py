@@ -33,9 +33,10 @@ twice: the behaviour itself rolled out on the twin's seeded evaluation pairs (``
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+import tyro
 
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import CorruptDatasetError, SchemaMismatchError
@@ -83,7 +84,7 @@ from dtradar_rl.offline.collection import replay, roll, rollout_bytes, rollout_s
 from dtradar_rl.offline.log_settings import parent_version, settings_of
 from dtradar_rl.offline.medium_agent import medium_agent, resolve_spec
 from dtradar_rl.offline.minari_copy import check_minari_free, export_minari
-from dtradar_rl.task.config import ConfigError
+from dtradar_rl.task.config import DEFAULT_IN_HELP, ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations, obs_dim
 from dtradar_rl.task.runtime import auto_threads
 from dtradar_rl.task.sensing import HONEST_PRESET, honest_dim, honest_names, sensing_for
@@ -98,14 +99,36 @@ class LogTooLargeError(ConfigError):
 @dataclass(frozen=True)
 class LogConfig(BehaviourConfig):
     """Log a behaviour policy on a twin into the store as a versioned, carded dataset
-    ``<scene>/<variant>/<name>``."""
+    ``<scene>/<variant>/<name>``.
 
+    The shared fields are declared again for the help text of ``log``, which trains nothing (their base docstrings
+    speak of training); ``out`` is hidden: a log goes into the store, under its name, not into a run folder."""
+
+    scene: str = "cubicle"
+    """scene to log on; the twin is <scene>/<variant> (synthetic = a 42x18 stand-in, no ray tracer)"""
+    variant: str = "blueprint"
+    """twin to log on; the dataset is <scene>/<variant>/<name>"""
+    seed: int = 0
+    """seed of the robots' starts and targets and of the behaviour's random moves (with medium, medium-replay and mixed
+    also of the medium agent's training); part of the dataset's version"""
+    out: tyro.conf.Suppress[str] = ""
+    reward: str = "geodesic"
+    """reward logged with each transition: paper (exact), scaled, euclidean or geodesic (shaped; see
+    dtradar_rl.task.rewards)"""
+    num_envs: int = 256
+    """robots stepped together while logging (in a mixture, robot i acts with component i mod k)"""
+    hidden: tuple[int, ...] = (256, 256)
+    """medium, medium-replay, mixed: sizes of the medium agent's dense ReLU hidden layers (part of its recipe and so
+    of the dataset's version; the other behaviours have no network of their own)"""
+    device: str = "cpu"
+    """torch device (cpu, cuda, cuda:1) the robots are stepped on while logging and scoring, and the medium agent
+    trains on (medium, medium-replay, mixed)"""
     behaviour: str = "noisy-shortest"
     """behaviour policy: random, noisy-shortest, epsilon-greedy (a DQN checkpoint) or mixture (see --components); or a
     dataset family: D4RL's random, expert, medium, medium-replay, mixed, OGBench's navigate, stitch, explore; or all
     (the eight families)"""
-    name: str = ""
-    """third part of the dataset name (default: the behaviour)"""
+    name: Annotated[str, DEFAULT_IN_HELP] = ""
+    """third part of the dataset name (default: the behaviour, followed by the --sensing when it is honest)"""
     steps: int = 100_000
     """environment steps to log (all robots together; rounded up to whole steps of num-envs robots)"""
     minari: bool = True

@@ -15,15 +15,20 @@ import numbers
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import torch
+import tyro
 
 from dtradar_data.core.errors import InvalidSettingError
 from dtradar_rl.task.observations import check_preset
 from dtradar_rl.task.rewards import check_reward
 
 INDOOR_SCENES = ("cubicle", "meeting")
+
+#: A field whose help text says what its default means (``--out``: "default runs/<scene>/<trainer>"): tyro's own
+#: ``(default: '')`` after it would state the default a second time, as an empty string.
+DEFAULT_IN_HELP = tyro.conf.arg(help_behavior_hint="")
 
 
 class ConfigError(InvalidSettingError):
@@ -153,8 +158,8 @@ class JobConfig(Config):
     """seed of the network, the environment and exploration"""
     threads: int = 0
     """torch CPU threads (0 = auto: up to 2, fewer when other processes keep cores busy; see dtradar_rl.task.runtime)"""
-    out: str = ""
-    """output directory (default runs/<scene>/<trainer>)"""
+    out: Annotated[str, DEFAULT_IN_HELP] = ""
+    """output directory (default: runs/<scene>/<trainer>)"""
     verbose: bool = True
     """print progress"""
 
@@ -167,7 +172,7 @@ class JobConfig(Config):
 class TwinConfig(JobConfig):
     """The twin a trainer works on and how it observes it."""
 
-    revision: str | None = None
+    revision: Annotated[str | None, DEFAULT_IN_HELP] = None
     """dataset version tag or hash (default: the newest)"""
     obs: str = "neighbors"
     """observation preset: paper (10 inputs, no target), goal (+ target), neighbors (+ neighbouring cells' radio)"""
