@@ -1,10 +1,10 @@
 """Publish dataset versions to, and pull them from, Hugging Face Hub dataset repos.
 
 One Hub repo per ``scene/variant`` (default ``dtradar/dtradar-<scene>-<variant>``; ``--repo`` overrides). A repo's
-files are exactly a stored version directory (``cells.parquet``, ``paths.parquet``, ``coverage.png``, ``meta.json``)
-plus a freshly rendered ``README.md`` card whose ``configs`` point at those files. Each publish is one commit
-(``HfApi.create_commit``) tagged twice: with the local tag (``v0``) and with the content version hash, so both
-spellings of a revision resolve on the Hub as they do locally.
+files are exactly a stored version directory (``cells.parquet``, ``paths.parquet``, ``coverage.png``, ``meta.json``,
+the traced scene under ``scene/``) plus a freshly rendered ``README.md`` card whose ``configs`` point at those files.
+Each publish is one commit (``HfApi.create_commit``) tagged twice: with the local tag (``v0``) and with the content
+version hash, so both spellings of a revision resolve on the Hub as they do locally.
 
 The network calls are kept to a few lines; everything around them (what is uploaded, verification, installing into
 the store) runs offline. A pull downloads into a held stage under ``<root>/work/`` (a killed pull's is removed by
@@ -44,6 +44,14 @@ from dtradar_data.store.versions import read_refs
 #: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
 # every file of a version but its card (rendered for the Hub); the pictures only where the version has them
 DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, P.COVERAGE_FILE, P.CITY_FILE, P.MOVING_GIF_FILE, P.META_FILE)
+#: The scene folder's files travel too; they are named by ``meta.json`` (a version's meshes depend on its materials).
+SCENE_PATTERN = f"{P.SCENE_DIR}/*"
+
+
+def version_files(vdir: Path, meta: dict) -> list[str]:
+    """What a publish of the version in ``vdir`` uploads, besides its card: its data files and its scene's files."""
+    scene = sorted(f for f in meta.get("files") or {} if P.is_scene_file(f))
+    return [f for f in DATA_FILES if (vdir / f).is_file()] + scene
 
 
 def default_repo(did: DatasetId) -> str:
@@ -185,11 +193,12 @@ class PublishResult:
 
 
 def publish_operations(vdir: Path, card_text: str) -> list[Any]:
-    """The files of one commit: every data file of the version plus the card as ``README.md``."""
+    """The files of one commit: every data file of the version and its scene, plus the card as ``README.md``."""
     from huggingface_hub import CommitOperationAdd
 
     ops = [
-        CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f)) for f in DATA_FILES if (vdir / f).is_file()
+        CommitOperationAdd(path_in_repo=f, path_or_fileobj=str(vdir / f))
+        for f in version_files(vdir, local.read_meta(vdir))
     ]
     ops.append(CommitOperationAdd(path_in_repo=P.CARD_FILE, path_or_fileobj=card_text.encode()))
     return ops
@@ -221,11 +230,12 @@ def publish(
     card = render_version_card(meta, tag=tag, history=upto, hub_repo=repo_id)
     ops = publish_operations(vdir, card)
 
-    def stale(api_) -> list[str]:  # e.g. paths.parquet of an older version
+    def stale(api_) -> list[str]:  # e.g. paths.parquet, or a mesh of a material gone, of an older version
+        ours = set(version_files(vdir, meta))
         return [
             f
             for f in api_.list_repo_files(repo_id, repo_type="dataset")
-            if f in DATA_FILES and not (vdir / f).is_file()
+            if (f in DATA_FILES or f.startswith(f"{P.SCENE_DIR}/")) and f not in ours
         ]
 
     return push_version(
@@ -310,7 +320,7 @@ def download(repo_id: str, revision: str, dest: Path, cache: Path, *, files: lis
 
 def _download(repo_id: str, revision: str, dest: Path, cache: Path) -> Path:
     """An RT dataset's files; a separate function so tests can replace the network with a local folder."""
-    return download(repo_id, revision, dest, cache, files=[*DATA_FILES, P.CARD_FILE])
+    return download(repo_id, revision, dest, cache, files=[*DATA_FILES, P.CARD_FILE, SCENE_PATTERN])
 
 
 def _remote_revision(repo_id: str, revision: str | None, instead: str | None = None) -> str:
@@ -423,7 +433,9 @@ def pull_version(name: str | DatasetId, revision: str | None = None, *, repo_id:
         meta = local.read_meta(got)
         existed = bool(HASH_RE.fullmatch(str(meta.get("version", "")))) and local.version_exists(did, meta["version"])
         for fname in [*(meta.get("files") or {}), P.META_FILE, P.CARD_FILE]:
-            if (got / fname).is_file():
+            # a plain name or the scene folder's, never a path out of the version (verify_dir then finds it missing)
+            if (got / fname).is_file() and (Path(fname).name == fname or P.is_scene_file(fname)):
+                (version_dir / fname).parent.mkdir(parents=True, exist_ok=True)
                 shutil.move(str(got / fname), version_dir / fname)
         preferred = revision if revision and is_tag(revision) else _card_tag(version_dir / P.CARD_FILE)
         path = writing.install_staged(did, version_dir, preferred_tag=preferred)

@@ -30,11 +30,25 @@ def root(root, tmp_path, monkeypatch):
     return root
 
 
-def put(version=V0, **meta):
+def put(version=V0, scene: Path | None = None, **meta):
+    """A stored version; with ``scene`` (a folder), that folder's files as its traced scene (``scene/...``)."""
     ds = synthetic_dataset(5, 3, name="cubicle/blueprint")
+    extra = {f"scene/{p.relative_to(scene).as_posix()}": p for p in scene.rglob("*") if p.is_file()} if scene else None
     return writing.write_version(
-        "cubicle/blueprint", version, ds.table, {**ds.meta, "rt": {"max_depth": 5}, "licence": "CC-BY-4.0", **meta}
+        "cubicle/blueprint",
+        version,
+        ds.table,
+        {**ds.meta, "rt": {"max_depth": 5}, "licence": "CC-BY-4.0", **meta},
+        extra_files=extra,
     )
+
+
+def a_scene(folder: Path) -> Path:
+    """A small Mitsuba scene as a build stores it: ``scene.xml`` naming ``meshes/wood.ply``."""
+    (folder / "meshes").mkdir(parents=True)
+    (folder / "scene.xml").write_text('<scene version="2.1.0"><!-- meshes/wood.ply --></scene>\n')
+    (folder / "meshes" / "wood.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nend_header\n")
+    return folder
 
 
 def tree(path: Path) -> dict[str, str]:
@@ -87,6 +101,26 @@ def test_publish_sends_one_commit_with_every_file_and_tags_it_twice(root):
     assert b'load_dataset("me/cubicle-bp", "cells"' in readme and b"hub_repo: me/cubicle-bp" in readme
     assert [c[1] for c in api.calls if c[0] == "create_tag"] == ["v0", V0]
     assert commits[0][3]["repo_type"] == "dataset"
+
+
+def test_publish_sends_the_scene_and_deletes_an_older_versions_meshes(root, tmp_path):
+    put(scene=a_scene(tmp_path / "scene"))
+    api = FakeApi(files=["scene/scene.xml", "scene/meshes/metal.ply", "paths.parquet"])
+    hub.publish("cubicle/blueprint", repo_id="me/cubicle-bp", api=api)
+    ops = next(c for c in api.calls if c[0] == "create_commit")[2]
+    added = {op.path_in_repo for op in ops if isinstance(op, CommitOperationAdd)}
+    assert added == {"cells.parquet", "meta.json", "README.md", "scene/scene.xml", "scene/meshes/wood.ply"}
+    deleted = {op.path_in_repo for op in ops if isinstance(op, CommitOperationDelete)}
+    assert deleted == {"scene/meshes/metal.ply", "paths.parquet"}
+    readme = next(op for op in ops if op.path_in_repo == "README.md").path_or_fileobj
+    assert b'sionna.rt.load_scene("scene/scene.xml")' in readme
+
+
+def test_a_download_asks_for_the_scene_folder(root, monkeypatch, tmp_path):
+    asked = []
+    monkeypatch.setattr(hub, "download", lambda *a, files: asked.extend(files))
+    hub._download("me/bp", "v0", tmp_path / "d", tmp_path / "c")
+    assert "scene/*" in asked and "meta.json" in asked
 
 
 def test_publishing_an_already_published_version_does_nothing(root):
@@ -167,13 +201,14 @@ def test_the_cli_pull_fails_offline_with_one_line_and_status_2(root):
 @pytest.fixture()
 def remote(root, tmp_path, monkeypatch):
     """A published version as a folder, served by replacing the one download call."""
-    vdir = put()
+    vdir = put(scene=a_scene(tmp_path / "scene"))  # a version as builds store them now: with its scene
     api = FakeApi()
     hub.publish("cubicle/blueprint", repo_id="me/bp", api=api)
     served = tmp_path / "served"
     served.mkdir()
     for op in next(c for c in api.calls if c[0] == "create_commit")[2]:
         src = op.path_or_fileobj
+        (served / op.path_in_repo).parent.mkdir(parents=True, exist_ok=True)
         (served / op.path_in_repo).write_bytes(src if isinstance(src, bytes) else Path(src).read_bytes())
     shutil.rmtree(root)  # a fresh machine: nothing stored locally
     requests = []
@@ -192,6 +227,8 @@ def test_pull_verifies_installs_and_keeps_the_publishers_tag(root, remote):
     assert path == root / "datasets/cubicle/blueprint" / V0 and remote.requests == [("me/bp", "v0")]
     ds = store.load("cubicle/blueprint@v0")
     assert ds.version == V0 and ds.table.num_rows == 15
+    assert ds.scene_xml.read_bytes() == (remote.dir / "scene/scene.xml").read_bytes(), "the scene came with it"
+    assert (path / "scene/meshes/wood.ply").is_file() and store.verify_dir(path) == []
     assert list((root / "work").iterdir()) == []
     assert hub.pull("cubicle/blueprint@v0", repo_id="me/bp") == path and len(remote.requests) == 1  # local now
 
@@ -211,6 +248,13 @@ def test_a_tampered_download_is_rejected_and_nothing_is_installed(root, remote):
     assert not (root / "datasets/cubicle/blueprint" / V0).exists()
     assert not (root / "datasets/cubicle/blueprint/refs.json").exists()
     assert list((root / "work").iterdir()) == []
+
+
+def test_a_tampered_scene_file_is_rejected_too(root, remote):
+    (remote.dir / "scene/meshes/wood.ply").write_bytes(b"not the mesh")
+    with pytest.raises(CorruptDatasetError, match="scene/meshes/wood.ply"):
+        hub.pull("cubicle/blueprint@v0", repo_id="me/bp")
+    assert not (root / "datasets/cubicle/blueprint" / V0).exists()
 
 
 def test_load_from_hub_pulls_a_missing_revision(root, remote):
