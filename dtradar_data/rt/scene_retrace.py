@@ -106,7 +106,7 @@ def retrace_strongest(ds, *, batch: int = 16, threads: int = 1) -> Strongest:
 
 def _pose(t: dict) -> dict:
     """Sionna's Transmitter keywords of a recorded transmitter: an exact orientation wins over the look-at point."""
-    pose = {"power_dbm": t.get("power_dbm", 44.0)}
+    pose = {"power_dbm": t.get("power_dbm", 0.0)}
     if t.get("orientation_deg") is not None:
         return {**pose, "orientation": [math.radians(v) for v in t["orientation_deg"]]}
     return {**pose, **({"look_at": list(t["look_at_m"])} if t.get("look_at_m") is not None else {})}
