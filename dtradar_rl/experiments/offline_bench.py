@@ -81,6 +81,7 @@ from dtradar_rl.experiments.offline_online import scores as _scores
 from dtradar_rl.experiments.offline_plan import bench_jobs, reused_rows, training_layout
 from dtradar_rl.experiments.offline_report import markdown, ope_summary, summarize
 from dtradar_rl.experiments.offline_tabular import tabular_section
+from dtradar_rl.experiments.offline_tabular_honest import honest_tabular_section
 from dtradar_rl.offline.behaviours import behaviour_policy
 from dtradar_rl.offline.config import ALGORITHMS
 from dtradar_rl.offline.formats import as_logged
@@ -199,13 +200,19 @@ def _tables(cfg: OfflineBenchConfig, ids, twins, refs, say, *, overlap: bool):
     """A callable giving ``(tabular section, seconds)``: computed now, or (``overlap``) in a thread of this process
     while the trainings run in other processes (the section is numpy, one core; it left a core idle for minutes
     when it ran before them). An error in the thread is raised by the callable."""
-    if not cfg.tabular or cfg.honest:  # the tables act on the robot's cell (privileged): not run with honest sensing
+    if not cfg.tabular:
         return lambda: (None, 0.0)
     logged = {b: as_logged(i) for b, i in ids.items()}
 
     def compute():
         t0 = time.perf_counter()
-        return tabular_section(cfg.scene, logged, twins, refs, pairs=cfg.pairs, say=say), time.perf_counter() - t0
+        if cfg.honest:  # the tables followed through the localisation filter, under the benchmark's noise
+            section = honest_tabular_section(
+                cfg.scene, logged, twins, refs, sensing=cfg.sensing, noise=cfg.sensing_noise, pairs=cfg.pairs, say=say
+            )
+        else:
+            section = tabular_section(cfg.scene, logged, twins, refs, pairs=cfg.pairs, say=say)
+        return section, time.perf_counter() - t0
 
     if not overlap:
         out = compute()
@@ -261,7 +268,7 @@ def _run_bench(cfg: OfflineBenchConfig) -> dict[str, Any]:
     runs: list[dict[str, Any]] = []
     done = _gatherer(cfg, jobs, refs, head, runs, m_start, t_start, layout, say)
     _train(cfg, reused, todo, workers, done)
-    if cfg.tabular and not cfg.honest:
+    if cfg.tabular:
         head["tabular"], head["tabular_s"] = tables()
     runs.sort(key=lambda r: (cfg.behaviours.index(r["behaviour"]), cfg.algorithms.index(r["algorithm"]), r["seed"]))
     result = _finish(cfg, head, runs, m_start, t_start, layout=layout, planned=len(jobs), complete=True)

@@ -70,7 +70,7 @@ class OfflineBenchConfig(Config):
     """what the logged datasets record and the agents observe: privileged (the neighbors preset: the robot's exact
     x, y and its neighbours' radio, the benchmark's upper bound) or an honest sensing (radio, rssi, no-radio... of
     dtradar_rl.task.sensing: the learners observe the localisation filter's belief, the online reference is the
-    default radio-filter agent, and the tabular learners, which act on cells, are not run)"""
+    default radio-filter agent, the tabular learners' tables are followed through the filter, without a ceiling)"""
     sensing_noise: str = "realistic"
     """honest --sensing only: the receiver noise of the logged readings and of the evaluations"""
     shortest_prob: float = 0.5

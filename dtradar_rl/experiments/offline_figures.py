@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from dtradar_rl.experiments.offline_report import TABULAR_COLUMNS, tabular_score
+from dtradar_rl.experiments.offline_report import tabular_columns, tabular_score
 
 
 def plot(result: dict[str, Any], path: Path) -> Path:
@@ -47,7 +47,7 @@ def plot(result: dict[str, Any], path: Path) -> Path:
         ax.scatter(x, own, marker="x", color="k", zorder=3, label="behaviour itself")
         if result.get("tabular"):  # the best tabular learner as a star, the data's ceiling as a bar across the group
             best = [
-                max((tabular_score(result, b, c, v) for c in TABULAR_COLUMNS if c != "ceiling"), default=np.nan)
+                max((tabular_score(result, b, c, v) for c in tabular_columns(result) if c != "ceiling"), default=np.nan)
                 for b in behs
             ]
             ax.scatter(x, best, marker="*", s=80, color="gold", edgecolor="k", zorder=4, label="best tabular")
