@@ -3,7 +3,8 @@
 * an RT dataset: ``<scene>/<variant>[@<revision>]``, e.g. ``cubicle/blueprint@v0`` (:func:`parse_id`,
   :func:`format_id`);
 * a logged (offline-RL) dataset: ``<scene>/<variant>/<behaviour>[@<revision>]``, e.g.
-  ``cubicle/blueprint/noisy-shortest``: the parent RT dataset the transitions were logged on, then the behaviour's
+  ``cubicle/blueprint/noisy-shortest`` or ``cubicle/moving/expert``: the parent RT dataset (any variant, the moving
+  twin's too) the transitions were logged on, then the behaviour's
   name (``[a-z0-9][a-z0-9_-]*``; by default the behaviour policy's kind) (:func:`parse_logged_id`,
   :func:`format_logged_id`). Two slashes tell it from an RT dataset (one slash), so :func:`dtradar_data.load`
   and the ``list``/``info``/``verify`` commands accept both (:func:`is_logged_name`; :func:`parse_name` and
@@ -34,12 +35,13 @@ from typing import Any
 
 from dtradar_data.core.errors import UnknownNameError, did_you_mean, unknown_name
 
-#: The static twins' variants: what ``--variant all`` builds, what a logged dataset may sit on.
+#: The static twins' variants: what ``--variant all`` builds.
 VARIANTS: tuple[str, ...] = ("blueprint", "dynamic")
 #: The moving twin (``cubicle/moving``): snapshots in time in one table (:mod:`dtradar_data.core.dataset`), built
 #: by ``build --variant moving`` (:mod:`dtradar_data.pipeline.moving`) only, never by ``--variant all``.
 MOVING_VARIANT = "moving"
-#: Every variant a stored RT dataset may have.
+#: Every variant a stored RT dataset may have, and so every variant a logged dataset may sit on (a moving twin's log
+#: is rolled out among its movers: :mod:`dtradar_rl.offline.moving_logs`).
 DATASET_VARIANTS: tuple[str, ...] = (*VARIANTS, MOVING_VARIANT)
 #: The suffix of an antenna-pose-error twin's scene (``cubicle-txpose``: :mod:`dtradar_data.scenes.tx_pose`). Scene
 #: files may not use it, so such a twin never shares a name with a built-in or a user's scene.
@@ -200,11 +202,11 @@ def parse_logged_id(text: str | LoggedId) -> LoggedId:
             f"malformed logged dataset id {text!r}", hint=f"use {LOGGED_GRAMMAR} (an RT dataset is {GRAMMAR})"
         )
     scene, variant, behaviour = parts
-    if variant not in VARIANTS:
-        suggestion = did_you_mean(variant, VARIANTS)
+    if variant not in DATASET_VARIANTS:
+        suggestion = did_you_mean(variant, DATASET_VARIANTS)
         raise UnknownNameError(
             f"unknown variant {variant!r} in {text!r}" + (f"; {suggestion}" if suggestion else ""),
-            hint=f"use one of: {', '.join(VARIANTS)}",
+            hint=f"use one of: {', '.join(DATASET_VARIANTS)}",
         )
     return LoggedId(scene, variant, behaviour, revision)
 

@@ -199,10 +199,13 @@ def logged_episodes_spl(
     target: np.ndarray,
     terminated: np.ndarray,
     max_steps: int,
+    snapshot: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """The SPL of logged episodes (columns of a transition table: episodes contiguous, each robot's stream
     contiguous) on ``ds``: per episode success, the breadth-first shortest length from its first cell and the cells
-    actually travelled (a collision travels nothing).
+    actually travelled (a collision travels nothing). On a moving twin, given each step's ``snapshot``, as evaluation
+    measures it there: the shortest path in time from the first cell at the episode's first snapshot (waits allowed)
+    against the steps taken (a bump into a mover costs a step: the static map alone cannot tell it from a move).
 
     Only the episodes that started at least ``max_steps`` (the log's step limit) before the end of their robot's
     stream count (``selection`` ``"started-early"``): each of them finished (reached its target or hit the limit)
@@ -223,16 +226,22 @@ def logged_episodes_spl(
     stream = np.diff(np.r_[starts, robot.size])
     pos = np.arange(robot.size) - np.repeat(starts, stream)
     keep = (pos + max_steps <= np.repeat(stream, stream))[first]
-    moved = mdp.next_cell[cell, np.asarray(action)] != cell
-    travelled = np.bincount(episode, weights=moved.astype(np.float64), minlength=n_ep)
     start, tgt = cell[first], np.asarray(target)[first]
     targets, row = np.unique(tgt, return_inverse=True)
-    shortest = mdp.bfs_distances_many(targets)[row, start] if n_ep else np.zeros(0)
+    if snapshot is not None and ds.is_moving:
+        travelled = np.bincount(episode, minlength=n_ep).astype(np.float64)  # steps, as evaluation counts them
+        t0 = np.asarray(snapshot)[first]
+        shortest = mdp.space_time_distances_many(targets)[row, t0, start].astype(np.int64) if n_ep else np.zeros(0)
+    else:
+        moved = mdp.next_cell[cell, np.asarray(action)] != cell
+        travelled = np.bincount(episode, weights=moved.astype(np.float64), minlength=n_ep)
+        shortest = mdp.bfs_distances_many(targets)[row, start] if n_ep else np.zeros(0)
     success = np.asarray(terminated)[last]
     selection = "started-early"
     if not keep.any():
         lengths = np.bincount(episode, minlength=n_ep)
         keep, selection = success | (lengths >= max_steps), "finished"
+    keep &= shortest >= 0  # a start that movers cut off from its target in time has no shortest path
     if not keep.any():
         return {"spl": float("nan"), "success_rate": float("nan"), "episodes": 0, "selection": selection}
     return {

@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from dtradar_data.core.dataset import Dataset
@@ -49,12 +48,11 @@ from dtradar_rl.agents.policy import Policy
 from dtradar_rl.envs.batched import BatchedNavEnv
 from dtradar_rl.evaluation.normalized import DEFAULT_PAIRS, DEFAULT_SEED, METRIC, ShortestPathOracle
 from dtradar_rl.offline import walks
-from dtradar_rl.offline.checkpoint_twin import check_logs_on_its_twin
+from dtradar_rl.offline.checkpoint_twin import checkpoint_policy
 from dtradar_rl.task.config import ConfigError, TwinConfig
 from dtradar_rl.task.noise import noise_model
 from dtradar_rl.task.observations import Normalizer
 from dtradar_rl.task.sensing import sensing_for
-from dtradar_rl.train.saved_runs import load_policy
 
 #: The dataset families (D4RL's names), in the order ``--behaviour all`` logs them.
 FAMILIES: tuple[str, ...] = ("random", "expert", "medium", "medium-replay", "mixed")
@@ -342,55 +340,6 @@ class Actor:
             mask = self.component == i
             out = torch.where(mask, self._single(kind, obs, random_actions, coin), out)
         return out
-
-
-def checkpoint_policy(
-    spec: BehaviourSpec, obs: str, normalizer: Normalizer, device: str = "cpu", *, ds: Dataset | None = None
-) -> Policy | None:
-    """The DQN of an ``epsilon-greedy`` (or ``medium``) behaviour, checked to observe like the log (preset and
-    normaliser) and, given the logged twin ``ds``, an ``epsilon-greedy`` one to be trained on it
-    (:mod:`.checkpoint_twin`). A ``medium`` spec must have been resolved
-    (:func:`dtradar_rl.offline.medium_agent.resolve_spec`)."""
-    if "epsilon-greedy" in spec.used:
-        path = spec.checkpoint
-    elif "medium" in spec.used:
-        path = spec.medium_checkpoint
-        if not path:
-            raise ConfigError(
-                f"the {spec.kind} behaviour acts with the medium agent, which this spec does not name yet",
-                hint="resolve it first: dtradar_rl.offline.medium_agent.resolve_spec(config, dataset) trains or reuses",
-            )
-    else:
-        return None
-    policy = load_policy(path, device)
-    if ds is not None and "epsilon-greedy" in spec.used:  # the medium agent is trained on ds by resolve_spec
-        check_logs_on_its_twin(policy, ds, path)
-    if getattr(policy.config, "memory_radius", 0):
-        raise ConfigError(
-            f"the checkpoint {path} is a memory agent ({policy.config.preset} preset): a logged step holds "
-            "the twin's observation only, not the agent's memory of the episode",
-            hint='log with a memoryless agent: make train SCENE=<scene> ARGS="--preset tuned --out runs/<scene>/tuned"',
-        )
-    if policy.sense_radius != 1:
-        raise ConfigError(
-            f"the checkpoint {path} senses the cells up to {policy.sense_radius} away (--sense-radius "
-            f"{policy.sense_radius}): a logged step holds the {obs!r} observation of the four neighbours only",
-            hint="log with an agent trained with --sense-radius 1 (the default of make train on a blueprint)",
-        )
-    if policy.obs_preset != obs:
-        raise ConfigError(
-            f"the checkpoint {path} observes {policy.obs_preset!r}, the log {obs!r}",
-            hint=f"pass --obs {policy.obs_preset}",
-        )
-    if not np.allclose(policy.normalizer.mean, normalizer.mean, rtol=1e-5, atol=1e-6) or not np.allclose(
-        policy.normalizer.std, normalizer.std, rtol=1e-5, atol=1e-6
-    ):
-        raise ConfigError(
-            f"the checkpoint {path} was trained on another twin (its feature normaliser "
-            "differs from the logged twin's)",
-            hint="log on the twin the checkpoint was trained on",
-        )
-    return policy
 
 
 @dataclass

@@ -2,7 +2,8 @@
 for every robot of a batched env.
 
 :func:`roll` runs a behaviour for about ``steps`` environment steps (rounded up to whole steps of all robots) and
-returns numpy arrays robot by robot, every episode contiguous, with the observation before and after each move. The
+returns numpy arrays robot by robot, every episode contiguous, with the observation before and after each move (and,
+on a moving twin, the snapshot each step starts in: ``snapshot``). The
 last step of each episode is ``terminated`` (target reached) or ``truncated`` (the step limit, or the logging budget
 ending mid-episode), never both. Nothing is dropped.
 
@@ -108,14 +109,12 @@ def roll(
     if not sensing_for(sensing).privileged:
         honest = HonestNavEnv(env, Readings.from_dataset(ds), sensing, sensing_noise, seed)
     horizon = -(-steps // num_envs)
-    keys = ("obs", "action", "reward", "next_obs", "terminated", "truncated", "cell", "target")
-    rec: dict[str, list[torch.Tensor]] = {k: [] for k in keys}
+    rec = _recorder(env)
     o = env.reset()
     seen = honest.observe() if honest is not None else o  # what is recorded as the robot's observation
     for _ in range(horizon):
         a = actor(o)
-        rec["cell"].append(env.cell.clone())
-        rec["target"].append(env.target.clone())
+        _record_where(rec, env)
         next_o, r, term, trunc, _ = (honest or env).step(a)
         rec["obs"].append(seen)
         rec["action"].append(a)
@@ -135,6 +134,21 @@ def roll(
             seen = o
 
     return _assemble(rec, num_envs, horizon, actor.component.cpu().numpy(), t0)
+
+
+def _recorder(env: BatchedNavEnv) -> dict[str, list[torch.Tensor]]:
+    """The per-step lists a rollout fills; on a moving twin also ``snapshot``, the snapshot each step starts in (the
+    transition table has no column for it: :mod:`dtradar_rl.offline.moving_logs` keeps it in the meta)."""
+    keys = ("obs", "action", "reward", "next_obs", "terminated", "truncated", "cell", "target")
+    return {k: [] for k in keys + (("snapshot",) if env.moving else ())}
+
+
+def _record_where(rec: dict[str, list[torch.Tensor]], env: BatchedNavEnv) -> None:
+    """Record where every robot is before its move: its cell, its target and, on a moving twin, its snapshot."""
+    rec["cell"].append(env.cell.clone())
+    rec["target"].append(env.target.clone())
+    if "snapshot" in rec:
+        rec["snapshot"].append(env.t.clone())
 
 
 def _assemble(rec: dict[str, list[torch.Tensor]], n: int, horizon: int, component: np.ndarray, t0: float) -> Rollout:
@@ -206,14 +220,12 @@ def replay(
         ds, n, obs=obs, normalizer=normalizer, reward=reward, max_steps=max_steps or None, device=device, seed=seed
     )
     as_t = lambda x: torch.as_tensor(x, device=env.device)  # noqa: E731
-    keys = ("obs", "action", "reward", "next_obs", "terminated", "truncated", "cell", "target")
-    rec: dict[str, list[torch.Tensor]] = {k: [] for k in keys}
+    rec = _recorder(env)
     env.reset()
     for t in range(horizon):
         rows = slice(t * n, (t + 1) * n)
         o, a = as_t(tr["obs"][rows]), as_t(tr["action"][rows]).long()
-        rec["cell"].append(env.cell.clone())
-        rec["target"].append(env.target.clone())
+        _record_where(rec, env)
         seen = env.observe()
         next_o, r, term, trunc, _ = env.step(a)
         same = (

@@ -84,6 +84,7 @@ from dtradar_rl.offline.collection import replay, roll, rollout_bytes, rollout_s
 from dtradar_rl.offline.log_settings import parent_version, settings_of
 from dtradar_rl.offline.medium_agent import medium_agent, resolve_spec
 from dtradar_rl.offline.minari_copy import check_minari_free, export_minari
+from dtradar_rl.offline.moving_logs import check_moving_log, moving_meta
 from dtradar_rl.task.config import DEFAULT_IN_HELP, ConfigError
 from dtradar_rl.task.observations import Normalizer, build_observations, obs_dim
 from dtradar_rl.task.runtime import auto_threads
@@ -231,6 +232,7 @@ def log_families(cfg: LogConfig, dataset: Dataset | None = None) -> dict[str, Lo
     cfg = cfg.validate()
     writable_data_root()  # a read-only data root is refused before the twin is loaded, a family rolled out
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
+    check_moving_log(cfg, ds)
     check_minari_copies(cfg.families(), ds)  # all of them before the first family is logged
     return {c.behaviour: log_dataset(c, ds) for c in cfg.families()}
 
@@ -270,6 +272,7 @@ def log_dataset(cfg: LogConfig, dataset: Dataset | None = None) -> LoggedDataset
     torch.set_num_threads(cfg.threads or auto_threads())
     say = print if cfg.verbose else (lambda *a, **k: None)
     ds = dataset if dataset is not None else load_dataset(cfg.dataset_name)
+    check_moving_log(cfg, ds)
     if cfg.behaviour != "medium-replay":
         cfg.check_memory(ds.transmitters)  # the twin's own observation width, wider with each transmitter
     check_minari_copies([cfg], ds)
@@ -340,6 +343,8 @@ def _log(cfg: LogConfig, ds: Dataset, lid, inputs: dict[str, Any], say) -> Logge
         "stats": {"rollout": r.stats},
         "score": behaviour_score(cfg, ds, spec, c, settings["max_steps"]),
     }
+    if ds.is_moving:  # the snapshot of every step, which the table has no column for
+        meta["moving"] = moving_meta(ds, c)
     if cfg.behaviour in FAMILIES or cfg.behaviour in OGBENCH_FAMILIES:
         meta["family"] = cfg.behaviour
     if agent is not None:
@@ -392,6 +397,7 @@ def behaviour_score(
         target=columns["target"],
         terminated=columns["terminated"],
         max_steps=max_steps,
+        snapshot=columns.get("snapshot"),  # a moving twin's: the SPL in time, as evaluation measures it there
     )
     ep["normalized"] = normalized(ep["spl"], refs) if ep["episodes"] else float("nan")
     pol = None

@@ -259,13 +259,10 @@ def _write_copy(minari, stage: Path, mid: str, logged: LoggedDataset, envs: Mina
     d = a["obs"].shape[1]
     s = logged.meta.get("stats") or {}
     if envs.spec is not None:
-        refs = reference_returns(envs.eval_spec)
-        env_args = {
-            "env": envs.env,
-            "eval_env": envs.eval_spec,
-            "ref_min_score": refs["ref_min_score"],
-            "ref_max_score": refs["ref_max_score"],
-        }
+        refs = reference_returns(envs.eval_spec)  # None on a moving twin: Minari's are optional
+        env_args = {"env": envs.env, "eval_env": envs.eval_spec}
+        if refs is not None:
+            env_args.update(ref_min_score=refs["ref_min_score"], ref_max_score=refs["ref_max_score"])
         how = (
             f"recover_environment(): {env_text(envs.spec)}; recover_environment(eval_env=True): "
             f"{env_text(envs.eval_spec)} (import path {envs.spec.entry_point}, needs dtradar installed)"
@@ -375,7 +372,8 @@ def export_minari(
             )
         with held_stage(root, STAGE_PREFIX, lockless=lambda _: True) as stage:  # .dtradar-stage-*: only ours
             staged = _write_copy(minari, stage, mid, logged, envs)
-            refs = reference_returns(envs.eval_spec)["references"] if envs.spec is not None else None
+            found = reference_returns(envs.eval_spec) if envs.spec is not None else None
+            refs = found["references"] if found is not None else None
             rec = {
                 **_wanted(logged, senses),
                 "minari_id": mid,

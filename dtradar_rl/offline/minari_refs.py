@@ -7,7 +7,9 @@ return-based normalised score (:mod:`dtradar_rl.evaluation.returns`) on that env
 mean discounted return (γ = :data:`~dtradar_rl.tabular.solver.GAMMA`) of uniformly random moves and of the optimal
 policy over the twin's 500 seeded evaluation pairs (seed 2024). So ``100 · get_normalized_score(dataset, J)``, with
 ``J`` a policy's mean discounted return over those pairs, is :func:`~dtradar_rl.evaluation.returns.return_score`.
-Minari runs no policy of its own for them (it would, with an ``expert_policy``).
+Minari runs no policy of its own for them (it would, with an ``expert_policy``). A moving twin's copy has none: the
+exact references solve a static twin's MDP, and a moving twin's is in space-time (its Minari metadata leaves them out,
+which Minari allows; the dtradar card gives the log's SPL-based normalised score).
 """
 
 from __future__ import annotations
@@ -18,14 +20,17 @@ from dtradar_rl.evaluation.returns import return_references
 from dtradar_rl.tabular.solver import GAMMA
 
 
-def reference_returns(eval_spec: Any) -> dict[str, Any]:
-    """``{"ref_min_score", "ref_max_score", "references"}`` for the evaluation env spec of a Minari copy."""
+def reference_returns(eval_spec: Any) -> dict[str, Any] | None:
+    """``{"ref_min_score", "ref_max_score", "references"}`` for the evaluation env spec of a Minari copy; None when
+    its twin is a moving one (module docstring)."""
     from dtradar_rl.task.twins import is_synthetic, load_dataset
 
     kw = eval_spec.kwargs
     dataset, version = kw["dataset"], kw.get("version")
     scene = dataset.split("/")[0]
     ds = load_dataset(dataset if version is None or is_synthetic(scene) else f"{dataset}@{version}")
+    if ds.is_moving:
+        return None
     refs = return_references(ds, reward=kw.get("reward", "geodesic"), gamma=GAMMA)
     return {
         "ref_min_score": refs["random"],

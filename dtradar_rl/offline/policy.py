@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from dtradar_data.core.dataset import Dataset
+from dtradar_data.core.ids import MOVING_VARIANT
 from dtradar_rl.agents.checkpoints import CheckpointError
 from dtradar_rl.agents.policy import Policy
 from dtradar_rl.evaluation.evaluate import evaluate_twins
@@ -114,6 +115,15 @@ def load_offline_policy(path: str | Path, device: str = "cpu") -> OfflinePolicy:
     )
 
 
+def evaluated_variants(cfg: OfflineConfig) -> tuple[str, ...]:
+    """``cfg.eval_variants``, the moving twin first when the run learnt on it: an agent is evaluated among the movers
+    it was trained with, and on the static twins it may transfer to (empty stays empty: no evaluation)."""
+    variants = tuple(cfg.eval_variants)
+    if not variants or cfg.variant != MOVING_VARIANT or MOVING_VARIANT in variants:
+        return variants
+    return (MOVING_VARIANT, *variants)
+
+
 def evaluate_offline(
     policy: OfflinePolicy, cfg: OfflineConfig, datasets: dict[str, Dataset] | None = None
 ) -> list[dict[str, Any]]:
@@ -122,7 +132,7 @@ def evaluate_offline(
     rows = evaluate_twins(
         policy,
         cfg.scene,
-        cfg.eval_variants,
+        evaluated_variants(cfg),
         label=f"{cfg.algorithm}: ",
         pairs=cfg.pairs,
         seed=cfg.eval_seed,
@@ -137,4 +147,11 @@ def evaluate_offline(
     return [{**row, "algorithm": cfg.algorithm} for row, _, _ in rows]
 
 
-__all__ = ["ActionScores", "OfflinePolicy", "d3rlpy_device", "evaluate_offline", "load_offline_policy"]
+__all__ = [
+    "ActionScores",
+    "OfflinePolicy",
+    "d3rlpy_device",
+    "evaluate_offline",
+    "evaluated_variants",
+    "load_offline_policy",
+]

@@ -58,6 +58,7 @@ def render_logged_card(meta: dict[str, Any], tag: str | None) -> str:
         family=meta.get("family"),
         score=meta.get("score") or {},
         medium_agent=meta.get("medium_agent") or {},
+        moving=meta.get("moving") or {},
         steps=meta.get("steps"),
         seed=meta.get("seed"),
         settings=meta.get("settings") or {},
