@@ -89,7 +89,8 @@ class OfflineConfig(BehaviourConfig):
     bcq_flexibility: float = 0.3
     """bcq: actions whose behaviour probability is below this fraction of the likeliest are not taken"""
     eval_variants: tuple[str, ...] = ("blueprint", "dynamic")
-    """twins of the scene to evaluate on after training (empty = no evaluation)"""
+    """twins of the scene to evaluate on after training (empty = no evaluation); a run on a moving twin's log is
+    evaluated on the moving twin too"""
     pairs: int = 500
     """seeded (start, target) pairs per evaluated twin"""
     eval_seed: int = 2024
