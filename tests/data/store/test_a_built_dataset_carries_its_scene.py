@@ -119,20 +119,34 @@ def test_extra_files_outside_the_scene_folder_are_refused(root, tmp_path, name):
         writing.write_version("cubicle/blueprint", "0123456789abcdef", ds.table, dict(ds.meta), extra_files={name: src})
 
 
-def test_a_scene_on_an_external_xml_is_stored_self_contained(tmp_path):
+def _canyon_scene(tmp_path: Path) -> dict[str, Path]:
+    """Sionna's street canyon as a user's XML, stored as a build stores it; then the user's folder is moved away."""
     from dtradar_data.geometry.scene_files import write_stored_scene
     from dtradar_data.scenes import load_scene_spec
     from dtradar_data.scenes.sionna_scenes import sionna_xml
 
-    src = sionna_xml("simple_street_canyon").parent
-    shutil.copytree(src, tmp_path / "canyon")
+    shutil.copytree(sionna_xml("simple_street_canyon").parent, tmp_path / "canyon")
     xml = tmp_path / "canyon" / "simple_street_canyon.xml"
     spec = load_scene_spec(xml, "blueprint", grid=(-20.0, -4.0, 4.0, 11, 3), tx=(0.0, 0.0, 20.0))
-    one = write_stored_scene(spec, tmp_path / "one")
+    stored = write_stored_scene(spec, tmp_path / "stored")
     shutil.move(tmp_path / "canyon", tmp_path / "moved")  # the stored copy no longer needs the user's folder
-    text = (tmp_path / "one" / "scene.xml").read_text()
+    return stored
+
+
+def test_a_scene_on_an_external_xml_is_stored_self_contained(tmp_path):
+    stored = _canyon_scene(tmp_path)
+    text = (tmp_path / "stored" / "scene.xml").read_text()
     assert str(tmp_path) not in text and 'value="base/meshes/' in text and "sha256" in text
-    for name, path in one.items():
+    for name, path in stored.items():
         assert name.startswith("scene/") and path.is_file()
-    names = [Path(n).name for n in one]
-    assert "scene.xml" in names and sum(n.startswith("scene/base/") for n in one) >= 2
+    assert "scene/scene.xml" in stored and sum(n.startswith("scene/base/") for n in stored) >= 2
+
+
+@pytest.mark.sionna
+def test_plain_sionna_opens_a_stored_scene_on_an_external_xml(tmp_path):
+    from dtradar_data.rt.tracer import _import_sionna
+
+    _canyon_scene(tmp_path)
+    _, rt = _import_sionna("cpu", cpu_only=True)
+    scene = rt.load_scene(str(tmp_path / "stored" / "scene.xml"), merge_shapes=False)
+    assert len(scene.objects) >= 2 and "floor" in scene.objects  # Sionna drops the "mesh-" of an id
