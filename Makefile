@@ -11,9 +11,9 @@ SCENES  ?=
 
 .PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-tx-shift bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-radio bench-tabular bench-offline-speed bench-gpu gpu-pack
 
-# List the targets (the first line of the comment above each one); `make` alone does the same.
+# List the targets, each with the first line of the comment above it (a make variable shown as <name>); `make` alone does the same.
 help:
-	@awk '/^# / { if (c == "") c = substr($$0, 3); next } /^[a-z][a-z-]*:/ { n = $$1; sub(/:.*/, "", n); printf "  %-14s %s\n", n, c; c = ""; next } { c = "" }' $(MAKEFILE_LIST)
+	@awk '/^# / { if (c == "") c = substr($$0, 3); next } /^[a-z][a-z-]*:/ { n = $$1; sub(/:.*/, "", n); while (match(c, /\$$\([A-Z_]+\)/)) c = substr(c, 1, RSTART - 1) "<" tolower(substr(c, RSTART + 2, RLENGTH - 3)) ">" substr(c, RSTART + RLENGTH); printf "  %-20s %s\n", n, c; c = ""; next } { c = "" }' $(MAKEFILE_LIST)
 
 # One command on a fresh machine: a venv with the CPU build of torch, Sionna RT and a libLLVM >= 16 for it.
 setup:
@@ -114,7 +114,7 @@ BEHAVIOUR ?= noisy-shortest
 # e.g. make log SCENE=cubicle BEHAVIOUR=mixture ARGS="--checkpoint runs/cubicle/dqn/model.pt" (a memoryless agent:
 # make train SCENE=cubicle AGENT=dqn ARGS="--preset tuned"). Dataset families (D4RL's names, no checkpoint needed): BEHAVIOUR=
 # random, expert, medium, medium-replay or mixed, and OGBench's navigate, stitch or explore; BEHAVIOUR=all logs the
-# eight (docs/logged-datasets.md).
+# eight (docs/reference/logged-datasets.md).
 log:
 	$(PY) -m dtradar_rl log --scene $(SCENE) --behaviour $(BEHAVIOUR) $(ARGS)
 

@@ -19,6 +19,10 @@ def test_make_help_gives_every_target_one_complete_line():
     assert set(targets) <= set(lines), set(targets) - set(lines)
     cut = {t: d for t, d in lines.items() if not d or not re.search(r"[.)*/]$", d)}
     assert not cut, f"targets whose help line is empty or cut mid-sentence: {cut}"
+    raw = {t: d for t, d in lines.items() if "$(" in d}
+    assert not raw, f"help lines showing a make variable unexpanded (the help writes $(SCENE) as <scene>): {raw}"
+    columns = {line.index(d) for line in out.splitlines() if (d := line.split(maxsplit=1)[-1])}
+    assert len(columns) == 1, "every description starts in the same column, after the longest target's name"
 
 
 @pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
