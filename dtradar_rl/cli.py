@@ -161,8 +161,9 @@ def _offline_commands() -> dict:
         print(f"curves: {result.out_dir / 'curve.png'}, {result.out_dir / 'curve.csv'}")
 
     def offline_cmd(cfg: Annotated[OfflineConfig, tyro.conf.arg(name="")] = OFFLINE_DEFAULT) -> None:
-        """Offline RL with d3rlpy (cql, bcq, bc, dqn, ddqn, nfq) on a named logged dataset (--logged, else
-        <scene>/<variant>/<behaviour>, logged or reused), evaluated on the blueprint and dynamic twins."""
+        """Offline RL with d3rlpy (bcq by default, the best measured; cql, bc, dqn, ddqn, nfq) on a named logged
+        dataset (--logged, else <scene>/<variant>/<behaviour>, logged or reused), evaluated on the blueprint and
+        dynamic twins; the results table gives each twin's normalised score (0 random, 100 shortest-path expert)."""
         from dtradar_rl.offline.trainer import train_offline
 
         result = train_offline(cfg.validate())

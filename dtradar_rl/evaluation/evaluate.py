@@ -340,6 +340,8 @@ COLUMNS = (
     ("latency_ms", "decision p50 (ms)", "{:.3f}"),
     ("latency_p99_ms", "p99 (ms)", "{:.3f}"),
 )
+#: The column added after SPL when the rows carry their normalised score (dtradar_rl.evaluation.scored_rows).
+NORMALIZED_COLUMN = ("normalized", "normalised score (0 random, 100 expert)", "{:.1f}")
 #: Columns added when a row is of a moving twin.
 MOVING_COLUMNS = (
     ("wall_collisions", "wall collisions/ep", "{:.2f}"),
@@ -349,9 +351,12 @@ MOVING_COLUMNS = (
 
 
 def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
-    """Rows ``{"case": ..., **Metrics.to_dict()}`` as a Markdown table (with the mover columns when a row has
-    them)."""
+    """Rows ``{"case": ..., **Metrics.to_dict()}`` as a Markdown table (with the normalised score after SPL, and the
+    mover columns, when a row has them)."""
     columns = COLUMNS + (MOVING_COLUMNS if any(row.get("mover_hits") is not None for row in rows) else ())
+    if any("normalized" in row for row in rows):
+        at = [c[0] for c in columns].index("spl") + 1
+        columns = (*columns[:at], NORMALIZED_COLUMN, *columns[at:])
     head = ["case"] + [c[1] for c in columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:

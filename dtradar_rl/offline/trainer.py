@@ -1,8 +1,8 @@
 """Offline-RL baselines with d3rlpy: log a behaviour policy's transitions on a twin, train on them, evaluate.
 
     from dtradar_rl.offline.trainer import OfflineConfig, train_offline
-    result = train_offline(OfflineConfig(scene="cubicle", algorithm="cql"))
-    result.model      # runs/cubicle/offline/cql/model.d3, with config.json, losses.csv, results.{json,md} beside it
+    result = train_offline(OfflineConfig(scene="cubicle"))   # --algorithm bcq, the best measured
+    result.model      # runs/cubicle/offline/bcq/model.d3, with config.json, losses.csv, results.{json,md} beside it
 
 Three stages, each usable on its own:
 
@@ -52,6 +52,7 @@ from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import open_atomic, write_atomic
 from dtradar_data.store.logged import LoggedDataset
 from dtradar_rl.evaluation.evaluate import write_results
+from dtradar_rl.evaluation.scored_rows import with_normalized
 from dtradar_rl.offline.behaviours import BehaviourConfig
 from dtradar_rl.offline.config import ALGORITHMS, OFFLINE_FORMAT, OfflineConfig, check_algorithm
 from dtradar_rl.offline.formats import as_logged, import_d3rlpy, quiet_d3rlpy, to_mdp_dataset
@@ -330,6 +331,8 @@ def _train_offline(cfg: OfflineConfig, dataset: Dataset | LoggedDataset | str | 
     rows, md = [], ""
     if cfg.eval_variants:
         rows = evaluate_offline(policy, cfg, datasets={ds.name: ds})
+        kw = dict(pairs=cfg.pairs, seed=cfg.eval_seed, max_steps=cfg.max_steps or None, device=cfg.device)
+        rows = with_normalized(rows, {ds.name: ds}, **kw)  # the score of the cards and the benchmark, on these pairs
         md = write_results(rows, out, meta)
     wall = time.perf_counter() - t_start
     return OfflineResult(model, out, policy, stats, cfg.n_steps, train_s, wall, losses, rows, md, logged_data)
