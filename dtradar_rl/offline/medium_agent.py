@@ -2,7 +2,13 @@
 until its normalised score reaches the recipe's target, and cached under
 ``<root>/logged/<scene>/<variant>/medium/agents/<key>/`` (``model.pt``, ``last.pt`` with its replay buffer,
 ``medium.json``), where ``key`` hashes the twin, the recipe, the seed, the logging settings and the library versions.
-Two processes training the same agent take turns; the second reuses the first's."""
+Two processes training the same agent take turns; the second reuses the first's.
+
+A cached agent is served only when its content is the one its record describes (:func:`cached_agent_problem`): the
+record's inputs hash to the folder's key, and ``model.pt`` (what ``medium`` and ``mixed`` act with) and ``last.pt``
+(the replay buffer ``medium-replay`` logs) have the sha256 the record took when the run was installed. A folder name
+says only which inputs it was trained for: a file damaged on disk or put back from another run would otherwise serve
+a wrong agent or another run's buffer. Any mismatch trains the agent again, saying why."""
 
 from __future__ import annotations
 
@@ -76,15 +82,34 @@ def medium_agent_dir(cfg: BehaviourConfig, key: str) -> Path:
     return logged_dir(parse_logged_id(f"{cfg.scene}/{cfg.variant}/medium")) / MEDIUM_AGENTS / key
 
 
-def _stored_agent(path: Path, key: str) -> MediumAgent | None:
+def cached_agent_problem(path: Path, key: str) -> str | None:
+    """Why the cache folder ``path`` of the agent ``key`` cannot be served (None when it can: module docstring)."""
     try:
         record = json.loads((path / MEDIUM_RECORD).read_text())
-        agent = MediumAgent(path, record)
-        if record.get("key") == key and agent.last.is_file():
-            if sha256_file(agent.checkpoint) == record.get("checkpoint_sha256"):
-                return agent
-    except (OSError, ValueError):
-        pass
+    except (OSError, ValueError) as exc:
+        return f"its {MEDIUM_RECORD} cannot be read ({type(exc).__name__})"
+    if not isinstance(record, dict) or record.get("key") != key or version_id(record.get("inputs") or {}) != key:
+        return f"its {MEDIUM_RECORD} is not the record of agent {key} (its inputs hash to another key)"
+    agent = MediumAgent(path, record)
+    for file, field in ((agent.checkpoint, "checkpoint_sha256"), (agent.last, "last_sha256")):
+        if not record.get(field):
+            return f"its record has no sha256 of {file.name} (written before the cache was checked)"
+        try:
+            if sha256_file(file) != record[field]:
+                return f"its {file.name} is not the one trained (sha256 differs from its record)"
+        except OSError:
+            return f"its {file.name} is missing"
+    return None
+
+
+def _stored_agent(path: Path, key: str, say=print) -> MediumAgent | None:
+    """The cached agent in ``path`` when its content checks out; None (said, when there was one) otherwise."""
+    if not path.exists():
+        return None
+    why = cached_agent_problem(path, key)
+    if why is None:
+        return MediumAgent(path, json.loads((path / MEDIUM_RECORD).read_text()))
+    say(f"medium agent {key}: the cached copy in {path} cannot be used ({why}): training it again")
     return None
 
 
@@ -97,7 +122,7 @@ def medium_agent(cfg: BehaviourConfig, ds: Dataset, say=print) -> MediumAgent:
     with waiting_lock(
         path.parent / f".{key}.lock", f"training the medium agent {key} of {ds.name}", then="this process reuses it"
     ):
-        agent = _stored_agent(path, key)
+        agent = _stored_agent(path, key, say)
         if agent is not None:
             say(
                 f"medium agent {key}: reused ({agent.record['stopped_at_env_steps']} env steps, normalised score "
@@ -235,6 +260,7 @@ def _medium_record(
         "evaluations": len(history),
         "history": [{"env_steps": h[0], "train_s": h[1], "spl": h[2], "score": h[3]} for h in history],
         "checkpoint_sha256": sha256_file(checkpoint),
+        "last_sha256": sha256_file(checkpoint.parent / "last.pt"),
     }
 
 
@@ -269,6 +295,7 @@ def resolve_spec(cfg: BehaviourConfig, ds: Dataset, *, agent: MediumAgent | None
 
 __all__ = [
     "MEDIUM_AGENTS",
+    "cached_agent_problem",
     "MEDIUM_RECORD",
     "MediumAgent",
     "medium_agent",
