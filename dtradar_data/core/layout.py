@@ -28,6 +28,11 @@ COVERAGE_FILE = "coverage.png"
 #: animation.
 CITY_FILE = "city.png"
 MOVING_GIF_FILE = "moving.gif"
+#: The picture of the stored table itself (cells.parquet's path gain per cell, per transmitter, on one dB scale):
+#: what an agent reads, beside the radio map's estimate on a finer grid (dtradar_data.pipeline.cells_picture).
+CELLS_PICTURE_FILE = "cells.png"
+#: Every picture a version may hold, in the order a build names them.
+PICTURE_FILES = (COVERAGE_FILE, CELLS_PICTURE_FILE, CITY_FILE, MOVING_GIF_FILE)
 META_FILE = "meta.json"
 #: The folder holding the Mitsuba scene a version was traced from (``scene.xml`` and the meshes it names, by relative
 #: paths), so that ``sionna.rt.load_scene`` opens it without dtradar; files in it are listed in ``meta.json`` by their

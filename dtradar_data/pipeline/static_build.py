@@ -17,7 +17,7 @@ import pyarrow as pa
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.errors import InvalidCoordinatesError, InvalidSettingError
 from dtradar_data.core.ids import DatasetId, format_id
-from dtradar_data.core.layout import work_root
+from dtradar_data.core.layout import CELLS_PICTURE_FILE, work_root
 from dtradar_data.core.schema import tx_column
 from dtradar_data.geometry.floorplan import save_city_overview_png
 from dtradar_data.geometry.occupancy import occupancy
@@ -25,6 +25,7 @@ from dtradar_data.geometry.scene_files import write_stored_scene
 from dtradar_data.geometry.xml_transmitter import check_transmitter_in_mesh
 from dtradar_data.pipeline import differential
 from dtradar_data.pipeline.batches import batch_dir, batch_layout, load_batch
+from dtradar_data.pipeline.cells_picture import render_cells_png
 from dtradar_data.pipeline.config import BuildConfig, scene_config
 from dtradar_data.pipeline.coverage import render_coverage_png
 from dtradar_data.pipeline.executors import check_ray_address
@@ -206,6 +207,8 @@ def _new_version(job: _Job, work_dir: Path, tmp: Path, traced: _Traced) -> NewVe
         if tracer is None:
             tracer = RayTracer(spec, settings)
         extra["coverage.png"] = render_coverage_png(spec, tracer, tmp / "coverage.png", samples=config.coverage_samples)
+    # the table itself, cell for cell (cheap: no tracer), so a hole the radio map smooths over shows
+    extra[CELLS_PICTURE_FILE] = render_cells_png(spec, traced.cells, traced.blocked, tmp / CELLS_PICTURE_FILE)
     if spec.prisms and "city" in spec.provenance:
         extra["city.png"] = save_city_overview_png(
             city_quadrant_specs(spec, config), tmp / "city.png", highlight=original_scene(spec)

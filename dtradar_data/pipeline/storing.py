@@ -21,7 +21,7 @@ import pyarrow as pa
 from dtradar_data.core.dataset import Dataset
 from dtradar_data.core.files import waiting_lock
 from dtradar_data.core.ids import DatasetId, format_id
-from dtradar_data.core.layout import work_root
+from dtradar_data.core.layout import PICTURE_FILES, work_root
 from dtradar_data.core.schema import SCHEMA_VERSION
 from dtradar_data.pipeline.resume import claim_device
 from dtradar_data.rt.settings import RTSettings
@@ -80,8 +80,18 @@ def store_version(
     ):
         if local.version_exists(ds_id, version):
             print(f"{name}: version {version} already built, reusing it")
-            return local.load(name, revision=version)
+            ds = local.load(name, revision=version)
+            say_pictures(name, ds.path)
+            return ds
         return write_new_version(ds_id, version, work_dir, make, rt)
+
+
+def say_pictures(name: str, version_dir: Path) -> None:
+    """Print where the version's pictures are (the radio map, the table's own, a city's overview, a moving twin's
+    animation), so a build's user opens them without knowing the store's layout."""
+    for picture in PICTURE_FILES:
+        if (version_dir / picture).is_file():
+            print(f"{name}: picture {version_dir / picture}")
 
 
 def write_new_version(
@@ -100,6 +110,7 @@ def write_new_version(
         new.tracer.close()
     shutil.rmtree(work_dir, ignore_errors=True)
     print(f"{name}: stored version {version} in {out}")
+    say_pictures(name, out)
     return local.load(name, revision=version)
 
 

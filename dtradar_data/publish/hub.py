@@ -43,7 +43,7 @@ from dtradar_data.store.versions import read_refs
 
 #: Files a Hub repo may hold for one version; anything else in the repo (e.g. .gitattributes) is left alone.
 # every file of a version but its card (rendered for the Hub); the pictures only where the version has them
-DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, P.COVERAGE_FILE, P.CITY_FILE, P.MOVING_GIF_FILE, P.META_FILE)
+DATA_FILES = (P.CELLS_FILE, P.PATHS_FILE, *P.PICTURE_FILES, P.META_FILE)
 #: The scene folder's files travel too; they are named by ``meta.json`` (a version's meshes depend on its materials).
 SCENE_PATTERN = f"{P.SCENE_DIR}/*"
 
