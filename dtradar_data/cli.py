@@ -221,6 +221,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _parse_and_run(argv: list[str]) -> int:
+    cfg = parse(argv)
+    return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()
+
+
+def parse(argv: list[str]) -> object:
+    """The command ``argv`` names, parsed and checked as values (the errors :func:`parse_command` raises), with
+    nothing run: a :class:`BuildConfig`, or a command object whose ``run()`` does the work. The docs' commands are
+    checked with it (tests/test_docs_commands.py)."""
     commands = {
         "build": BuildConfig,
         "list": ListCmd,
@@ -233,14 +241,13 @@ def _parse_and_run(argv: list[str]) -> int:
         "place": PlaceCmd,
         "channels": ChannelsCmd,
     }
-    cfg = parse_command(
+    return parse_command(
         commands,
         argv,
         prog="python -m dtradar_data",
         description="Sionna RT digital-twin datasets: build, list, inspect, verify, card, publish, pull, place; "
         "generate channels from a stored one. " + DEBUG_HELP,
     )
-    return run_build(cfg) if isinstance(cfg, BuildConfig) else cfg.run()
 
 
 def parse_command(commands: dict[str, type], argv: list[str], **kwargs) -> object:

@@ -104,21 +104,35 @@ def main(argv: list[str] | None = None) -> int:
 
 def _parse_and_run(argv: list[str]) -> int:
     """Parse ``argv`` into one command's config and run it; 0 when it returns."""
-    commands = {
-        **_agent_commands(_train_default(argv)),
-        **_offline_commands(),
-        **_experiment_commands(),
-    }
+    _cli({name: _checked(cmd) for name, cmd in _commands(argv).items()}, argv)
+    return 0
+
+
+def parse(argv: list[str]) -> Config:
+    """The config ``argv`` gives its command, checked as the command checks it before its first step (the config's
+    ``validate()``), with nothing run: a bad value raises the same typed error the command would (a usage error is
+    tyro's ``SystemExit``). The docs' commands are checked with it (tests/test_docs_commands.py)."""
+    cfg = _cli({name: _config_of(cmd) for name, cmd in _commands(argv).items()}, argv)
+    with deferred_checks(False):
+        return cfg.validate()
+
+
+def _commands(argv: list[str]) -> dict:
+    """Every command, by name (train's defaults are those of the ``--preset`` in ``argv``)."""
+    return {**_agent_commands(_train_default(argv)), **_offline_commands(), **_experiment_commands()}
+
+
+def _cli(commands: dict, argv: list[str]):
+    """tyro's parse of ``argv`` into one of ``commands``, which it calls; what that returns."""
     # tyro would turn a config's own check (made while parsing) into its usage box: the checks wait for the
     # command's validate(), which raises the boundary's one-line error (exit 2), and run again inside the command.
     with deferred_checks():
-        tyro.extras.subcommand_cli_from_dict(
-            {name: _checked(cmd) for name, cmd in commands.items()},
+        return tyro.extras.subcommand_cli_from_dict(
+            commands,
             args=argv,
             prog="python -m dtradar_rl",
             description="Navigation agents on dtradar datasets. " + DEBUG_HELP,
         )
-    return 0
 
 
 def _agent_commands(train_default: DQNConfig) -> dict:
@@ -219,6 +233,17 @@ def _experiment_commands() -> dict:
         run_paper(cfg.validate())
 
     return {"solve": solve_cmd, "sweep": sweep_cmd, "paper": paper_cmd}
+
+
+def _config_of(command):
+    """``command`` (same signature and help) returning its parsed config instead of running."""
+
+    @functools.wraps(command)
+    def config(*args, **kwargs):
+        (cfg,) = (*args, *kwargs.values())
+        return cfg
+
+    return config
 
 
 def _checked(command):
