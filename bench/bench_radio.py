@@ -37,7 +37,7 @@ from dtradar_rl.task.twins import load_dataset
 from dtradar_rl.train.saved_runs import load_policy
 from dtradar_rl.viz.plots import _save, plt
 
-SCENES = ("cubicle", "meeting", "office", "dallas-q1", "dallas-q2", "dallas-q3", "dallas-q4", "sionna-munich_cells")
+SCENES = ("cubicle", "meeting", "office", "dallas-q1", "dallas-q2", "dallas-q3", "dallas-q4", "sionna-munich-10tx")
 HONEST = tuple(name for name, s in SENSINGS.items() if s.honest and name != "radio-no-proximity")
 NOISES = ("none", "realistic", "2x")
 #: The goals the default agent (radio, realistic noise) is held to: success and SPL on each twin.

@@ -2,7 +2,7 @@
 
 A dynamic twin (the blueprint plus movable objects) changes what a robot hears wherever the objects move a path. With
 several transmitters each one's paths change in their own places, so the observation shifts in more cells than with
-one. This script measures, for ``--scene`` (default ``dallas-cells-q3``, Dallas Q3 with three transmitters):
+one. This script measures, for ``--scene`` (default ``dallas-3tx-q3``, Dallas Q3 with three transmitters):
 
 1. per transmitter, the share of the cells free in both twins whose total path gain moved by more than
    ``--threshold-db`` or that became heard or silent, and the share where any transmitter's did;
@@ -14,7 +14,7 @@ one. This script measures, for ``--scene`` (default ``dallas-cells-q3``, Dallas 
 ``--one`` names the same twin with one transmitter (default ``dallas-q3``) for its changed share beside. Writes
 ``results/<name>.{json,md,png}``; the same 500 seeded pairs (seed 2024) as ``python -m dtradar_rl eval``.
 
-    python bench/bench_transmitter_shift.py --checkpoints runs/dallas-cells-q3/*/model.pt
+    python bench/bench_transmitter_shift.py --checkpoints runs/dallas-3tx-q3/*/model.pt
 """
 
 from __future__ import annotations
@@ -88,7 +88,7 @@ def run(args) -> dict:
     torch.set_num_threads(1)
     bp, dyn = load_dataset(f"{args.scene}/blueprint"), load_dataset(f"{args.scene}/dynamic")
     if dyn.transmitters < 2:
-        sys.exit(f"error: {args.scene} has one transmitter; name a twin with several (e.g. dallas-cells-q3)")
+        sys.exit(f"error: {args.scene} has one transmitter; name a twin with several (e.g. dallas-3tx-q3)")
     result = {"scene": args.scene, "threshold_db": args.threshold_db, "changed": shares(bp, dyn, args.threshold_db)}
     if args.one:
         result["one"] = args.one
@@ -170,7 +170,7 @@ def _plot(r: dict, path: Path) -> Path:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", default="dallas-cells-q3", help="a twin with several transmitters and a dynamic variant")
+    ap.add_argument("--scene", default="dallas-3tx-q3", help="a twin with several transmitters and a dynamic variant")
     ap.add_argument("--one", default="dallas-q3", help="the same twin with one transmitter ('' = none)")
     ap.add_argument("--checkpoints", nargs="*", default=[], help="model.pt files trained on the blueprint (globs too)")
     ap.add_argument("--no-planner", action="store_true")

@@ -7,7 +7,7 @@ not the JIT compile; the peak resident memory is that process's). Transmitter 0'
 every K: adding a transmitter must not change what the others trace. Writes ``results/bench_transmitters.json``,
 ``.md`` and ``.png`` (seconds and GiB against K, and the ratio to K = 1).
 
-    python bench/bench_transmitters.py [--scene dallas-cells-q3] [--counts 1 2 3]
+    python bench/bench_transmitters.py [--scene dallas-3tx-q3] [--counts 1 2 3]
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def _trace(scene: str, k: int, out) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--scene", default="dallas-cells-q3")
+    p.add_argument("--scene", default="dallas-3tx-q3")
     p.add_argument("--counts", type=int, nargs="+", default=[1, 2, 3])
     p.add_argument("--out", type=Path, default=Path("results"))
     a = p.parse_args(argv)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from dtradar_data.core.errors import InvalidSettingError, SceneFileError, unknown_name
 from dtradar_data.core.ids import VARIANTS
+from dtradar_data.core.renamed import current_scene
 from dtradar_data.scenes.city.document import read_city_file
 from dtradar_data.scenes.city.reader import (
     city_file,
@@ -76,12 +77,18 @@ def available_scenes() -> list[str]:
 def scene_file(scene: str) -> Path:
     """Path of a built-in scene's file (a city quadrant's is its city's); :class:`UnknownNameError` (with
     did-you-mean) for unknown names."""
+    scene = str(_current(scene))
     if scene in indoor_scenes():
         return Path(str(_indoor_dir() / f"{scene}.toml"))
     city = scene.rpartition("-")[0]
     if scene in available_scenes():
         return city_file(city)
     raise unknown_name("scene", scene, available_scenes() + city_names())
+
+
+def _current(scene: str | Path) -> str | Path:
+    """A built-in scene's current name for an old one (:mod:`dtradar_data.core.renamed`); a path as it is."""
+    return scene if is_scene_path(scene) else current_scene(str(scene))
 
 
 def is_scene_path(scene: str | Path) -> bool:
@@ -107,6 +114,7 @@ def load_scene_spec(
     ``cell_m`` (cities and XML scenes) replaces its cell size; ``grid`` (``X0, Y0, CELL_M, NX, NY``) and ``tx``
     (``X, Y, Z``) replace an XML scene's grid and transmitter (required for a bare ``.xml``).
     """
+    scene = _current(scene)
     if variant == MOVING_VARIANT:
         raise InvalidSettingError(
             f"{scene}/{MOVING_VARIANT} is a moving twin, a series of scenes rather than one",
@@ -153,6 +161,7 @@ def load_moving_scene(scene: str | Path, *, footprints: str | None = None, cell_
     have no moving twin. :meth:`MovingScene.spec_at` gives each snapshot as a scene; ``build --variant moving``
     traces them all (:mod:`dtradar_data.pipeline.moving`).
     """
+    scene = _current(scene)
     check_scene_options(footprints=footprints, cell_m=cell_m)
     if is_scene_path(scene):
         path = Path(scene).expanduser()
@@ -228,6 +237,7 @@ def build_targets(scene: str | Path, variant: str = "all") -> list[tuple[str | P
     """``(scene, variant)`` pairs a build of ``scene`` makes: a city expands to its quadrants (blueprints, plus the
     dynamic twin of its dynamic quadrant); ``variant`` is ``"all"``, ``"blueprint"``, ``"dynamic"`` or ``"moving"``
     (the moving twin only, never part of ``"all"``: a city's is that of the quadrant its ``[moving]`` names)."""
+    scene = _current(scene)
     if variant == MOVING_VARIANT:
         return _moving_targets(scene)
     if variant != "all" and variant not in VARIANTS:

@@ -9,6 +9,8 @@ the user's room. Reserved, for every scene file except the packaged one that def
   (``dallas-q1`` ... ``dallas-q4``);
 * the namespace of Sionna's bundled scenes: every name starting with ``sionna-`` (``sionna-munich`` ...), which a
   build resolves to a bundled scene;
+* the old names of renamed built-ins (``dallas-cells``, ``dallas-cells-q3``: :mod:`dtradar_data.core.renamed`),
+  which still name them;
 * the names of antenna-pose-error twins: every name ending in ``-txpose`` (``cubicle-txpose``).
 
 :func:`check_user_scene_name` is called by every reader of a user's file as soon as the name is known, before any
@@ -22,6 +24,7 @@ from pathlib import Path
 
 from dtradar_data.core.errors import SceneFileError
 from dtradar_data.core.ids import TX_POSE_SUFFIX
+from dtradar_data.core.renamed import RENAMED
 from dtradar_data.scenes.sionna_scenes import is_sionna_name
 
 __all__ = ["QUADRANTS", "builtin_scene_file", "check_user_scene_name", "reserved_because"]
@@ -48,6 +51,8 @@ def reserved_because(name: str) -> str | None:
         return f"the name of the built-in city {name!r}"
     if (parts := _split_quadrant(name)) is not None:
         return f"the name of quadrant {parts[1]} of the built-in city {parts[0]!r}"
+    if name in RENAMED:
+        return f"the old name of the built-in {RENAMED[name]!r}, still taken as its alias"
     if is_sionna_name(name):
         return "in the namespace of Sionna's bundled scenes (sionna-...)"
     if name.endswith(TX_POSE_SUFFIX):

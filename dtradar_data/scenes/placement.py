@@ -9,8 +9,8 @@ size, and it is what planning tools do first.
 
 Line of sight on the plan is a lower bound on what the ray tracer finds: reflections and diffraction reach around
 corners. It ignores heights (a transmitter above the roofs sees more); sites are for transmitters below the
-roofline, on lamp posts or façades. Used to place the transmitters of ``sionna:munich_cells`` and
-``dallas-cells-q3``; ``python -m dtradar_data place sionna:munich`` prints sites (``dtradar_data.cli.PlaceCmd``), and
+roofline, on lamp posts or façades. Used to place the transmitters of ``sionna:munich-10tx`` and
+``dallas-3tx-q3``; ``python -m dtradar_data place sionna:munich`` prints sites (``dtradar_data.cli.PlaceCmd``), and
 ``--heard-in`` a built twin places the next ones where its trace found no path (a second round, measured rather than
 modelled).
 """

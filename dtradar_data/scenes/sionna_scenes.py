@@ -39,7 +39,7 @@ SIONNA_DEFAULTS: dict[str, dict[str, Any]] = {
         "grid": {"x0_m": -197.5, "y0_m": -197.5, "cell_m": 5.0, "nx": 80, "ny": 80},
         "tx": {"position_m": [40.0, 90.0, 20.0]},  # in the square north of the Neues Rathaus
     },
-    "munich_cells": {  # Munich's grid with nine more transmitters: see dtradar_data.scenes.placement
+    "munich-10tx": {  # Munich's grid with nine more transmitters: see dtradar_data.scenes.placement
         "xml": "munich",
         "title": "Sionna Munich (Frauenkirche), ten transmitters",
         "description": "Sionna RT's bundled twin of central Munich around the Frauenkirche and Marienplatz, "
@@ -119,7 +119,7 @@ def sionna_key(scene: str) -> str:
 
 def sionna_xml(key: str) -> Path:
     """The bundled XML of one Sionna scene, found through package metadata (importing sionna is ``rt``'s job); a
-    twin of another's geometry (``munich_cells``) names the scene it is built on (``"xml"``)."""
+    twin of another's geometry (``munich-10tx``) names the scene it is built on (``"xml"``)."""
     key = SIONNA_DEFAULTS.get(key, {}).get("xml", key)
     return installed_file(SIONNA_DIST, f"sionna/rt/scenes/{key}/{key}.xml", f"the scene sionna:{key}")
 

@@ -269,7 +269,7 @@ def load_sionna_spec(scene: str, variant: str, *, grid=None, tx=None, cell_m=Non
     """A bundled Sionna scene (``sionna:munich`` or ``sionna-munich``) with its defaults or the given overrides."""
     key = sionna_key(scene)
     d = SIONNA_DEFAULTS[key]
-    base = sionna_base(key)  # munich_cells traces munich's XML
+    base = sionna_base(key)  # munich-10tx traces munich's XML
     doc = _parse(
         {
             "scene": {

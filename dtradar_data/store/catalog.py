@@ -22,6 +22,7 @@ from dtradar_data.core.ids import (
     parse_id,
     parse_name,
 )
+from dtradar_data.core.renamed import stored_or_current
 from dtradar_data.scenes import available_scenes, builtin_moving_names, builtin_names
 
 
@@ -56,6 +57,16 @@ def known_names() -> list[str]:
     """Every ``scene/variant`` name that exists here: the variants each built-in scene's file makes (its blueprint,
     its dynamic and moving twins where it has them) and every one in the data root."""
     return sorted({*builtin_names(), *builtin_moving_names(), *stored_names()})
+
+
+def renamed(text: str) -> str:
+    """``text`` (a dataset or logged dataset name) with a renamed scene (:mod:`dtradar_data.core.renamed`) spelt as
+    the store holds it: the current name, or the old one where only the old name's data is stored."""
+    if not isinstance(text, str):
+        return text  # parse_id names the wrong type
+    scene, sep, rest = text.strip().partition("/")
+    roots = (layout.datasets_root(), layout.data_root() / "logged")
+    return stored_or_current(scene, lambda s: any((r / s).is_dir() for r in roots)) + sep + rest
 
 
 def missing_twin(did: DatasetId) -> DatasetNotFoundError | None:
@@ -97,6 +108,7 @@ def as_id(name: str | DatasetId, *, check_known: bool = True) -> DatasetId:
     """Accept either a string or an already parsed id (public functions take both)."""
     if isinstance(name, DatasetId):
         return name
+    name = renamed(name)
     if not check_known:
         return parse_id(name)
     return parse_id(name, known=known_scenes(), names=known_names())
@@ -108,6 +120,7 @@ def as_any_id(name: str | DatasetId | LoggedId, *, check_known: bool = True) -> 
     stored gets its "did you mean" from the logged store when it is resolved)."""
     if isinstance(name, (DatasetId, LoggedId)):
         return name
+    name = renamed(name)
     if not check_known or is_logged_name(name):
         return parse_name(name)
     return parse_name(name, known=known_scenes(), names=known_names())

@@ -21,15 +21,15 @@ def canyon_copy(tmp_path: Path) -> Path:
 
 
 def test_the_five_sionna_scenes_and_the_munich_deployment_are_listed_and_resolve_to_their_bundled_xml():
-    assert sionna_scene_names() == sorted([*SIONNA, "sionna:munich_cells"])
+    assert sionna_scene_names() == sorted([*SIONNA, "sionna:munich-10tx"])
     assert {s.replace(":", "-") for s in SIONNA} <= set(available_scenes())
-    for name in [*SIONNA, "sionna:munich_cells"]:
+    for name in [*SIONNA, "sionna:munich-10tx"]:
         spec = load_scene_spec(name, "blueprint")
-        assert spec.scene == name.replace(":", "-") and spec.base.xml == name.removesuffix("_cells")
+        assert spec.scene == name.replace(":", "-") and spec.base.xml == name.removesuffix("-10tx")
         assert Path(spec.base.path).is_file() and len(spec.base.ground) == 1
         assert spec.grid.nx * spec.grid.ny <= 6400
         assert build_targets(name) == [(name, "blueprint")]
-    cells, munich = (load_scene_spec(n, "blueprint") for n in ("sionna:munich_cells", "sionna:munich"))
+    cells, munich = (load_scene_spec(n, "blueprint") for n in ("sionna:munich-10tx", "sionna:munich"))
     assert len(cells.transmitters) == 10 and cells.tx == munich.tx.__class__(
         **{**vars(munich.tx), "name": cells.tx.name}
     )
