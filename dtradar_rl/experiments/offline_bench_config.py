@@ -29,7 +29,7 @@ EVAL_SEED = DEFAULT_SEED
 #: Behaviours that act with a memoryless online DQN checkpoint.
 NEED_ONLINE = ("epsilon-greedy", "mixture")
 #: The default budget, chosen by measurement (cubicle 29 min, Dallas Q3 27 min on 2 cores before relabelling; Dallas Q3
-#: 31.5 min relabelled, with the tables with senses, beside other jobs: docs/logged-datasets.md).
+#: 31.5 min relabelled, with the tables with senses, beside other jobs: docs/results/offline.md).
 BENCH_UPDATES = 4_000
 BENCH_FQE_STEPS = 1_000
 
@@ -55,7 +55,7 @@ class OfflineBenchConfig(Config):
     """d3rlpy updates per run"""
     batch_size: int = 256
     """minibatch size of one update (0 = auto: 512 where the updates run in bf16, else 256; the samples a run draws
-    are updates x batch: docs/logged-datasets.md)"""
+    are updates x batch: docs/results/offline.md)"""
     precision: str = "fp32"
     """arithmetic of the training updates: auto, fp32 or bf16 (OfflineConfig.precision; bf16 for bcq, dqn, ddqn and
     nfq only, bc and cql train in fp32)"""

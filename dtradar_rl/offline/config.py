@@ -35,7 +35,7 @@ ALGORITHMS: dict[str, str] = {
 SENSES = ("auto", "none", "memory", "filter")
 
 #: ``--senses auto``: each algorithm's best measured (Dallas Q3 expert and medium, 4 000 updates, relabelled; the
-#: cubicle within a few points either way: docs/logged-datasets.md). The imitation-anchored learners (bc; cql, whose
+#: cubicle within a few points either way: docs/results/offline.md). The imitation-anchored learners (bc; cql, whose
 #: conservative term pulls towards the logged moves) read the logged trail behind them as the next move's cue and fall
 #: to 15-42 with the memory window, the Q-learners gain 5-24 points with it.
 AUTO_SENSES: dict[str, str] = {
@@ -80,7 +80,7 @@ class OfflineConfig(BehaviourConfig):
     lr: float = 1e-3
     """Adam learning rate (d3rlpy's Atari default, 6.25e-5, is too slow for a short run; 1e-3 beat 3e-4 for every
     algorithm measured on the cubicle's expert and medium data at 3 K updates, by 10-50 points of normalised score,
-    and for DQN at 10 K too; 3e-3 was no better: docs/logged-datasets.md)"""
+    and for DQN at 10 K too; 3e-3 was no better: docs/results/offline.md)"""
     gamma: float = 0.5
     """discount factor of the Q-learning algorithms (not used by bc)"""
     target_update_interval: int = 500
@@ -133,7 +133,7 @@ class OfflineConfig(BehaviourConfig):
     AVX512-BF16, else it is slower), or auto (bf16 for those four where the CPU has the units, else fp32). On a 2-core
     Xeon with AMX, Dallas Q3 expert BCQ in bf16 at batch 512 trained in about fp32's time at 256 to 82.0 against 75.3;
     the full offline benchmark with auto gained 3.8-8.2 per family but took 35.2 min against its 30, so fp32 stays the
-    default (docs/logged-datasets.md)"""
+    default (docs/results/offline.md)"""
     out: Annotated[str, DEFAULT_IN_HELP] = ""
     """output directory (default: runs/<scene>/offline/<algorithm>)"""
 
