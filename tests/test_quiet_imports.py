@@ -29,6 +29,7 @@ def test_the_installed_gym_notices_hold_no_notice_for_the_installed_gym():
         "dtradar_rl.offline.formats as f; f.import_d3rlpy()",
     ],
 )
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_an_import_that_brings_in_gym_prints_nothing(module):
     pytest.importorskip(module.split()[0].split(".")[0])
     out = subprocess.run([sys.executable, "-c", f"import {module}"], capture_output=True, text=True, timeout=300)

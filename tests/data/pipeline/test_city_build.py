@@ -5,6 +5,7 @@ import pytest
 pytestmark = pytest.mark.sionna
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_a_dallas_quadrant_builds_and_loads_by_name_with_its_city_card_and_overview(root):
     import dtradar_data
     from dtradar_data.pipeline.builder import build

@@ -340,6 +340,7 @@ def test_the_moving_variant_is_a_command_line_choice(capsys):
     assert "moving" in text and "differentially from the one before" in text
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 @pytest.mark.sionna
 def test_a_build_that_shares_its_cells_with_a_helper_process_stores_the_same_tables_and_version(
     built, tmp_path, monkeypatch

@@ -45,6 +45,7 @@ def config(samples: int = 2_000):
     )
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_a_ray_build_stores_the_same_table_and_version_as_a_serial_build(root, monkeypatch, small_cubicle, local_ray):
     serial = build_one(small_cubicle, config())
     monkeypatch.setenv("DTRADAR_DATA_ROOT", str(root.parent / "ray-root"))

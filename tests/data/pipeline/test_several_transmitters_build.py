@@ -40,6 +40,7 @@ def _build(tmp_path, name: str, txs: str):
     return ds
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_two_transmitters_trace_together_and_leave_transmitter_zero_as_the_one_transmitter_twin_has_it(root, tmp_path):
     import dtradar_data
 

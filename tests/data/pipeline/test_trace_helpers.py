@@ -91,6 +91,7 @@ def _assert_same(joined, whole) -> None:
         np.testing.assert_array_equal(v, whole[1][k], err_msg=k)
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 @pytest.mark.sionna
 def test_cells_a_helper_traces_are_the_bytes_this_process_traces(room, small_parts):
     from dtradar_data.pipeline.trace_helpers import TraceHelpers

@@ -59,6 +59,7 @@ def test_loop_escape_needs_the_visit_counts():
         config_for("memory", escape_after=2)
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_the_default_preset_is_named_in_the_train_help_and_the_readme():
     assert DEFAULT_PRESET in PRESETS and config_for().preset == DEFAULT_PRESET
     out = subprocess.run([sys.executable, "-m", "dtradar_rl", "train", "--help"], capture_output=True, text=True)

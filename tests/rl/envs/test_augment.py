@@ -196,6 +196,7 @@ def test_the_robust_preset_validates_and_only_adds_augmentation_to_tuned():
     assert {k for k in changed if not k.startswith("aug_")} <= {"preset", "total_env_steps"}
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_resumed_augmented_training_equals_an_uninterrupted_run(tmp_path):
     cfg = {
         "scene": "synthetic-12x8",

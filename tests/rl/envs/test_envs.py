@@ -130,6 +130,7 @@ def test_synthetic_cubicle_stand_in_has_the_cubicle_grid_and_more_obstacles_when
     assert bp.shape == (18, 42) and bp.any() and (dyn & ~bp).any() and not (bp & ~dyn).any()
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_a_fresh_process_makes_an_env_by_gymnasiums_module_colon_id_form():
     import subprocess
     import sys

@@ -3,11 +3,14 @@ planner, every row naming its sensing."""
 
 import json
 
+import pytest
+
 from dtradar_rl.cli import main
 
 TRAIN = ["--total-env-steps", "2000", "--num-envs", "16", "--hidden", "16", "--learning-starts", "500"]
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_eval_without_flags_reports_the_default_agent_the_privileged_dqn_and_the_planner(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["eval", "--scene", "synthetic-6x5", "--pairs", "10"]) == 2  # no agent built yet

@@ -52,6 +52,7 @@ def test_markdown_table_lists_every_case():
     assert "decision p50 (ms) | p99 (ms)" in md.splitlines()[0]
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_cli_trains_then_evaluates_on_blueprint_and_dynamic(tmp_path, capsys):
     run = tmp_path / "dqn"
     assert (

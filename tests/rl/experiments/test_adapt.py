@@ -8,6 +8,7 @@ from dtradar_rl.train.config import config_for
 from dtradar_rl.train.dqn import train
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_a_tiny_adapt_run_fine_tunes_a_blueprint_agent_and_compares_it_with_training_from_scratch(tmp_path):
     cfg = config_for(
         "memory",

@@ -133,6 +133,7 @@ def test_the_score_table_has_a_row_per_dataset_and_the_best_algorithm_in_bold():
     assert lines[3] == "| medium-replay | - | - | **41.0 ± 1.0** |"
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_with_fqe_every_agent_gets_an_estimate_and_a_true_value_and_their_rank_correlation(root, tmp_path):
     cfg = OfflineBenchConfig(
         scene="synthetic-8x6",

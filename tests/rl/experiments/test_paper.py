@@ -9,6 +9,7 @@ from dtradar_rl.cli import main
 from dtradar_rl.experiments.paper import PaperConfig, cross_groups
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_a_tiny_paper_run_on_synthetic_tables_writes_every_file_of_the_report(tmp_path, root, capsys):
     out = tmp_path / "paper"
     status = main(
@@ -174,6 +175,7 @@ def test_seeds_trained_side_by_side_in_processes_give_the_same_runs_as_one_after
         ).read_text()
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_the_paper_agent_takes_its_episode_cap_and_step_budget_from_the_report_options(tmp_path, root):
     out = tmp_path / "paper"
     args = ["paper", "--scenes", "synthetic-8x6", "--episodes", "50", "--seeds", "0", "--jobs", "1", "--no-cross"]

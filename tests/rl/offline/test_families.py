@@ -43,6 +43,7 @@ def families(tiny, tmp_path_factory):
         yield out, agent, root
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_all_logs_every_family_under_its_name_with_its_normalised_score_in_the_card(families):
     out, _, _ = families
     assert list(out) == [*FAMILIES, *OGBENCH_FAMILIES]
@@ -82,6 +83,7 @@ def test_medium_stops_at_the_first_evaluation_at_its_target(families):
     assert medium["medium_agent"]["checkpoint_sha256"] == sha256_file(agent.checkpoint)
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_medium_is_reproducible_with_its_seed_and_changes_with_another(families, tiny, tmp_path, monkeypatch):
     _, agent, _ = families
 

@@ -145,6 +145,7 @@ KILLED_EXPORT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_a_minari_copy_killed_mid_write_is_absent_and_the_next_export_writes_a_whole_one(stores):
     logged = put()
     kill_at(run(KILLED_EXPORT, NAME), "midway")

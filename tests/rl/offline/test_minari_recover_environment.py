@@ -132,6 +132,7 @@ FRESH = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_a_fresh_process_that_imports_only_minari_recovers_both_envs(stores):
     logged = log_dataset(CFG)
     out = subprocess.run(

@@ -102,6 +102,7 @@ def _bc(tmp_path, logged, name):
     return train_offline(cfg, dataset=logged).policy
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_fqe_is_finite_and_ranks_bc_on_expert_like_data_above_bc_on_random_moves_as_the_twin_does(root, tmp_path, tiny):
     torch.set_num_threads(1)
     log = {"scene": TINY, "num_envs": 16, "steps": 3_000, "max_steps": 20, "minari": False, "verbose": False}

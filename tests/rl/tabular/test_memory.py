@@ -91,6 +91,7 @@ def test_online_and_batch_learners_too_large_for_the_memory_are_refused_before_t
         batch.ceiling(model, pairs)
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_the_cache_and_the_greedy_table_are_made_chunk_by_chunk_never_whole_twice(tmp_path, monkeypatch):
     tab = TabularMDP.from_dataset(load_dataset("synthetic-24x16/blueprint"))  # arrays well above the fixed costs
     monkeypatch.setattr(memory, "CHUNK_BYTES", 2 * tab.n * 32)  # chunks of 2 targets

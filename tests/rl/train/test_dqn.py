@@ -32,6 +32,7 @@ TINY = dict(
 )
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_dqn_on_a_tiny_table_learns_the_optimal_action_everywhere(tmp_path):
     result = train(config_for("tuned", out=str(tmp_path), **TINY))
     policy = load_policy(result.checkpoint)
@@ -59,6 +60,7 @@ def test_training_is_seeded(tmp_path):
     assert all(torch.equal(qa[k], qb[k]) for k in qa)
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 @pytest.mark.parametrize("expert_weight", [0.0, 1.0])
 def test_resumed_training_equals_an_uninterrupted_run(tmp_path, expert_weight):
     cfg = dict(

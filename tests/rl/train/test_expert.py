@@ -96,6 +96,7 @@ def test_the_expert_loss_needs_the_geodesic_reward_and_a_positive_margin():
         config_for("tuned", expert_weight=1.0, expert_margin=0.0).validate()
 
 
+@pytest.mark.slow  # over 3 s: make test-all (CI) runs it
 def test_training_with_the_expert_loss_learns_the_shortest_moves(tmp_path):
     common = dict(
         scene="synthetic-12x8",
