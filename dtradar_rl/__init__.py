@@ -11,7 +11,9 @@ observations, pairs, the base config) → :mod:`~dtradar_rl.envs` (gymnasium and
     result = train(config_for("tuned", scene="synthetic"))
     metrics, rollouts = evaluate(load_policy(result.checkpoint), load_dataset("synthetic/dynamic"))
 
-Never imports Sionna.
+Importing it registers the gymnasium ids of every built twin (:mod:`dtradar_rl.envs.registration`), as gymnasium's
+own packages do: ``import dtradar_rl; gym.make("dtradar/cubicle-blueprint-v0")`` is the default agent's honest
+observation. Never imports Sionna.
 """
 
 from __future__ import annotations
@@ -49,3 +51,6 @@ def __getattr__(name: str):
 
         return getattr(importlib.import_module(_EXPORTS[name]), name)
     raise AttributeError(f"module 'dtradar_rl' has no attribute {name!r}")
+
+
+import dtradar_rl.envs  # noqa: E402, F401  (registers the gymnasium ids; the env classes load when first used)

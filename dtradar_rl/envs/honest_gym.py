@@ -20,7 +20,7 @@ Episode End
 Arguments
     ``dataset`` (a name such as ``"cubicle/dynamic"`` or a :class:`~dtradar_data.core.dataset.Dataset`), ``sensing``
     (default ``radio``), ``noise`` (default ``realistic``), ``reward``, ``max_steps``. Registered as
-    ``dtradar/<scene>-<variant>-honest-v0`` for every built twin (:mod:`dtradar_rl.envs.registration`).
+    ``dtradar/<scene>-<variant>-v0`` (and ``-honest-v0``) for every built twin (:mod:`dtradar_rl.envs.registration`).
 """
 
 from __future__ import annotations

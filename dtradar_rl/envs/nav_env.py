@@ -110,7 +110,8 @@ class DtradarNavEnv(gym.Env):
     **Privileged** (:mod:`dtradar_rl.task.sensing`): every preset holds the robot's exact ``x, y``, and ``neighbors``
     the radio of the four neighbouring cells read from the twin being navigated, which a robot's receiver could not
     measure. For what a robot with a radio receiver observes, use the honest-sensing env
-    (:class:`~dtradar_rl.envs.honest_gym.HonestGymEnv`, ids ``dtradar/<scene>-<variant>-honest-v0``).
+    (:class:`~dtradar_rl.envs.honest_gym.HonestGymEnv`, ids ``dtradar/<scene>-<variant>-v0``). This env's ids say
+    so: ``dtradar/<scene>-<variant>-privileged-v0``.
     ``Box(low, high, (D,), float32)`` (bounds: the range of the lookup tables), z-scored features of the
     chosen preset (:mod:`dtradar_rl.task.observations`):
     ``paper`` (D = 10: x, y, AoA az/zen, AoD az/zen, coefficient real/imag, delay, phase; no target),

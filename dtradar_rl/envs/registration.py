@@ -1,5 +1,11 @@
-"""Registration of the gymnasium env under ``dtradar/<scene>-<variant>-v0`` ids, one per built dataset, and the env
-specs that pin a twin version (:func:`twin_env_spec`, recorded by every Minari copy of a logged dataset).
+"""Registration of the gymnasium ids, four per built dataset, and the env specs that pin a twin version
+(:func:`twin_env_spec`, recorded by every Minari copy of a logged dataset).
+
+``dtradar/<scene>-<variant>-v0`` is what the default agent observes: honest sensing (its own cell's radio under
+receiver noise, proximity, odometry, the target on the map; never its position). ``-honest-v0`` is the same env named
+by its sensing. The learnt agents' observations hold the robot's position, so their ids say so:
+``-privileged-v0`` (an observation preset, ``goal`` by default) and ``-privileged-memory-v0`` (the default learnt
+agent's: ``neighbors`` with its memory window). ``import dtradar_rl`` registers them, as gymnasium's own packages do.
 
 A pinned spec needs no registration: its entry point :data:`TWIN_ENTRY_POINT` is a ``"module:function"`` string that
 gymnasium imports itself, so ``gym.make(spec)`` (and Minari's ``recover_environment()``) works in a fresh process
@@ -29,25 +35,50 @@ def built_datasets() -> list[str]:
 
 
 def env_id(name: str) -> str:
-    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-v0"``."""
+    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-v0"``: what the default agent observes (honest)."""
     scene, _, variant = name.partition("/")
     return f"dtradar/{scene}-{variant or 'blueprint'}-v0"
 
 
+def _suffixed(name: str, suffix: str) -> str:
+    return env_id(name)[: -len("-v0")] + f"-{suffix}-v0"
+
+
 def honest_env_id(name: str) -> str:
-    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-honest-v0"``: the twin with honest sensing."""
-    return env_id(name)[: -len("-v0")] + "-honest-v0"
+    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-honest-v0"``: the same env as :func:`env_id`, named
+    by its sensing."""
+    return _suffixed(name, "honest")
+
+
+def privileged_env_id(name: str) -> str:
+    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-privileged-v0"``: a learnt agent's observation preset,
+    which holds the robot's position (:class:`~dtradar_rl.envs.nav_env.DtradarNavEnv`)."""
+    return _suffixed(name, "privileged")
+
+
+def memory_env_id(name: str) -> str:
+    """``"cubicle/blueprint"`` -> ``"dtradar/cubicle-blueprint-privileged-memory-v0"``: the default learnt agent's
+    observation, ``neighbors`` and its memory window (:class:`~dtradar_rl.envs.memory.MemoryGymEnv`)."""
+    return _suffixed(name, "privileged-memory")
+
+
+#: The memory id's settings: the default learnt agent's (``make train AGENT=dqn``; dtradar_rl.train.config).
+MEMORY_DEFAULTS: dict[str, Any] = {
+    "obs": "neighbors",
+    "reward": "geodesic",
+    "memory_radius": 5,
+    "memory_visits": True,
+    "memory_bumps": False,
+}
 
 
 def register_dataset_envs(**kwargs) -> list[str]:
-    """Register one env id per built dataset, plus ``dtradar/synthetic-{blueprint,dynamic}-v0`` and the moving twin
-    ``dtradar/synthetic-moving-blueprint-v0``, and beside each its honest-sensing id
-    ``dtradar/<scene>-<variant>-honest-v0`` (:class:`~dtradar_rl.envs.honest_gym.HonestGymEnv`: the robot is never
-    told where it is); returns the ids.
+    """Register the four ids of every built dataset and of ``synthetic/blueprint``, ``synthetic/dynamic`` and the
+    moving ``synthetic-moving/blueprint`` (module docstring); returns the ids.
 
-    ``kwargs`` (``obs``, ``reward``, ...) become the default arguments of every ``-v0`` id (the privileged
-    observation presets); ``gym.make`` can override them. Datasets are loaded when an env is made, not here.
-    Registering again replaces the ids.
+    ``kwargs`` (``obs``, ``reward``, ...) become the default arguments of every ``-privileged-v0`` id; ``gym.make``
+    can override them, and the honest ids' (``sensing``, ``noise``, ``reward``, ``max_steps``). Datasets are loaded
+    when an env is made, not here. Registering again replaces the ids.
     """
     return _register(
         ["synthetic/blueprint", "synthetic/dynamic", "synthetic-moving/blueprint", *built_datasets()], kwargs
@@ -57,18 +88,16 @@ def register_dataset_envs(**kwargs) -> list[str]:
 def _register(names: list[str], kwargs: dict) -> list[str]:
     ids = []
     for name in names:
-        eid = env_id(name)
-        gym.registry.pop(eid, None)
-        gym.register(
-            id=eid,
-            entry_point="dtradar_rl.envs.nav_env:DtradarNavEnv",
-            kwargs={"dataset": name, **kwargs},
-            disable_env_checker=True,
-        )
-        hid = honest_env_id(name)
-        gym.registry.pop(hid, None)
-        gym.register(id=hid, entry_point="dtradar_rl.envs.honest_gym:HonestGymEnv", kwargs={"dataset": name})
-        ids += [eid, hid]
+        entries = {
+            env_id(name): ("dtradar_rl.envs.honest_gym:HonestGymEnv", {"dataset": name}),
+            honest_env_id(name): ("dtradar_rl.envs.honest_gym:HonestGymEnv", {"dataset": name}),
+            privileged_env_id(name): ("dtradar_rl.envs.nav_env:DtradarNavEnv", {"dataset": name, **kwargs}),
+            memory_env_id(name): (TWIN_ENTRY_POINT, {"dataset": name, **MEMORY_DEFAULTS}),
+        }
+        for eid, (entry_point, kw) in entries.items():
+            gym.registry.pop(eid, None)
+            gym.register(id=eid, entry_point=entry_point, kwargs=kw, disable_env_checker=True)
+            ids.append(eid)
     return ids
 
 
@@ -134,7 +163,8 @@ def twin_env_spec(
     noise: str = "none",
     memory: dict[str, Any] | None = None,
 ) -> EnvSpec:
-    """The spec of the navigation env on ``dataset`` pinned to ``version``, id :func:`env_id` (``gym.make(spec)``
+    """The spec of a learnt agent's env on ``dataset`` pinned to ``version``, id :func:`privileged_env_id` (or
+    :func:`memory_env_id` with ``memory``; ``gym.make(spec)``
     needs no registration; ``gym.make(spec, **kw)`` overrides a setting). No ``max_episode_steps``: the env
     truncates at ``max_steps`` itself (gymnasium's ``TimeLimit`` would also flag the step that reaches the target
     on the last step as truncated, which the env and the logged data do not). ``memory`` (``memory_radius``,
@@ -150,7 +180,7 @@ def twin_env_spec(
         **(memory or {}),
     }
     return EnvSpec(
-        id=env_id(dataset),
+        id=memory_env_id(dataset) if (memory or {}).get("memory_radius") else privileged_env_id(dataset),
         entry_point=TWIN_ENTRY_POINT,
         max_episode_steps=None,
         disable_env_checker=True,
@@ -180,6 +210,7 @@ def honest_env_spec(
 
 
 __all__ = [
+    "MEMORY_DEFAULTS",
     "SYNTHETIC_ENV_ID",
     "TWIN_ENTRY_POINT",
     "built_datasets",
@@ -187,6 +218,8 @@ __all__ = [
     "make_twin_env",
     "honest_env_id",
     "honest_env_spec",
+    "memory_env_id",
+    "privileged_env_id",
     "register_dataset_envs",
     "twin_env_spec",
     "twin_version",

@@ -1,5 +1,8 @@
 """Observation presets, the gymnasium env and its registration, and the batched env against the single env."""
 
+import subprocess
+import sys
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -61,12 +64,32 @@ def test_unknown_observation_preset_suggests_the_closest(small):
 
 def test_every_registered_env_id_passes_the_gymnasium_checker(root):  # an empty data root: the synthetic ids
     ids = register_dataset_envs()
-    assert "dtradar/synthetic-blueprint-v0" in ids and "dtradar/synthetic-dynamic-v0" in ids
-    assert "dtradar/synthetic-blueprint-honest-v0" in ids
+    for kind in ("", "-honest", "-privileged", "-privileged-memory"):
+        assert f"dtradar/synthetic-blueprint{kind}-v0" in ids and f"dtradar/synthetic-dynamic{kind}-v0" in ids
     for eid in ids:
-        env = gym.make(eid) if eid.endswith("-honest-v0") else gym.make(eid, obs="neighbors", reward="geodesic")
+        env = gym.make(eid, obs="neighbors", reward="geodesic") if eid.endswith("-privileged-v0") else gym.make(eid)
         check_env(env.unwrapped, skip_render_check=True)
         env.close()
+
+
+def test_the_plain_id_is_the_default_agents_honest_observation_and_position_is_named_privileged(root):
+    from dtradar_rl.envs.honest_gym import HonestGymEnv
+    from dtradar_rl.envs.memory import MemoryGymEnv
+
+    register_dataset_envs()
+    assert isinstance(gym.make("dtradar/synthetic-blueprint-v0").unwrapped, HonestGymEnv)
+    assert isinstance(gym.make("dtradar/synthetic-blueprint-privileged-v0").unwrapped, DtradarNavEnv)
+    assert isinstance(gym.make("dtradar/synthetic-blueprint-privileged-memory-v0").unwrapped, MemoryGymEnv)
+
+
+def test_importing_dtradar_rl_registers_the_ids_without_importing_torch():
+    code = (
+        "import sys, dtradar_rl, gymnasium as gym; "
+        "assert 'torch' not in sys.modules; "
+        "assert 'dtradar/synthetic-blueprint-v0' in gym.registry; print('ok')"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
 
 
 @pytest.mark.parametrize("obs", ["paper", "goal", "neighbors"])

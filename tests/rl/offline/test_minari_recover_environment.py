@@ -57,7 +57,7 @@ def test_the_recovered_env_is_the_logging_twin_at_its_version_with_the_logged_se
     env = ds.recover_environment()
     nav = env.unwrapped
     assert isinstance(nav, DtradarNavEnv) and nav.dataset_name == f"{SMALL}/blueprint"
-    assert env.spec.entry_point == TWIN_ENTRY_POINT and env.spec.id == f"dtradar/{SMALL}-blueprint-v0"
+    assert env.spec.entry_point == TWIN_ENTRY_POINT and env.spec.id == f"dtradar/{SMALL}-blueprint-privileged-v0"
     kw = env.spec.kwargs
     assert (kw["dataset"], kw["version"]) == (logged.meta["parent"], logged.meta["parent_version"])
     assert (nav.obs_preset, nav.reward_name, nav.max_steps) == ("neighbors", "euclidean", 12)
@@ -104,7 +104,7 @@ def test_the_evaluation_env_is_the_dynamic_twin_with_the_training_twins_normalis
     ds = minari.load_dataset(logged.minari_id)
     ev = ds.recover_environment(eval_env=True)
     nav = ev.unwrapped
-    assert nav.dataset_name == f"{SMALL}/dynamic" and ev.spec.id == f"dtradar/{SMALL}-dynamic-v0"
+    assert nav.dataset_name == f"{SMALL}/dynamic" and ev.spec.id == f"dtradar/{SMALL}-dynamic-privileged-v0"
     assert nav.normalizer.to_dict() == logged.meta["normalizer"]
     assert (nav.obs_preset, nav.reward_name, nav.max_steps) == ("neighbors", "euclidean", 12)
     assert ev.action_space == ds.action_space and ev.observation_space.shape == ds.observation_space.shape
