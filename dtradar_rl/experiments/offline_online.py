@@ -23,6 +23,23 @@ def scores(metrics: dict[str, Any], refs: dict[str, float]) -> dict[str, float]:
     return {"normalized": normalized(metrics["spl"], refs), **{m: float(metrics[m]) for m in METRICS}}
 
 
+def _scored_twins(policy, cfg: OfflineBenchConfig, twins: dict[str, Any], refs: dict[str, Any], **kwargs):
+    """``{variant: scores}`` of ``policy`` on every evaluated twin, greedy and unshielded on the benchmark's pairs
+    (``kwargs``: the evaluation's ``noise``, ``latency``)."""
+    rows = evaluate_twins(
+        policy,
+        cfg.scene,
+        cfg.variants,
+        pairs=cfg.pairs,
+        seed=EVAL_SEED,
+        device=cfg.device,
+        shield=False,
+        datasets=twins,
+        **kwargs,
+    )
+    return {r["dataset"].split("/")[1]: scores(r, refs[r["dataset"].split("/")[1]]) for r, _, _ in rows}
+
+
 def _memoryless(path: Path) -> bool:
     """A checkpoint the epsilon-greedy behaviour can act with (a memory agent's memory is not in a logged step)."""
     return path.is_file() and not getattr(load_policy(path).config, "memory_radius", 0)
@@ -64,25 +81,12 @@ def online_reference(
     else:
         return None, {}
     policy = load_policy(ckpt, cfg.device)
-    rows = [
-        r
-        for r, _, _ in evaluate_twins(
-            policy,
-            cfg.scene,
-            cfg.variants,
-            pairs=cfg.pairs,
-            seed=EVAL_SEED,
-            device=cfg.device,
-            shield=False,
-            datasets=twins,
-        )
-    ]
     preset = getattr(policy.config, "preset", "") or "?"
     online = {
         "checkpoint": str(ckpt),
         "label": f"online DQN, {preset} preset" + (", trained here" if info.get("trained_here") else ""),
         **info,
-        **{r["dataset"].split("/")[1]: scores(r, refs[r["dataset"].split("/")[1]]) for r in rows},
+        **_scored_twins(policy, cfg, twins, refs),
     }
     say(
         f"online agent {ckpt}: "
@@ -102,22 +106,10 @@ def _honest_reference(cfg: OfflineBenchConfig, twins: dict[str, Any], refs: dict
 
     blueprint = twins.get(f"{cfg.scene}/blueprint") or load_dataset(f"{cfg.scene}/blueprint")
     agent = RadioFilterAgent(blueprint, FilterConfig(cfg.scene, cfg.sensing, cfg.sensing_noise), cfg.device)
-    rows = evaluate_twins(
-        agent,
-        cfg.scene,
-        cfg.variants,
-        pairs=cfg.pairs,
-        seed=EVAL_SEED,
-        device=cfg.device,
-        shield=False,
-        datasets=twins,
-        noise=cfg.sensing_noise,
-        latency=False,
-    )
     online = {
         "checkpoint": "radio-filter (built here; nothing learnt)",
         "label": f"the default radio-filter agent, sensing {cfg.sensing}, noise {cfg.sensing_noise}",
-        **{r["dataset"].split("/")[1]: scores(r, refs[r["dataset"].split("/")[1]]) for r, _, _ in rows},
+        **_scored_twins(agent, cfg, twins, refs, noise=cfg.sensing_noise, latency=False),
     }
     say(
         "honest reference: "

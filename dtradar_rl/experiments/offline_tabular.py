@@ -168,6 +168,17 @@ def tabular_rows(
     return out
 
 
+def twins_by_variant(
+    scene: str, twins: dict[str, Dataset], refs: dict[str, dict[str, float]], pairs: int
+) -> tuple[dict[str, Dataset], dict[str, dict[str, float]]]:
+    """``twins`` (by name) by variant, the blueprint first (loaded when it is not evaluated: the logs' own twin), and
+    each one's SPL references (the blueprint's measured here when it is not evaluated)."""
+    by_variant = {name.split("/")[1]: ds for name, ds in twins.items()}
+    if "blueprint" not in by_variant:
+        by_variant = {"blueprint": load_dataset(f"{scene}/blueprint"), **by_variant}
+    return by_variant, {v: refs[v] if v in refs else reference_scores(ds, pairs=pairs) for v, ds in by_variant.items()}
+
+
 def tabular_section(
     scene: str,
     logged: dict[str, Any],
@@ -180,10 +191,7 @@ def tabular_section(
     """:func:`tabular_rows` of every logged dataset (``{behaviour: LoggedDataset}``) of ``scene``; ``twins`` maps
     ``<scene>/<variant>`` to the evaluated twins, ``refs`` variant to their SPL references (the blueprint's are
     measured here when it is not evaluated)."""
-    by_variant = {name.split("/")[1]: ds for name, ds in twins.items()}
-    if "blueprint" not in by_variant:
-        by_variant = {"blueprint": load_dataset(f"{scene}/blueprint"), **by_variant}
-    refs = {v: refs[v] if v in refs else reference_scores(ds, pairs=pairs) for v, ds in by_variant.items()}
+    by_variant, refs = twins_by_variant(scene, twins, refs, pairs)
     out = {}
     for beh, data in logged.items():
         row = out[beh] = tabular_rows(data, by_variant, refs, pairs=pairs)
@@ -198,4 +206,12 @@ def tabular_section(
     return out
 
 
-__all__ = ["COLUMNS", "COLUMN_NAMES", "grid_table", "localised_table", "tabular_rows", "tabular_section"]
+__all__ = [
+    "COLUMNS",
+    "COLUMN_NAMES",
+    "grid_table",
+    "localised_table",
+    "tabular_rows",
+    "tabular_section",
+    "twins_by_variant",
+]

@@ -20,13 +20,12 @@ import numpy as np
 from dtradar_data.core.dataset import Dataset
 from dtradar_rl.agents.radio_filter import FilterConfig
 from dtradar_rl.evaluation.evaluate import evaluate, sample_eval_pairs
-from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized, reference_scores
-from dtradar_rl.experiments.offline_tabular import grid_table
+from dtradar_rl.evaluation.normalized import DEFAULT_SEED, normalized
+from dtradar_rl.experiments.offline_tabular import grid_table, twins_by_variant
 from dtradar_rl.tabular.batch import LEARNERS, NAMES, BatchConfig, empirical_model, learn
 from dtradar_rl.tabular.filter_table import FilterTablePolicy
 from dtradar_rl.tabular.sensing import SENSING
 from dtradar_rl.tabular.solver import TabularMDP
-from dtradar_rl.task.twins import load_dataset
 
 #: The suffix of a learner's column with an honest sensing.
 FILTER_SUFFIX = "-filter"
@@ -101,10 +100,7 @@ def honest_tabular_section(
 ) -> dict[str, Any]:
     """:func:`honest_tabular_rows` of every logged dataset (``{behaviour: LoggedDataset}``) of ``scene``; ``twins``
     maps ``<scene>/<variant>`` to the evaluated twins, ``refs`` variant to their SPL references."""
-    by_variant = {name.split("/")[1]: ds for name, ds in twins.items()}
-    if "blueprint" not in by_variant:
-        by_variant = {"blueprint": load_dataset(f"{scene}/blueprint"), **by_variant}
-    refs = {v: refs[v] if v in refs else reference_scores(ds, pairs=pairs) for v, ds in by_variant.items()}
+    by_variant, refs = twins_by_variant(scene, twins, refs, pairs)
     out = {}
     for beh, data in logged.items():
         row = out[beh] = honest_tabular_rows(
