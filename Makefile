@@ -9,7 +9,7 @@ ARGS    ?=
 OSM     ?=
 SCENES  ?=
 
-.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-tx-shift bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-radio bench-tabular bench-offline-speed bench-gpu gpu-pack
+.PHONY: help setup test test-all lint format docs dataset datasets list info verify cards publish pull train eval adapt solve offline log logged offline-bench sweep paper bench bench-rt bench-radiomap bench-transmitters bench-tx-shift bench-rl bench-ray bench-diff bench-moving bench-dynamic bench-latency bench-threads bench-nav bench-radio bench-tabular bench-offline-speed bench-gpu gpu-pack results-pages
 
 # List the targets, each with the first line of the comment above it (a make variable shown as <name>); `make` alone does the same.
 help:
@@ -216,3 +216,7 @@ gpu-pack:
 # d3rlpy updates/s per algorithm: logging, sampler, threads, epochs, evaluators, worker processes -> results/bench_offline_speed.*
 bench-offline-speed:
 	$(PY) bench/bench_offline_speed.py --scene $(SCENE) $(ARGS)
+
+# Re-render the marked tables of docs/results/*.md from the benchmarks' JSON under results/ (ARGS="--check": exit 1 if stale).
+results-pages:
+	$(PY) tools/results_pages.py $(ARGS)

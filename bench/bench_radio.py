@@ -236,8 +236,9 @@ def plots(report: dict, out: Path) -> list[Path]:
     return [bars, loc]
 
 
-def page(report: dict, path: Path, images: list[Path]) -> None:
-    """The docs' results page, generated from the report (a re-run rewrites it)."""
+def page(report: dict, path: Path, images: list[Path], source: Path) -> None:
+    """The docs' results page, generated from the report (a re-run rewrites it). The tables sit in a block marked
+    with ``source`` (the report's JSON), so ``make results-pages`` re-renders them from that JSON too."""
     path.parent.mkdir(parents=True, exist_ok=True)
     img_dir = path.parent / "img"
     img_dir.mkdir(exist_ok=True)
@@ -258,7 +259,12 @@ def page(report: dict, path: Path, images: list[Path]) -> None:
         "default agent (the radio filter) observing with that sensing. What each sensing observes: "
         "[Sensing](../sensing.md).",
         "",
-        markdown(report),
+        f"<!-- results: bench-radio {source} -->",
+        "",
+        markdown(report).rstrip("\n"),
+        "",
+        "<!-- end results -->",
+        "",
         *links,
         "",
     ]
@@ -289,7 +295,7 @@ def write(report: dict, args) -> int:
     write_atomic(out.with_suffix(".md"), md)
     images = plots(report, out)
     if args.page:
-        page(report, Path(args.page), images)
+        page(report, Path(args.page), images, out.with_suffix(".json"))
     print(md, end="")
     print(f"results: {out.with_suffix('.json')}, {out.with_suffix('.md')}, " + ", ".join(map(str, images)))
     return 0
