@@ -46,9 +46,11 @@ def _throughput_rows(thr: dict) -> list[str]:
     ]
 
 
-def render_markdown(r: dict) -> str:
+def render_markdown(r: dict, throughput: bool = True) -> str:
+    """The report; ``throughput=False`` leaves out the env's steps/s rows (a page that shows them in a table of their
+    own, from ``--env-only``)."""
     t, sb3 = r["train"], r["sb3"]
-    lines = _header(r) + _throughput_rows(r["env_steps_per_s"])
+    lines = _header(r) + (_throughput_rows(r["env_steps_per_s"]) if throughput else [])
     lines.append(
         f"| greedy decision latency | {r['decision_latency_ms']:.3f} ms | paper 17 ms | "
         f"{r['decision_speedup_vs_paper']:.0f}x faster |"

@@ -174,15 +174,17 @@ def _result(args, spec, points, base: RTSettings, ref_s: float, first_call_s: fl
     }
 
 
-def _markdown_lines(args, spec, points, base: RTSettings, ref_s: float, first_call_s: float, result: dict) -> list:
-    """The Markdown report's lines: a heading, the reference and the first call, and a table of the rows."""
+def markdown(result: dict) -> str:
+    """The Markdown report of a results JSON: a heading, the reference and the first call, and a table of the rows.
+    It reads nothing but the JSON, so ``make results-pages`` re-renders a page's table from the JSON alone."""
+    ref_s, cells = result["reference_seconds"], result["free_cells"]
     lines = [
-        f"# Ray-tracing benchmark: {spec.name} ({len(points)} free cells, max_depth {base.max_depth}, "
+        f"# Ray-tracing benchmark: {result['scene']} ({cells} free cells, max_depth {result['max_depth']}, "
         f"{result['machine']})",
         "",
-        f"Reference: {args.reference:.0e} samples (path buffer {args.reference_buffer:.0e}), {ref_s:.1f} s "
-        f"({len(points) / ref_s:.0f} cells/s); rows use the default buffer {base.max_num_paths_per_src:.0e}. "
-        f"First call incl. JIT compile: {first_call_s:.1f} s.",
+        f"Reference: {result['reference_samples']:.0e} samples (path buffer {result['reference_path_buffer']:.0e}), "
+        f"{ref_s:.1f} s ({cells / ref_s:.0f} cells/s); rows use the default buffer {result['path_buffer']:.0e}. "
+        f"First call incl. JIT compile: {result['first_call_seconds_incl_jit']:.1f} s.",
         "",
         "| samples_per_src | s / grid | cells/s | strongest-path agreement | cells with a path | paths found "
         "| median abs. total-gain error | speed-up vs reference |",
@@ -194,7 +196,7 @@ def _markdown_lines(args, spec, points, base: RTSettings, ref_s: float, first_ca
         f"{r['median_abs_gain_error_db']} dB | {r['speedup_vs_reference']}× |"
         for r in result["rows"]
     ]
-    return lines
+    return "\n".join(lines) + "\n"
 
 
 def _plot(rows: list[dict], title: str, path: Path) -> None:
@@ -244,9 +246,9 @@ def main() -> None:
 
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
-    lines = _markdown_lines(args, spec, points, base, ref_s, first_call_s, result)
-    (args.out / f"{stem}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    md = markdown(result)
+    (args.out / f"{stem}.md").write_text(md)
+    print(md, end="")
     title = f"{spec.name}: agreement with {args.reference:.0e}-sample reference vs throughput"
     _plot(rows, title, args.out / f"{stem}.png")
 

@@ -11,8 +11,9 @@ A block on a page is marked by two HTML comments (invisible on the site)::
 The first word names a renderer (``RENDERERS`` below: each is the benchmark's own JSON -> Markdown function,
 imported, never re-written here), the second the JSON, relative to the repository root; ``key=value`` options
 follow (``table=N`` keeps the Nth table of the renderer's output, ``corner="..."`` replaces the first cell of its
-header, where a page names the table there; the others go to the renderer). Every block whose JSON
-exists is replaced by the renderer's output; a block whose JSON is absent is left as it is (the pages keep the
+header, where a page names the table there; the others go to the renderer: its named options, and its yes/no flags,
+``yes`` unless the marker says ``no``, e.g. ``throughput=no`` where a page leaves those rows out). Every block whose
+JSON exists is replaced by the renderer's output; a block whose JSON is absent is left as it is (the pages keep the
 numbers of the run they were written from). One line per block says what happened::
 
     .venv/bin/python tools/results_pages.py          # rewrite the pages (make results-pages)
@@ -46,6 +47,7 @@ PAGES_GLOB = "docs/**/*.md"
 GENERIC = ("table", "corner")
 START = re.compile(r"^<!-- results: (?P<spec>.*?) -->[ \t]*$", re.M)
 END = "<!-- end results -->"
+FENCE = re.compile(r"^[ \t]*(```+|~~~+)", re.M)
 
 
 def _bench(script: str, func: str) -> Callable[..., Any]:
@@ -80,7 +82,8 @@ class Renderer:
 
     render: Callable[[dict[str, Any], dict[str, str]], str]
     command: str
-    options: tuple[str, ...] = field(default=())
+    options: tuple[str, ...] = field(default=())  # each marker names them
+    flags: tuple[str, ...] = field(default=())  # yes (the default) or no: a part of the output a page leaves out
 
 
 #: name -> renderer. Each calls the benchmark's own renderer, so a page block is what the benchmark's .md holds.
@@ -95,12 +98,23 @@ RENDERERS: dict[str, Renderer] = {
         'make bench-nav ARGS="--out {dir} --name {name}" (with the scenes and options the page names)',
     ),
     "bench-rl": Renderer(
-        lambda d, o: _bench("bench_rl_report.py", "render_markdown")(d),
+        lambda d, o: _bench("bench_rl_report.py", "render_markdown")(d, throughput=o["throughput"] == "yes"),
         "make bench-rl (results/bench_rl.json; --scene <scene>: results/bench_rl_<scene>.json)",
+        flags=("throughput",),
     ),
     "bench-latency": Renderer(
-        lambda d, o: _bench("bench_latency.py", "markdown")(d),
+        lambda d, o: _bench("bench_latency.py", "markdown")(d, goal=o["goal"] == "yes"),
         'make bench-latency SCENE=<scene> ARGS="--out {dir}" (writes {dir}/bench_latency_<scene>.json)',
+        flags=("goal",),
+    ),
+    "bench-threads": Renderer(
+        lambda d, o: _bench("bench_threads.py", "markdown")(d),
+        'make bench-threads SCENE=<scene> ARGS="--out {dir}" (writes {dir}/bench_threads_<scene>.json)',
+    ),
+    "bench-rt": Renderer(
+        lambda d, o: _bench("bench_rt.py", "markdown")(d),
+        'make bench-rt ARGS="--out {dir}" (with the options the page names; --scene, --buffer and --stock-solver '
+        "name the file: {name}.json)",
     ),
     "bench-moving": Renderer(
         lambda d, o: _bench("bench_moving_report.py", "markdown")(d),
@@ -139,10 +153,26 @@ class Block:
     end: int  # first character of the end marker
 
 
+def _fenced(text: str) -> list[tuple[int, int]]:
+    """The character spans of the text's fenced code blocks (a marker shown in one, as docs/development.md shows
+    one, is an example, not a block)."""
+    spans, opened = [], None
+    for m in FENCE.finditer(text):
+        if opened is None:
+            opened = m
+        elif m.group(1)[0] == opened.group(1)[0] and len(m.group(1)) >= len(opened.group(1)):
+            spans.append((opened.start(), m.end()))
+            opened = None
+    return spans + ([(opened.start(), len(text))] if opened else [])
+
+
 def blocks(text: str, where: str = "page") -> list[Block]:
     """The marked blocks of a page's text, in order; a malformed marker raises with the line to fix."""
     found, pos = [], 0
+    fenced = _fenced(text)
     for m in START.finditer(text):
+        if any(a <= m.start() < b for a, b in fenced):
+            continue
         line = text.count("\n", 0, m.start()) + 1
         if m.start() < pos:
             raise InvalidSettingError(
@@ -167,15 +197,22 @@ def blocks(text: str, where: str = "page") -> list[Block]:
                 f"{where}:{line}: options of a results marker are key=value, got {bad}", hint="e.g. table=2"
             )
         options = dict(w.split("=", 1) for w in rest)
-        wanted = set(RENDERERS[name].options) | set(GENERIC)
-        if set(options) - wanted or set(RENDERERS[name].options) - set(options):
+        r = RENDERERS[name]
+        wanted = set(r.options) | set(r.flags) | set(GENERIC)
+        if set(options) - wanted or set(r.options) - set(options):
             raise InvalidSettingError(
                 f"{where}:{line}: renderer {name} takes the options {sorted(wanted)}, got {sorted(options)}",
                 hint="name every one of "
-                + (", ".join(RENDERERS[name].options) or "none")
+                + (", ".join(r.options) or "none")
                 + "; "
-                + ", ".join(GENERIC)
+                + ", ".join((*r.flags, *GENERIC))
                 + " are optional",
+            )
+        bad = [f"{k}={options[k]}" for k in r.flags if options.get(k, "yes") not in ("yes", "no")]
+        if bad:
+            raise InvalidSettingError(
+                f"{where}:{line}: {', '.join(bad)}: a flag is yes or no",
+                hint=f"write {bad[0].split('=')[0]}=no to leave that part of the output out",
             )
         start = m.end() + 1
         end = text.find("\n" + END, m.end())
@@ -208,7 +245,8 @@ def render(block: Block, root: Path) -> str:
     """The block's new content: a blank line, the renderer's Markdown, a blank line (so the markers never touch a
     table, which Markdown would otherwise read as part of it)."""
     data = json.loads((root / block.json).read_text(encoding="utf-8"))
-    options = {k: v for k, v in block.options.items() if k not in GENERIC}
+    options = dict.fromkeys(RENDERERS[block.renderer].flags, "yes")
+    options.update((k, v) for k, v in block.options.items() if k not in GENERIC)
     try:
         out = RENDERERS[block.renderer].render(data, options)
     except (KeyError, TypeError, ValueError) as e:
