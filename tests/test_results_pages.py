@@ -99,7 +99,32 @@ def test_a_missing_json_leaves_the_block_and_says_which_command_makes_it(page, c
     assert results_pages.main(["--check", "--root", str(path.parent), str(path)]) == 0
     assert path.read_bytes() == before
     out = capsys.readouterr().out
-    assert "skipped: JSON not found (made by: python -m dtradar_rl offline-bench --out bench" in out
+    assert "skipped: JSON not found: bench/bench.json (made by: python -m dtradar_rl offline-bench --out bench" in out
+
+
+def test_a_table_of_several_runs_reads_every_json_its_marker_names_in_order(tmp_path, capsys, monkeypatch):
+    seen = []
+
+    def render(runs, options):
+        seen.append(runs)
+        return "| run | x |\n|---|---|\n" + "".join(f"| {r['name']} | {r['x']} |\n" for r in runs)
+
+    renderer = results_pages.Renderer(render, "python bench/x.py --out {json}", several=True)
+    monkeypatch.setitem(results_pages.RENDERERS, "runs", renderer)
+    for name, x in (("b", 2), ("a", 1)):
+        (tmp_path / f"{name}.json").write_text(json.dumps({"name": name, "x": x}), encoding="utf-8")
+    page = tmp_path / "page.md"
+    page.write_text(
+        "<!-- results: runs b.json,a.json,c.json -->\n\n| old |\n\n<!-- end results -->\n", encoding="utf-8"
+    )
+    assert results_pages.main(["--root", str(tmp_path), str(page)]) == 0
+    assert "skipped: JSON not found: c.json" in capsys.readouterr().out and not seen  # one run missing: kept
+    page.write_text(page.read_text().replace(",c.json", ""), encoding="utf-8")
+    assert results_pages.main(["--root", str(tmp_path), str(page)]) == 0
+    assert "| b | 2 |\n| a | 1 |" in page.read_text() and [r["name"] for r in seen[0]] == ["b", "a"]
+    page.write_text("<!-- results: bench-rt a.json,b.json -->\n\n| old |\n\n<!-- end results -->\n", encoding="utf-8")
+    assert results_pages.main(["--root", str(tmp_path), str(page)]) == 2
+    assert "renderer bench-rt reads one JSON, the marker names several" in capsys.readouterr().err
 
 
 def test_a_corner_option_puts_the_pages_name_for_the_table_in_its_first_header_cell(page):

@@ -8,13 +8,14 @@ A block on a page is marked by two HTML comments (invisible on the site)::
 
     <!-- end results -->
 
-The first word names a renderer (``RENDERERS`` below: each is the benchmark's own JSON -> Markdown function,
-imported, never re-written here), the second the JSON, relative to the repository root; ``key=value`` options
-follow (``table=N`` keeps the Nth table of the renderer's output, ``corner="..."`` replaces the first cell of its
-header, where a page names the table there; the others go to the renderer: its named options, and its yes/no flags,
-``yes`` unless the marker says ``no``, e.g. ``throughput=no`` where a page leaves those rows out). Every block whose
-JSON exists is replaced by the renderer's output; a block whose JSON is absent is left as it is (the pages keep the
-numbers of the run they were written from). One line per block says what happened::
+The first word names a renderer (the ``RENDERERS`` of the modules of tools/renderers/: each is the benchmark's own
+JSON -> Markdown function, imported, never re-written here), the second the JSON, relative to the repository root
+(a table assembled from several runs names each run's JSON, comma-separated, in the table's order); ``key=value``
+options follow (``table=N`` keeps the Nth table of the renderer's output, ``corner="..."`` replaces the first cell
+of its header, where a page names the table there; the others go to the renderer: its named options, and its yes/no
+flags, ``yes`` unless the marker says ``no``, e.g. ``throughput=no`` where a page leaves those rows out). Every
+block whose JSON exists is replaced by the renderer's output; a block whose JSON is absent is left as it is (the
+pages keep the numbers of the run they were written from). One line per block says what happened::
 
     .venv/bin/python tools/results_pages.py          # rewrite the pages (make results-pages)
     .venv/bin/python tools/results_pages.py --check  # exit 1 when a page would change
@@ -24,19 +25,22 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.util
 import json
 import re
 import shlex
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script from anywhere: the project's packages import from the checkout
     sys.path.insert(0, str(ROOT))
+
+if str(ROOT / "tools") not in sys.path:  # the renderer registries, tools/renderers/
+    sys.path.insert(0, str(ROOT / "tools"))
+
+from renderers.base import Renderer, bench  # noqa: E402
 
 from dtradar_data.core.errors import InvalidSettingError, UnknownNameError  # noqa: E402
 from dtradar_data.core.files import write_atomic  # noqa: E402
@@ -50,95 +54,24 @@ END = "<!-- end results -->"
 FENCE = re.compile(r"^[ \t]*(```+|~~~+)", re.M)
 
 
-def _bench(script: str, func: str) -> Callable[..., Any]:
-    """``func`` of ``bench/<script>``, imported by path on first use (bench/ is no package; its scripts import their
-    report modules beside them, hence bench/ on the path)."""
-    bench = ROOT / "bench"
-    if str(bench) not in sys.path:
-        sys.path.insert(0, str(bench))
-    name = Path(script).stem
-    module = sys.modules.get(name)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(name, bench / script)
-        assert spec and spec.loader
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return getattr(module, func)
+def _registries() -> dict[str, Renderer]:
+    """Every renderer: the ``RENDERERS`` of each module of tools/renderers/ (one per benchmark family or results page),
+    merged; a name defined twice is a mistake caught here."""
+    merged: dict[str, Renderer] = {}
+    for path in sorted((ROOT / "tools" / "renderers").glob("*.py")):
+        if path.stem in ("base", "__init__"):
+            continue
+        found = getattr(importlib.import_module(f"renderers.{path.stem}"), "RENDERERS", {})
+        twice = sorted(set(found) & set(merged))
+        if twice:
+            raise RuntimeError(f"tools/renderers/{path.name} defines renderers already defined: {twice}")
+        merged.update(found)
+    return merged
 
 
-def _module(path: str, func: str) -> Callable[..., Any]:
-    return getattr(importlib.import_module(path), func)
-
-
-def _lines(out: str | list[str]) -> str:
-    return out if isinstance(out, str) else "\n".join(out) + "\n"
-
-
-@dataclass(frozen=True)
-class Renderer:
-    """How one kind of JSON becomes Markdown, and the command that writes that JSON (``{json}``, ``{dir}``,
-    ``{stem}`` and ``{name}`` filled from the block's JSON path)."""
-
-    render: Callable[[dict[str, Any], dict[str, str]], str]
-    command: str
-    options: tuple[str, ...] = field(default=())  # each marker names them
-    flags: tuple[str, ...] = field(default=())  # yes (the default) or no: a part of the output a page leaves out
-
-
-#: name -> renderer. Each calls the benchmark's own renderer, so a page block is what the benchmark's .md holds.
-RENDERERS: dict[str, Renderer] = {
-    "bench-radio": Renderer(
-        lambda d, o: _bench("bench_radio.py", "markdown")(d),
-        'make bench-radio ARGS="--out {stem}" (several runs: python bench/bench_radio.py --merge <their .json> '
-        "--out {stem})",
-    ),
-    "bench-nav": Renderer(
-        lambda d, o: _bench("bench_nav.py", "markdown")(d),
-        'make bench-nav ARGS="--out {dir} --name {name}" (with the scenes and options the page names)',
-    ),
-    "bench-rl": Renderer(
-        lambda d, o: _bench("bench_rl_report.py", "render_markdown")(d, throughput=o["throughput"] == "yes"),
-        "make bench-rl (results/bench_rl.json; --scene <scene>: results/bench_rl_<scene>.json)",
-        flags=("throughput",),
-    ),
-    "bench-latency": Renderer(
-        lambda d, o: _bench("bench_latency.py", "markdown")(d, goal=o["goal"] == "yes"),
-        'make bench-latency SCENE=<scene> ARGS="--out {dir}" (writes {dir}/bench_latency_<scene>.json)',
-        flags=("goal",),
-    ),
-    "bench-threads": Renderer(
-        lambda d, o: _bench("bench_threads.py", "markdown")(d),
-        'make bench-threads SCENE=<scene> ARGS="--out {dir}" (writes {dir}/bench_threads_<scene>.json)',
-    ),
-    "bench-rt": Renderer(
-        lambda d, o: _bench("bench_rt.py", "markdown")(d),
-        'make bench-rt ARGS="--out {dir}" (with the options the page names; --scene, --buffer and --stock-solver '
-        "name the file: {name}.json)",
-    ),
-    "bench-moving": Renderer(
-        lambda d, o: _bench("bench_moving_report.py", "markdown")(d),
-        'make bench-moving SCENES=<scene> ARGS="--out {dir}" (writes {dir}/bench_moving_<scene>.json)',
-    ),
-    "bench-offline-speed": Renderer(
-        lambda d, o: _bench("bench_offline_speed_report.py", "markdown")(d),
-        'make bench-offline-speed ARGS="--out {stem}"',
-    ),
-    "offline-bench": Renderer(
-        lambda d, o: _module("dtradar_rl.experiments.offline_report", "markdown")(d),
-        "python -m dtradar_rl offline-bench --out {dir} (with the options the page names)",
-    ),
-    "offline-bench-scores": Renderer(
-        lambda d, o: _lines(_module("dtradar_rl.experiments.offline_report", "score_table")(d, o["variant"])),
-        "python -m dtradar_rl offline-bench --out {dir} (with the options the page names)",
-        ("variant",),
-    ),
-    "offline-bench-returns": Renderer(
-        lambda d, o: _lines(_module("dtradar_rl.experiments.offline_report", "return_table")(d, o["variant"])),
-        "python -m dtradar_rl offline-bench --out {dir} (with the options the page names)",
-        ("variant",),
-    ),
-}
+#: name -> renderer.
+RENDERERS: dict[str, Renderer] = _registries()
+_bench = bench  # the tests call the benchmarks' renderers through this module
 
 
 @dataclass(frozen=True)
@@ -147,7 +80,7 @@ class Block:
 
     line: int
     renderer: str
-    json: str
+    json: str  # the JSON path, or several comma-separated (a renderer with several=True)
     options: dict[str, str]
     start: int  # first character after the start marker's line
     end: int  # first character of the end marker
@@ -208,6 +141,11 @@ def blocks(text: str, where: str = "page") -> list[Block]:
                 + ", ".join((*r.flags, *GENERIC))
                 + " are optional",
             )
+        if "," in path and not r.several:
+            raise InvalidSettingError(
+                f"{where}:{line}: renderer {name} reads one JSON, the marker names several: {path}",
+                hint="name one JSON path, or use a renderer of several runs",
+            )
         bad = [f"{k}={options[k]}" for k in r.flags if options.get(k, "yes") not in ("yes", "no")]
         if bad:
             raise InvalidSettingError(
@@ -244,7 +182,8 @@ def nth_table(markdown: str, n: int) -> str:
 def render(block: Block, root: Path) -> str:
     """The block's new content: a blank line, the renderer's Markdown, a blank line (so the markers never touch a
     table, which Markdown would otherwise read as part of it)."""
-    data = json.loads((root / block.json).read_text(encoding="utf-8"))
+    loaded = [json.loads((root / p).read_text(encoding="utf-8")) for p in paths(block)]
+    data = loaded if RENDERERS[block.renderer].several else loaded[0]
     options = dict.fromkeys(RENDERERS[block.renderer].flags, "yes")
     options.update((k, v) for k, v in block.options.items() if k not in GENERIC)
     try:
@@ -262,9 +201,14 @@ def render(block: Block, root: Path) -> str:
     return "\n" + out.strip("\n") + "\n\n"
 
 
+def paths(block: Block) -> list[str]:
+    """The block's JSON paths, relative to the root (one, or several in the table's order)."""
+    return [p for p in block.json.split(",") if p]
+
+
 def command_for(block: Block) -> str:
-    """The command that writes the block's JSON."""
-    path = Path(block.json)
+    """The command that writes the block's JSON (the first of several)."""
+    path = Path(paths(block)[0])
     stem = path.with_suffix("")
     return RENDERERS[block.renderer].command.format(json=path, dir=path.parent, stem=stem, name=stem.name)
 
@@ -277,8 +221,9 @@ def update_page(path: Path, root: Path, check: bool, say: Callable[[str], None] 
     parts, last = [], 0
     for b in blocks(text, where):
         label = f"{where}:{b.line} {b.renderer} {b.json}"
-        if not (root / b.json).is_file():
-            say(f"{label}: skipped: JSON not found (made by: {command_for(b)})")
+        missing = [p for p in paths(b) if not (root / p).is_file()]
+        if missing:
+            say(f"{label}: skipped: JSON not found: {', '.join(missing)} (made by: {command_for(b)})")
             continue
         new = render(b, root)
         if new == text[b.start : b.end]:
