@@ -2,7 +2,6 @@
 JSON, the rest of the page is kept byte for byte, --check reports a stale page, and a block whose JSON is absent
 stays as it is with the command that would make it."""
 
-import importlib.util
 import json
 import shutil
 import sys
@@ -13,11 +12,8 @@ import pytest
 from dtradar_rl.experiments.offline_bench import OfflineBenchConfig, run_bench
 from dtradar_rl.experiments.offline_report import score_table
 
-ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("results_pages", ROOT / "tools" / "results_pages.py")
-results_pages = importlib.util.module_from_spec(spec)
-sys.modules["results_pages"] = results_pages  # dataclasses look their module up there
-spec.loader.exec_module(results_pages)
+ROOT = Path(__file__).resolve().parents[2]
+results_pages = sys.modules["results_pages"]  # tools/results_pages.py, loaded by this folder's conftest
 
 BEFORE = "# Results\n\nProse above, with a table the tool must not touch:\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\n"
 MARKER = "<!-- results: offline-bench-scores bench/bench.json variant=blueprint -->\n"
@@ -177,131 +173,3 @@ def test_a_flag_of_a_marker_is_yes_or_no(tmp_path, capsys):
     )
     assert results_pages.main(["--root", str(tmp_path), str(path)]) == 2
     assert "goal=maybe: a flag is yes or no" in capsys.readouterr().err
-
-
-# The benchmarks whose tables were marked after the fact: a JSON holding the numbers of the page's table is written
-# by hand in the shape of the benchmark's writer (the runs' own JSONs are not kept), and the benchmark's renderer must
-# give the page's block back byte for byte (so marking the table changed nothing, and a re-run changes only numbers).
-
-
-def _block(page: str, marker: str) -> tuple[str, object]:
-    """The committed page's text and its one block whose marker line holds ``marker``."""
-    text = (ROOT / "docs" / "results" / page).read_text(encoding="utf-8")
-    lines = text.splitlines()
-    (block,) = [b for b in results_pages.blocks(text, page) if f"results: {marker}" in lines[b.line - 1]]
-    return text, block
-
-
-def _rows(text: str, block) -> list[list[str]]:
-    """The cells of the block's table rows (header and separator left out)."""
-    lines = [line for line in text[block.start : block.end].splitlines() if line.startswith("|")][2:]
-    return [[c.strip() for c in line.strip("|").split("|")] for line in lines]
-
-
-def _num(cell: str) -> float:
-    return float(cell.replace(",", "").replace(" ", "").rstrip("%×xdBms").strip())
-
-
-def _renders_the_page(tmp_path, capsys, page: str, marker: str, data: dict, change: tuple[str, str]) -> None:
-    """``data`` at the block's JSON path gives the page's block unchanged; a re-run's new number lands in it."""
-    text, block = _block(page, marker)
-    copy = tmp_path / page
-    copy.write_text(text, encoding="utf-8")
-    json_path = tmp_path / block.json
-    json_path.parent.mkdir(parents=True, exist_ok=True)
-    json_path.write_text(json.dumps(data), encoding="utf-8")
-    label = f"{page}:{block.line} {block.renderer} {block.json}"
-    results_pages.main(["--check", "--root", str(tmp_path), str(copy)])  # another block of the JSON may differ
-    assert f"{label}: unchanged" in capsys.readouterr().out
-    old, new = change  # a number of the page, and what a re-run measured instead
-    json_path.write_text(json.dumps(data).replace(old, new, 1), encoding="utf-8")
-    assert results_pages.main(["--root", str(tmp_path), str(copy)]) == 0
-    assert f"{label}: updated" in capsys.readouterr().out
-    after = copy.read_text(encoding="utf-8")
-    was = text[block.start : block.end]
-    now = after[block.start : after.index("\n" + results_pages.END, block.start) + 1]
-    assert now.split("\n")[1:3] == was.split("\n")[1:3]  # the page's header and separator
-    assert new in now and new not in was and after[: block.start] == text[: block.start]
-
-
-def test_bench_rt_renders_the_ray_tracing_pages_table_from_its_json_alone(tmp_path, capsys):
-    text, block = _block("ray-tracing.md", "bench-rt results/bench_rt_stock.json")
-    keys = ("samples_per_src", "seconds", "cells_per_s", "agreement", "found_path_share", "paths_found_vs_reference")
-    rows = []
-    for cells in _rows(text, block):
-        row = dict(zip(keys, map(_num, cells), strict=False))
-        for k in ("agreement", "found_path_share", "paths_found_vs_reference"):
-            row[k] /= 100
-        row["samples_per_src"] = int(row["samples_per_src"])
-        rows.append({**row, "median_abs_gain_error_db": _num(cells[6]), "speedup_vs_reference": _num(cells[7])})
-    data = {
-        "scene": "cubicle/blueprint",
-        "free_cells": 592,
-        "max_depth": 5,
-        "machine": "2-core CPU, no GPU (LLVM backend)",
-        "reference_samples": 1_000_000,
-        "reference_path_buffer": 10_000_000,
-        "path_buffer": 1_000_000,
-        "reference_seconds": 136.6,
-        "first_call_seconds_incl_jit": 2.3,
-        "rows": rows,
-    }
-    _renders_the_page(tmp_path, capsys, "ray-tracing.md", "bench-rt", data, ("1480.3", "1500.0"))
-    md = results_pages._bench("bench_rt.py", "markdown")(data)
-    assert "Reference: 1e+06 samples (path buffer 1e+07), 136.6 s (4 cells/s)" in md  # the page's sentence above
-
-
-def test_bench_threads_renders_the_speed_pages_threads_table(tmp_path, capsys):
-    def case(load, threads, each, median, steps):
-        return {"load": load, "threads": threads, "wall_s_each": each, "median_wall_s": median,
-                "median_steps_per_s": steps, "updates": 100}  # fmt: skip
-
-    data = {
-        "scene": "cubicle",
-        "preset": "memory-escape-noise",
-        "steps": 30_000,
-        "rounds": 3,
-        "busy_rounds": 1,
-        "machine": {},
-        "cases": [
-            case("idle", 1, [7.93, 7.1, 6.92], 7.1, 4262),
-            case("idle", 2, [5.46, 4.33, 5.27], 5.27, 5746),
-            case("one busy process", 1, [7.4], 7.4, 4084),
-            case("one busy process", 2, [19.1], 19.1, 1580),
-        ],
-    }
-    _renders_the_page(tmp_path, capsys, "speed.md", "bench-threads", data, ("7.93", "8.4"))
-
-
-def test_bench_latency_renders_the_speed_pages_table_without_the_goal_column(tmp_path, capsys):
-    text, block = _block("speed.md", "bench-latency")
-    rows = []
-    for policy, threads, load, p50, p99, _ in _rows(text, block):
-        for run, (a, b) in enumerate(zip(p50.split(), p99.split(), strict=True)):
-            rows.append({"policy": policy, "threads": int(threads), "load": load, "run": run,
-                         "p50_ms": float(a), "p99_ms": float(b)})  # fmt: skip
-    data = {"scene": "cubicle", "decisions": 1000, "rows": rows, "machine": {"start": {}, "end": {}}}
-    _renders_the_page(tmp_path, capsys, "speed.md", "bench-latency", data, ("0.057", "0.051"))
-    assert "goal met" in results_pages._bench("bench_latency.py", "markdown")(data)  # the flag's default: yes
-
-
-def test_bench_rl_renders_the_speed_pages_headline_without_the_throughput_rows(tmp_path, capsys):
-    data = {
-        "dataset": {"name": "cubicle/blueprint", "synthetic": False},
-        "machine": {"torch_threads": 1, "load_1min_before": 0.1},
-        "env_steps_per_s": {"gymnasium": 48_300.0, "batched_4096": 17_300_000.0},
-        "decision_latency_ms": 0.042,
-        "decision_speedup_vs_paper": 400.0,
-        "train": {
-            "env_steps": 600_064,
-            "wall_s": 47.8,
-            "speedup_vs_paper": 58.0,
-            "goal_met": True,
-            "speedup_vs_sb3": 8.1,
-        },  # fmt: skip
-        "train_robust": {"config": {"aug_obstacles": 10}, "wall_s": 54.1},
-        "sb3": {"wall_s_for_budget": 386.0, "env_steps": 466_665, "capped": True, "threads": 1},
-        "eval": [],
-    }
-    _renders_the_page(tmp_path, capsys, "speed.md", "bench-rl results/bench_rl.json table=1", data, ("47.8", "49.0"))
-    assert "env steps/s" in results_pages._bench("bench_rl_report.py", "render_markdown")(data)
