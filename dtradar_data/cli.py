@@ -26,6 +26,7 @@ import tyro
 from dtradar_data.channels.export import ChannelsCmd
 from dtradar_data.core.boundary import DEBUG_HELP, EXIT_FAILED_CHECK, run_cli
 from dtradar_data.core.errors import DtradarError, InvalidSettingError
+from dtradar_data.core.help_text import join_docstring_lines
 from dtradar_data.pipeline import builder
 from dtradar_data.pipeline.config import BuildConfig
 from dtradar_data.publish import cards, hub, logged_hub
@@ -33,6 +34,8 @@ from dtradar_data.rt import llvm
 from dtradar_data.rt.tracer import smoke_test
 from dtradar_data.store.logged import is_logged_name
 from dtradar_data.store_commands import InfoCmd, ListCmd, Name, Revision, VerifyCmd
+
+join_docstring_lines()
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from typing import Annotated
 import tyro
 
 from dtradar_data.core.boundary import DEBUG_HELP, run_cli
+from dtradar_data.core.help_text import join_docstring_lines
 from dtradar_rl.agents.radio_filter import FilterConfig, build_agent
 from dtradar_rl.evaluation.jobs import CrossConfig, EvalConfig, run_cross, run_eval
 from dtradar_rl.experiments.adapt import AdaptConfig, adapt
@@ -59,6 +60,7 @@ from dtradar_rl.train.config import DEFAULT_PRESET, PRESETS, DQNConfig, config_f
 from dtradar_rl.train.dqn import train
 
 OFFLINE_DEFAULT = OfflineConfig()
+join_docstring_lines()
 
 
 def run_train(cfg: DQNConfig) -> None:
