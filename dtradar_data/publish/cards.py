@@ -1,10 +1,11 @@
 """The committed cards of the built-in datasets, in ``cards/<scene>/<variant>/``.
 
 Each holds ``card.json`` (the newest stored version's ``meta.json``, its tag and the version history: the card's only
-input), ``README.md`` (rendered from ``card.json`` by :func:`dtradar_data.store.card.render_card`) and
-``coverage.png``. ``python -m dtradar_data cards`` refreshes them from the local store; ``--check`` (and the test
-suite) re-renders every committed ``card.json`` and fails when ``README.md`` differs, so a template or metadata change
-without ``make cards`` is caught without needing the datasets themselves.
+input), ``README.md`` (rendered from ``card.json`` by :func:`dtradar_data.store.card.render_card`) and its pictures
+(``cells.png``, the table itself, and ``coverage.png``, Sionna's radio map). ``python -m dtradar_data cards`` refreshes
+them from the local store; ``--check`` (and the test suite) re-renders every committed ``card.json`` and fails when
+``README.md`` differs, so a template or metadata change without ``make cards`` is caught without needing the datasets
+themselves.
 """
 
 from __future__ import annotations
@@ -31,8 +32,8 @@ def render_inputs(inputs: dict[str, Any]) -> str:
 
 
 def snapshot(name: str, out_dir: Path) -> Path:
-    """Write ``out_dir/<scene>/<variant>/{card.json, README.md, coverage.png[, city.png][, moving.gif]}`` from the
-    newest stored version."""
+    """Write ``out_dir/<scene>/<variant>/{card.json, README.md}`` and the pictures the version holds (``cells.png``,
+    ``coverage.png``, ``city.png``, ``moving.gif``) from the newest stored version."""
     _, version, vdir = local.resolve(name)
     entries = listing.history(name)
     meta = local.read_meta(vdir)
@@ -45,7 +46,7 @@ def snapshot(name: str, out_dir: Path) -> Path:
     target.mkdir(parents=True, exist_ok=True)
     (target / CARD_INPUTS).write_text(json.dumps(inputs, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
     (target / P.CARD_FILE).write_text(render_inputs(inputs))
-    for picture in (P.COVERAGE_FILE, CITY_FILE, P.MOVING_GIF_FILE):  # the images the card shows
+    for picture in (P.CELLS_PICTURE_FILE, P.COVERAGE_FILE, CITY_FILE, P.MOVING_GIF_FILE):  # the images the card shows
         if (vdir / picture).is_file():
             shutil.copyfile(vdir / picture, target / picture)
     return target

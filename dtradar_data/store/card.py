@@ -256,6 +256,7 @@ def _version_values(rec: VersionRecord, tag: str | None) -> dict[str, Any]:
             {"name": k, "size": human_size(f.bytes), "sha256": f.sha256[:16]} for k, f in sorted(rec.files.items())
         ],
         "coverage": P.COVERAGE_FILE if P.COVERAGE_FILE in rec.files else None,
+        "cells_png": P.CELLS_PICTURE_FILE if P.CELLS_PICTURE_FILE in rec.files else None,
         "city_png": CITY_FILE if CITY_FILE in rec.files else None,
         "scene_xml": P.SCENE_XML if P.SCENE_XML in rec.files else None,
     }

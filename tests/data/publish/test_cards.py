@@ -69,7 +69,12 @@ def put(version=V0, rt=RT, licence="CC-BY-4.0", with_paths=True, png=None):
             schema=PATH_SCHEMA,
         )
     return writing.write_version(
-        "cubicle/blueprint", version, ds.table, meta, paths=paths, extra_files={"coverage.png": png} if png else None
+        "cubicle/blueprint",
+        version,
+        ds.table,
+        meta,
+        paths=paths,
+        extra_files={"coverage.png": png, "cells.png": png} if png else None,
     )
 
 
@@ -107,7 +112,9 @@ def test_the_card_defines_every_column_every_rt_setting_and_the_angle_convention
     assert "zenith angles, not elevation" in text and "elevation = π/2 − θ" in text
     for key in RT:
         assert f"| `{key}` |" in text
-    assert "![Coverage map" in text and "(coverage.png)" in text
+    assert "## Sionna's radio map" in text and "(coverage.png)" in text and "not the table's values" in text
+    assert "## The table, cell by cell" in text and "(cells.png)" in text
+    assert text.index("(cells.png)") < text.index("(coverage.png)")  # the table's own picture first
     assert 'dtradar_data.load("cubicle/blueprint@v0")' in text and "load_dataset(" in text
     assert "24 cells: 24 free, 0 blocked" in text
     assert "| v0 | `0123456789abcdef` |" in text and "first version" in text
@@ -145,6 +152,15 @@ def test_a_snapshot_renders_identically_and_detects_staleness(root, tmp_path):
     inputs["meta"]["rt"]["max_depth"] = 7  # metadata edited without re-rendering
     (target / "card.json").write_text(json.dumps(inputs))
     assert cards.stale_cards(out) == [target]
+
+
+def test_a_snapshot_carries_the_pictures_its_card_shows(root, tmp_path):
+    png = tmp_path / "c.png"
+    png.write_bytes(b"png")
+    put(png=png)
+    target = cards.snapshot("cubicle/blueprint", tmp_path / "cards")
+    assert {p.name for p in target.iterdir()} == {"card.json", "README.md", "cells.png", "coverage.png"}
+    assert "(cells.png)" in (target / "README.md").read_text()
 
 
 def test_the_cards_command_refreshes_and_check_fails_on_a_stale_card(root, tmp_path, capsys):

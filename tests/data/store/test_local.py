@@ -104,7 +104,8 @@ def test_the_per_path_table_and_extra_files_are_stored_and_loaded_on_request(roo
     assert (path / "coverage.png").read_bytes() == png.read_bytes()
     ds = store.load("cubicle/blueprint", paths=True)
     assert ds.paths_table.num_rows == 46
-    assert "![Coverage map" in (path / "README.md").read_text()
+    card = (path / "README.md").read_text()
+    assert "![Sionna's radio map" in card and "cells.png" not in card  # no table picture stored: none shown
 
 
 def test_writing_an_existing_version_reuses_it_and_never_rewrites(root):
