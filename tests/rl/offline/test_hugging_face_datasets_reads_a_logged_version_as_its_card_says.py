@@ -1,6 +1,6 @@
 """docs/reference/logged-datasets.md's 🤗 `datasets` snippet: `load_dataset(<repo>, split="train")` reads
-`transitions.parquet` through the card's default config. `datasets` pointed at the version folder (the files the Hub repo holds) resolves
-the card's configs as it does on the Hub, offline."""
+`transitions.parquet` through the card's default config. `datasets` pointed at the version folder (the files the
+Hub repo holds) resolves the card's configs as it does on the Hub, offline."""
 
 from pathlib import Path
 
@@ -19,7 +19,8 @@ def test_the_default_config_of_a_logged_version_loads_every_transition(root, tmp
     logged = log_dataset(cfg, load_dataset("synthetic-10x8/blueprint"))
     folder = logged.path if logged.path.is_dir() else logged.path.parent
     page = (Path(__file__).resolve().parents[3] / "docs" / "reference" / "logged-datasets.md").read_text()
-    assert 'transitions = load_dataset("dtradar/dtradar-cubicle-blueprint-mixture", split="train", revision="v0")' in page
+    snippet = 'load_dataset("dtradar/dtradar-cubicle-blueprint-mixture", split="train", revision="v0")'
+    assert f"transitions = {snippet}" in page
     transitions = datasets.load_dataset(str(folder), split="train")
     assert transitions.num_rows == len(logged)
     assert transitions["action"] == logged.frame["action"].to_list()
