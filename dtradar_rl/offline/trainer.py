@@ -405,10 +405,12 @@ def _fit_timed(cfg: OfflineConfig, algo, train_data, t_start: float, say) -> tup
     """``(losses, train_s)``: :func:`fit` for ``cfg.n_steps`` updates, each epoch's losses said as they come."""
     epochs = _epochs(cfg.n_steps)
 
-    def progress(row: dict[str, float]) -> None:
+    def progress(row: dict[str, float]) -> None:  # a line per epoch: where, the rate and the time left
+        rate = row["step"] / max(time.perf_counter() - t_fit, 1e-9)
         say(
-            f"[{time.perf_counter() - t_start:6.1f}s] {cfg.algorithm} epoch {row['epoch']}/{epochs} "
-            f"step {row['step']}  " + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step"))
+            f"[{time.perf_counter() - t_start:6.1f}s] {cfg.algorithm} epoch {row['epoch']}/{epochs} step "
+            f"{row['step']}/{cfg.n_steps}, {rate:.0f} updates/s, {(cfg.n_steps - row['step']) / rate:.0f} s left  "
+            + "  ".join(f"{k} {v:.4f}" for k, v in row.items() if k not in ("epoch", "step"))
         )
 
     t_fit, numerics = time.perf_counter(), {"precision": cfg.update_precision, "device": cfg.device}

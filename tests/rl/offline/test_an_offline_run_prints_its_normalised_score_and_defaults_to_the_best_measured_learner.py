@@ -3,6 +3,7 @@ run's own evaluation pairs) in its results table and results.json, and its defau
 benchmark measured (DiscreteBCQ with the memory window and OGBench's goal mix)."""
 
 import json
+import re
 
 import pytest
 
@@ -47,3 +48,12 @@ def test_an_offline_run_prints_and_records_each_twins_normalised_score(root, tmp
         refs = reference_scores(load_dataset(r["dataset"]), pairs=60, seed=2024)
         assert r["normalized"] == pytest.approx(normalized(r["spl"], refs))
         assert f"{r['normalized']:.1f} |" in printed
+
+
+def test_each_epochs_line_says_the_updates_done_of_the_total_the_rate_and_the_time_left(root, tmp_path, capsys):
+    argv = ["offline", "--scene", SMALL, "--algorithm", "bc", "--transitions", "2000", "--num-envs", "16"]
+    argv += ["--n-steps", "50", "--hidden", "16", "--pairs", "20", "--threads", "1", "--no-latency", "--no-shield"]
+    assert main([*argv, "--out", str(tmp_path / "run")]) == 0
+    printed = capsys.readouterr().out
+    lines = re.findall(r"bc epoch (\d+)/(\d+) step (\d+)/50, \d+ updates/s, (\d+) s left", printed)
+    assert lines and lines[-1][0] == lines[-1][1] and lines[-1][2:] == ("50", "0"), printed
