@@ -20,10 +20,6 @@ import os
 import time
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from dtradar_data.core.dataset import Dataset
@@ -96,6 +92,11 @@ def bench_scene(scene: str, radius_m: float, seed_floor: bool, out: Path) -> dic
 
 
 def plot(spec, blocked, mask, c, path: Path, row: dict) -> None:
+    import matplotlib  # here: the results pages import markdown() alone
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     shape = blocked.shape
     img = np.zeros(shape)  # 0 free kept, 1 re-traced, 2 blocked, 3 disagrees with the full trace
     img[mask] = 1
@@ -122,14 +123,20 @@ def plot(spec, blocked, mask, c, path: Path, row: dict) -> None:
 
 
 def markdown(rows: list[dict], described: str) -> str:
+    """The report of one or more scenes' rows (the JSON of each, in order): a sentence and the table, as
+    docs/results/ray-tracing.md shows it (``make results-pages`` renders it from the scenes' JSON alone)."""
+
     def pct(s):
         return f"{100 * s['agreement']:.1f} %"
+
+    def count(n: int) -> str:
+        return f"{n:,}".replace(",", " ")
 
     lines = [
         f"Differential vs full re-trace of each dynamic twin ({described}).",
         "",
         "| twin | re-traced | trace time full → differential | agreement with the full re-trace: all / "
-        "re-traced / kept cells | median / p95 abs. gain diff | parent reused unchanged | another full trace "
+        "re-traced / kept cells | median / p95 abs. gain diff | parent reused unchanged | a 2nd full trace "
         "(seed + 1) |",
         "|---|---:|---:|---|---:|---:|---:|",
     ]
@@ -137,9 +144,10 @@ def markdown(rows: list[dict], described: str) -> str:
         a = r["differential_vs_full"]
         seed = r.get("full_other_seed_vs_full")
         lines.append(
-            f"| `{r['scene']}/dynamic` | {r['retraced_cells']} of {r['free_cells']} | {r['full_s']:.1f} s → "
-            f"{r['differential_s']:.1f} s ({r['speedup']:.2f}×) | {pct(a['all'])} / {pct(a['retraced'])} / "
-            f"{pct(a['kept'])} | {a['all']['gain_median_db']:.3f} / {a['all']['gain_p95_db']:.2f} dB | "
+            f"| `{r['scene']}/dynamic` | {count(r['retraced_cells'])} of {count(r['free_cells'])} | "
+            f"{r['full_s']:.1f} s → {r['differential_s']:.1f} s ({r['speedup']:.1f}×) | "
+            f"{pct(a['all'])} / {pct(a['retraced'])} / {pct(a['kept'])} | "
+            f"{a['all']['gain_median_db']:.3f} / {a['all']['gain_p95_db']:.2f} dB | "
             f"{pct(r['parent_reused_vs_full'])} | {pct(seed) if seed else 'not run'} |"
         )
     return "\n".join(lines) + "\n"

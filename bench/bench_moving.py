@@ -42,6 +42,7 @@ from dtradar_data.core.machine import describe, machine
 from dtradar_data.geometry.occupancy import occupancy
 from dtradar_data.pipeline import differential, moving
 from dtradar_data.pipeline.config import BuildConfig, scene_config
+from dtradar_data.pipeline.trace_helpers import helper_count
 from dtradar_data.pipeline.tracing import trace_grid
 from dtradar_data.rt.compare import compare
 from dtradar_data.rt.compare import summarize as stats
@@ -118,6 +119,7 @@ def bench_scene(
     log(f"{scene}: {count} snapshots of {mv.dt_s:g} s (own horizon {period}), {grid['nx']} x {grid['ny']} cells")
     compile_s = _first_compile(spec0, rt)
     log(f"{scene}: first compile {compile_s:.1f} s")
+    helpers = helper_count(int((~occupancy(spec0)).sum()), rt)  # what the build starts beside it, as it decides
     snaps, trace_s, tables_s = _build(mv, config)
     log(f"{scene}: built {count} snapshots in {trace_s:.1f} s (+ {tables_s:.1f} s joining the table)")
     rows, kept_full, floor_ks = _compare_with_full(scene, count, mv, period, config, grid, snaps, floor_at)
@@ -135,6 +137,7 @@ def bench_scene(
         trace_s=trace_s,
         tables_s=tables_s,
         tol_pp=tol_pp,
+        helpers=helpers,
         host_before=host_before,
         host_after=host_after,
     )
@@ -298,7 +301,9 @@ def _seed_floor(scene: str, mv, config, grid: dict, kept_full: dict, floor_ks: l
     return floors
 
 
-def summarize(scene, mv, period, rt, config, rows, floors, *, compile_s, trace_s, tables_s, tol_pp, **hosts) -> dict:
+def summarize(
+    scene, mv, period, rt, config, rows, floors, *, compile_s, trace_s, tables_s, tol_pp, helpers=0, **hosts
+) -> dict:
     diff = [r for r in rows if r["mode"] == "differential"]
     agree = np.array([r["differential_vs_full"]["all"]["agreement"] for r in diff])
     speed = np.array([r["speedup"] for r in diff], dtype=float)
@@ -341,6 +346,7 @@ def summarize(scene, mv, period, rt, config, rows, floors, *, compile_s, trace_s
         "grid": [mv.base.grid.nx, mv.base.grid.ny],
         "rt": {k: getattr(rt, k) for k in ("max_depth", "samples_per_src", "batch_size", "seed", "batch_independent")},
         "radius_m": max(config.retrace_radius_m, mv.base.grid.cell_m),
+        "helpers": helpers,  # processes tracing parts of each differential snapshot beside the build's (0: one)
         "first_compile_s": round(compile_s, 2),
         "build_trace_s": round(trace_s, 2),
         "build_tables_s": round(tables_s, 2),

@@ -16,7 +16,8 @@ map (one run per TX polarisation with a one-hot precoding: with a synthetic arra
 element of one polarisation); the area (PathSolver averaged over k×k points inside each cell against a radio map
 k times finer); the interactions (LoS only, LoS + specular at each depth, the dataset's setting, + diffraction);
 the samples (radio map 1e6..; PathSolver 1e4 and more; Sionna's own PathSolver beside the batch-independent one).
-Writes ``results/bench_radiomap/bench_radiomap.{json,md,png}``.
+Writes ``results/bench_radiomap/bench_radiomap.{json,md,png}`` (:mod:`bench_radiomap_report`: the report, whose summary
+is the two tables of docs/results/ray-tracing.md).
 
     python bench/bench_radiomap.py                                    # cubicle, about 5 min on 2 cores
     python bench/bench_radiomap.py --rm-samples 1000000 --ps-samples 10000 --subpoints 2 --no-diffraction
@@ -31,6 +32,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from bench_radiomap_report import markdown, plot  # beside this script in bench/ (on its path)
 
 from dtradar_data.core.machine import describe, machine
 from dtradar_data.geometry.occupancy import occupancy
@@ -317,64 +319,6 @@ def _padded(parts: list[np.ndarray]) -> list[np.ndarray]:
     return [np.pad(x, [(0, 0)] * (x.ndim - 1) + [(0, width - x.shape[-1])]) for x in parts]
 
 
-def _markdown(result: dict) -> list[str]:
-    """The report: a heading with the machine and command, then one table per hypothesis."""
-    lines = [
-        f"# PathSolver against RadioMapSolver: {result['scene']} ({result['free_cells']} free cells, "
-        f"{result['machine']})",
-        "",
-        f"`{result['command']}`: PathSolver {result['ps_samples']:.0e} samples (batch-independent unless said), "
-        f"radio map {result['rm_samples']:.0e} samples, {result['rm_cell_m']} m cells at z = {result['plane_z_m']} m "
-        f"(receivers at {result['rx_height_m']} m), max_depth {result['max_depth']}; PathSolver minus radio map in dB "
-        "over the free cells; total time {:.0f} s.".format(result["seconds"]),
-    ]
-    head = "| compared | cells | median | median abs. | p90 abs. | ratio of means | table red., median | paths "
-    head += "| PathSolver s | radio map s |"
-    for group in ("antennas", "area", "interactions", "samples"):
-        lines += ["", f"## {group}", "", head, "|---|" + "---:|" * 9]
-        for r in (r for r in result["rows"] if r["group"] == group):
-            table = f"{r['table_median_db']:+.2f} dB" if "table_median_db" in r else ""
-            lines.append(
-                f"| {r['what']} | {r['cells']} | {r['median_db']:+.2f} dB | {r['median_abs_db']:.2f} dB | "
-                f"{r['p90_abs_db']:.2f} dB | {r['mean_linear_ratio_db']:+.2f} dB | {table} | {r.get('paths', '')} | "
-                f"{r['ps_s'] or ''} | {r['rm_s'] or ''} |"
-            )
-    return lines
-
-
-def _plot(cells: dict, path: Path, title: str) -> None:
-    """Histogram of the per-cell differences for each reduction, and PathSolver against radio map per cell."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rm = 10 * np.log10(cells["rm"])
-    series = [(f"{n} (iso receiver)", 10 * np.log10(cells["red"][n])) for n in REDUCTIONS]
-    series.append(("table, dataset's dipole", 10 * np.log10(cells["dipole"])))
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
-    bins = np.linspace(-20, 20, 81)
-    for name, db in series:
-        d = db - rm
-        ax1.hist(
-            d[np.isfinite(d)], bins=bins, histtype="step", lw=1.5, label=f"{name}: median {np.nanmedian(d):+.2f} dB"
-        )
-        ax2.plot(rm, db, ".", ms=3, label=name)
-    ax1.axvline(0, color="k", lw=0.8)
-    ax1.set_xlabel("PathSolver minus radio map per free cell [dB]")
-    ax1.set_ylabel("cells")
-    ax1.legend(fontsize=8, loc="upper left")
-    lo, hi = np.nanmin(rm), np.nanmax(rm)
-    ax2.plot([lo, hi], [lo, hi], "k-", lw=0.8)
-    ax2.set_xlabel("radio map (default precoding) [dB]")
-    ax2.set_ylabel("PathSolver [dB]")
-    ax2.legend(fontsize=8)
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def main() -> None:
     """Parse, set up one tracer, run each hypothesis' ablation, write JSON + Markdown + PNG."""
     import sys
@@ -405,6 +349,14 @@ def main() -> None:
         "max_depth": s.max_depth,
         "tx_array": f"{tx.num_rows}x{tx.num_cols} {tx.pattern} {tx.polarization}, {b.tracer.scene.tx_array.num_ant} "
         "ports",
+        "tx_ports": b.tracer.scene.tx_array.num_ant,
+        # the ablations' settings (the rows' labels name them; the results page's tables find rows by them)
+        "subpoints": args.subpoints,
+        "depths": args.depths,
+        "rm_sweep": args.rm_sweep,
+        "ps_sweep": args.ps_sweep,
+        "solo_every": args.solo_every,
+        "diffraction": not args.no_diffraction,
         "seconds": round(time.perf_counter() - t0, 1),
         "rows": rows,
         "machine": f"{describe(machine())}, no GPU (LLVM backend)",
@@ -413,10 +365,10 @@ def main() -> None:
     }
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "bench_radiomap.json").write_text(json.dumps(result, indent=2) + "\n")
-    lines = _markdown(result)
-    (args.out / "bench_radiomap.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
-    _plot(cells, args.out / "bench_radiomap.png", f"{spec.name}: PathSolver against RadioMapSolver per free cell")
+    md = markdown(result)
+    (args.out / "bench_radiomap.md").write_text(md)
+    print(md, end="")
+    plot(cells, args.out / "bench_radiomap.png", f"{spec.name}: PathSolver against RadioMapSolver per free cell")
 
 
 if __name__ == "__main__":

@@ -165,6 +165,9 @@ def _result(args, spec, points, base: RTSettings, ref_s: float, first_call_s: fl
         "batch_size": args.batch_size,
         "batch_independent": not args.stock_solver,
         "max_depth": base.max_depth,
+        # what a build of the scene traces with by default (its scene file's [rt] table over the RTSettings defaults)
+        "default_samples_per_src": spec.rt_defaults.get("samples_per_src", RTSettings().samples_per_src),
+        "scene_rt_defaults": dict(spec.rt_defaults),
         "rows": rows,
         "meets_goal_300_cells_per_s_at_95pct": [r["samples_per_src"] for r in ok],
         "paper_ms_per_decision_rt": 16.0,
