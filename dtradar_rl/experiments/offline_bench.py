@@ -302,6 +302,7 @@ def _gatherer(
     """The callable each finished run's row is handed to (``fresh=False``: a reused one): it keeps a fresh row in its
     run folder, scores the row, appends it to ``runs``, says it and writes the partial results."""
     job_of = {(j.behaviour, j.algorithm, j.seed): j for j in jobs}
+    t_train, trained = time.perf_counter(), [0]  # the time left is the fresh trainings' mean pace so far
 
     def done(run: dict[str, Any], fresh: bool = True) -> None:
         if fresh:  # its row as the job returned it, before scoring: what a benchmark run again reuses
@@ -311,8 +312,11 @@ def _gatherer(
                 run[v] = _scores(run[v], refs[v])
         runs.append(run)
         ope = f"; FQE {run['fqe']:.3f}, true {run['true_value']:.3f}" if "fqe" in run else ""
+        trained[0] += fresh
+        left = (time.perf_counter() - t_train) / max(trained[0], 1) * (len(jobs) - len(runs)) if trained[0] else 0.0
         say(
-            f"[{time.perf_counter() - t_start:7.1f}s] {run['behaviour']:<15} {NAMES[run['algorithm']]:<12} "
+            f"[{time.perf_counter() - t_start:7.1f}s] run {len(runs)}/{len(jobs)}, about {left / 60:.1f} min left: "
+            f"{run['behaviour']:<15} {NAMES[run['algorithm']]:<12} "
             f"seed {run['seed']}: "
             + ", ".join(
                 f"{v} {run[v]['normalized']:.1f} (success {run[v]['success_rate']:.3f})"
