@@ -149,6 +149,11 @@ def run_seed(job: SeedJob) -> dict[str, Any]:
         "min_steps": best[3] if best else None,
         "min_episode": best[0] + 1 if best else None,
         "first_within_10pct": near[0] + 1 if near else None,
+        # the first episode's steps (the whole run's when no episode ended), and the steps of an episode that was
+        # still running when the budget ran out (episodes until the target: one that never reached it)
+        "first_episode_steps": episodes[0][3] if episodes else stats["env_steps"],
+        "first_episode_finished": bool(episodes),
+        "unfinished_steps": stats["env_steps"] - sum(e[3] for e in episodes),
         "greedy": greedy,
     }
 

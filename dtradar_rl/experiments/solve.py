@@ -219,4 +219,40 @@ def markdown(result: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["SolveConfig", "check_solve_memory", "greedy_metrics", "solve_scene"]
+def _seconds(x: float) -> str:
+    """Two decimals under 10 s (trailing zeros dropped, one kept), one under 100 s, none above: ``0.42``, ``1.0``,
+    ``8.3``, ``20.2``, ``137``."""
+    if x >= 10:
+        return f"{x:.1f}" if x < 100 else f"{x:.0f}"
+    said = f"{x:.2f}".rstrip("0")
+    return said + "0" if said.endswith(".") else said
+
+
+def twins_table(results: list[dict[str, Any]]) -> str:
+    """Several scenes' ``solve.json`` in one table (docs/results/tabular.md), a row per twin in their order: its size,
+    the solve time under each reward and the greedy policy's success / SPL under each (the discount named for every
+    reward but ``geodesic``, whose greedy policy is the shortest path at any)."""
+    rewards = list(results[0]["config"]["rewards"])
+    gamma = results[0]["config"]["gamma"]
+    twins: dict[str, dict[str, dict[str, Any]]] = {}
+    for result in results:
+        for r in result["rows"]:
+            twins.setdefault(r["dataset"], {})[r["reward"]] = r
+
+    def k(n: int) -> str:
+        return f"{n:,}".replace(",", " ")
+
+    head = ["twin", "cells × targets", *(f"solve, {w}" for w in rewards)] + [
+        f"greedy under `{w}`" + ("" if w == "geodesic" else f" (γ {gamma:g})") + ": success / SPL" for w in rewards
+    ]
+    lines = ["| " + " | ".join(head) + " |", "|---|---|" + "---:|" * len(rewards) + "---|" * len(rewards)]
+    for name, by in twins.items():
+        r0 = next(iter(by.values()))
+        cells = [name, f"{k(r0['cells'])} × {k(r0['targets'])}"]
+        cells += [f"{_seconds(by[w]['solve_s'])} s" if w in by else "-" for w in rewards]
+        cells += [f"{by[w]['success_rate']:.3f} / {by[w]['spl']:.3f}" if w in by else "-" for w in rewards]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+__all__ = ["SolveConfig", "check_solve_memory", "greedy_metrics", "solve_scene", "twins_table"]
