@@ -12,7 +12,9 @@ offline benchmark's budget; lr 1e-3, one torch thread), evaluated greedy and uns
 (:func:`dtradar_rl.evaluation.normalized.normalized` with :func:`~dtradar_rl.evaluation.normalized.reference_scores`).
 Runs go to ``--workers`` spawned processes (one torch thread each). Every finished run is appended to
 ``results/bench_relabel/runs.jsonl`` (``--out``); a run already there (same scene, family, algorithm, mix, seed,
-updates, discount, resampling) is not run again, and ``bench.md`` is rewritten from all of them.
+updates, discount, resampling) is not run again, and ``bench.json`` (``{"runs": [...]}``, every run) and ``bench.md``
+are rewritten from all of them; :func:`table` is the results page's table of one scene (the logged targets -> the
+``auto`` mix).
 """
 
 from __future__ import annotations
@@ -75,7 +77,58 @@ def _key(run: dict[str, Any]) -> tuple:
     return tuple(run[k] for k in KEYS)
 
 
+#: The page's order of the algorithms and families (those present are shown).
+ALGORITHMS = ("bc", "cql", "bcq", "dqn", "ddqn", "nfq")
+FAMILIES = ("random", "expert", "medium", "medium-replay", "mixed")
+
+
+def _auto_run(runs: list[dict[str, Any]], algorithm: str) -> dict[str, Any] | None:
+    """The run of ``--relabel auto`` among ``runs`` (the mix ``auto``, else the mix auto stands for)."""
+    from dtradar_rl.offline.relabel import AUTO_MIXES
+
+    for mix in ("auto", AUTO_MIXES.get(algorithm)):
+        hit = [r for r in runs if r["mix"] == mix]
+        if hit:
+            return hit[-1]
+    return None
+
+
+def table(data: dict[str, Any], scene: str, bold: bool = True) -> str:
+    """The page's table of ``scene``: a row per family, a column per algorithm, each cell the normalised score on
+    the logged targets -> with the ``auto`` mix, blueprint / dynamic (blank: not run); ``bold``: the best ``auto``
+    blueprint score of each family in bold."""
+    sel = [r for r in data["runs"] if r["scene"] == scene]
+    algos = [a for a in ALGORITHMS if any(r["algorithm"] == a for r in sel)]
+    algos += list(dict.fromkeys(r["algorithm"] for r in sel if r["algorithm"] not in algos))
+    fams = [f for f in FAMILIES if any(r["family"] == f for r in sel)]
+    fams += list(dict.fromkeys(r["family"] for r in sel if r["family"] not in fams))
+    lines = ["| " + " | ".join([scene, *algos]) + " |", "|" + "---|" * (1 + len(algos))]
+    for fam in fams:
+        cells, best = [], (None, -1)
+        for i, a in enumerate(algos):
+            runs = [r for r in sel if (r["family"], r["algorithm"]) == (fam, a)]
+            none = [r for r in runs if r["mix"] == "none"]
+            auto = _auto_run(runs, a)
+            if not none or auto is None:
+                cells.append("")
+                continue
+            cells.append(
+                " / ".join(
+                    f"{none[-1][v]['normalized']:.1f} → {auto[v]['normalized']:.1f}" for v in ("blueprint", "dynamic")
+                )
+            )
+            if best[0] is None or auto["blueprint"]["normalized"] > best[0]:
+                best = (auto["blueprint"]["normalized"], i)
+        if bold and best[0] is not None:
+            cells[best[1]] = f"**{cells[best[1]]}**"
+        lines.append("| " + fam + " |" + "".join(f" {c} |" if c else " |" for c in cells))
+    return "\n".join(lines) + "\n"
+
+
 def write_markdown(runs: list[dict[str, Any]], path: Path) -> None:
+    """``bench.md``: every mix's score per scene and twin, the results page's table of each scene, then every run's
+    seconds; and ``bench.json`` beside it (every run: what :func:`table` reads)."""
+    path.with_name("bench.json").write_text(json.dumps({"runs": runs}, indent=2) + "\n")
     lines = []
     for scene in dict.fromkeys(r["scene"] for r in runs):
         for variant in ("blueprint", "dynamic"):
@@ -92,6 +145,13 @@ def write_markdown(runs: list[dict[str, Any]], path: Path) -> None:
                     if any(cells):
                         lines.append(f"| {fam} | {algo} | " + " | ".join(cells) + " |")
             lines.append("")
+    for scene in dict.fromkeys(r["scene"] for r in runs):
+        lines += [
+            f"**{scene}**: the logged targets → the `auto` mix, blueprint / dynamic",
+            "",
+            table({"runs": runs}, scene),
+            "",
+        ]
     lines += ["| scene | family | algorithm | mix | train s | wall s |", "|---|---|---|---|---:|---:|"]
     lines += [
         f"| {r['scene']} | {r['family']} | {r['algorithm']} | {r['mix']} | {r['train_s']:.1f} | {r['wall_s']:.1f} |"

@@ -40,7 +40,7 @@ runs it had not finished (``--no-reuse``: all of them; :mod:`dtradar_rl.experime
 
 The budget (``--n-steps``, ``--fqe-steps``) was chosen by measurement for 30 min of wall time per twin on this 2-core
 machine: the cubicle took 29 min, a Dallas quadrant 27 min; what each
-reaches is in docs/results/offline.md.
+reaches is in docs/results/offline-first-benchmark.md.
 """
 
 from __future__ import annotations

@@ -147,6 +147,9 @@ def run_job(job: BenchJob) -> dict[str, Any]:
         "wall_s": r.wall_s,
         "final_losses": r.losses[-1] if r.losses else {},
         "pid": os.getpid(),
+        # what --precision and --batch-size resolved to for this algorithm on this CPU (auto: bf16 where it runs)
+        "precision": cfg.update_precision,
+        "batch_size": cfg.update_batch_size,
         **{
             v: _row_metrics(r.rows, f"{scene}/{v}")
             for v in cfg.eval_variants
