@@ -80,7 +80,7 @@ class OfflineConfig(BehaviourConfig):
     lr: float = 1e-3
     """Adam learning rate (d3rlpy's Atari default, 6.25e-5, is too slow for a short run; 1e-3 beat 3e-4 for every
     algorithm measured on the cubicle's expert and medium data at 3 K updates, by 10-50 points of normalised score,
-    and for DQN at 10 K too; 3e-3 was no better: docs/results/offline.md)"""
+    and for DQN at 10 K too; 3e-3 was no better: docs/results/offline-first-benchmark.md)"""
     gamma: float = 0.5
     """discount factor of the Q-learning algorithms (not used by bc)"""
     target_update_interval: int = 500
