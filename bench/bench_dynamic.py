@@ -215,5 +215,31 @@ def report(rows, adapt_rows, args) -> str:
     return "\n".join(lines) + "\n"
 
 
+def adapt_table(result: dict) -> str:
+    """The twin update of the JSON's ``adapt`` rows: per scene and seed, the memory agent's zero-shot success, the
+    fine-tune with the expert loss (first evaluation at >= 0.99, in bold, and success (SPL) at the end), the plain DQN
+    fine-tune (first >= 0.99 and success at the end) and training from scratch with the expert loss (at the end)."""
+    end = f"{result['args']['seconds']:g} s"
+
+    def first(curve) -> str:
+        t = first_time_at(curve, 0.99)
+        return "never" if t is None else f"{t:.1f} s"
+
+    lines = [
+        f"| scene | seed | zero-shot (0 s) | fine-tune + expert loss: first ≥ 0.99 / at {end} (SPL) | plain DQN "
+        f"fine-tune: first ≥ 0.99 / at {end} | from scratch + expert loss: at {end} |",
+        "|---|---|---:|---|---|---:|",
+    ]
+    for a in result["adapt"]:
+        ft, plain, scratch = (a["curves"].get(k) for k in ("finetune", "finetune-dqn", "scratch"))
+        plain_cell = f"{first(plain)} / {plain[-1]['success_rate']:.3f}" if plain else "-"
+        scratch_cell = f"{scratch[-1]['success_rate']:.3f}" if scratch else "-"
+        lines.append(
+            f"| {a['scene']} | {a['seed']} | {ft[0]['success_rate']:.3f} | **{first(ft)}** / "
+            f"{ft[-1]['success_rate']:.3f} ({ft[-1]['spl']:.3f}) | {plain_cell} | {scratch_cell} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 if __name__ == "__main__":
     main()

@@ -126,6 +126,21 @@ def markdown(result, goal: bool = True) -> str:
     return "\n".join(lines) + "\n"
 
 
+def markdown_twins(results: list[dict]) -> str:
+    """Several twins' runs as one table (a twin column first, no worst or goal column): each case of each run, in the
+    runs' order."""
+    lines = [
+        "| twin | policy | torch threads | machine | p50 (ms), each run | p99 (ms), each run |",
+        "|---" * 6 + "|",
+    ]
+    for result in results:
+        for (name, threads, load), rs in _cases(result):
+            p50 = " ".join(f"{r['p50_ms']:.3f}" for r in rs)
+            p99 = " ".join(f"{r['p99_ms']:.3f}" for r in rs)
+            lines.append(f"| {result['scene']} | {name} | {threads} | {load} | {p50} | {p99} |")
+    return "\n".join(lines) + "\n"
+
+
 def plot(result, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(9, 4))
     labels, p50s, p99s = [], [], []

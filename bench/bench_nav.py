@@ -335,6 +335,26 @@ def markdown(result) -> str:
     return "\n".join(lines) + "\n"
 
 
+def agent_table(result, agent: str = SB3, noise: str = "none") -> str:
+    """One agent's rows under one noise level: a row per twin, its blueprint success / SPL and dynamic success / SPL
+    / collisions (mean ± spread over seeds)."""
+    lines = ["| twin | blueprint: success / SPL | dynamic: success / SPL / collisions |", "|---|---|---|"]
+    for (scene, name, level), rs in _groups(result["rows"]):
+        if (name, level) != (agent, noise):
+            continue
+        bp = [r for r in rs if r["twin"] == "blueprint"]
+        dy = [r for r in rs if r["twin"] == "dynamic"]
+        bp_cell = f"{_pm(r['success'] for r in bp)} / {_pm(r['spl'] for r in bp)}" if bp else "-"
+        dy_cell = (
+            f"{_pm(r['success'] for r in dy)} / {_pm(r['spl'] for r in dy)} / "
+            f"{_pm((r['collisions'] for r in dy), '{:.2f}')}"
+            if dy
+            else "-"
+        )
+        lines.append(f"| {scene} | {bp_cell} | {dy_cell} |")
+    return "\n".join(lines) + "\n"
+
+
 def plot(result, path: Path) -> Path:
     rows = result["rows"]
     scenes = list(dict.fromkeys(r["scene"] for r in rows))

@@ -3,6 +3,7 @@
     python bench/bench_rl.py                 # `make bench-rl`; writes results/bench_rl.json and results/bench_rl.md
     python bench/bench_rl.py --scene meeting # -> results/bench_rl_meeting.{json,md}
     python bench/bench_rl.py --env-only      # env throughput only -> results/bench_rl_env.{json,md}
+    python bench/bench_rl.py --no-robust --name bench_rl_memory  # -> results/bench_rl_memory.{json,md}
     python bench/bench_rl.py --help
 
 Measures (paper figures in brackets): env steps/s of the batched torch env (its fast path and, side by side, its
@@ -91,6 +92,8 @@ class BenchConfig:
     """torch threads (0 = auto)"""
     out: str = "results"
     """where bench_rl.{json,md} go (bench_rl_<scene>.{json,md} for a scene other than the cubicle)"""
+    name: str = ""
+    """stem of the result files instead (a run of other options beside the default run: its own JSON)"""
     runs: str = str(run_dir("bench_rl"))
     """where the benchmark's checkpoints go"""
 
@@ -411,7 +414,7 @@ def main(cfg: BenchConfig) -> dict:
         ds, cfg.env_counts, cfg.env_seconds, rounds=cfg.env_rounds, general=cfg.env_general, threads=cfg.env_threads
     )
     print("env steps/s:", {k: f"{v:,.0f}" for k, v in thr.items()})
-    stem = "bench_rl" if cfg.scene == "cubicle" else f"bench_rl_{cfg.scene}"
+    stem = cfg.name or ("bench_rl" if cfg.scene == "cubicle" else f"bench_rl_{cfg.scene}")
     out = Path(cfg.out)
     if cfg.env_only:
         return _write_env_only(cfg, out, stem, ds, synthetic, threads, load_before, thr)

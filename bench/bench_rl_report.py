@@ -97,3 +97,80 @@ def render_markdown(r: dict, throughput: bool = True) -> str:
         markdown_table(r["eval"]),
     ]
     return "\n".join(lines)
+
+
+def _thousands(n: int) -> str:
+    """``289821`` -> ``289 821`` (the docs' thousands separator)."""
+    return f"{n:,}".replace(",", " ")
+
+
+def _rate(v: float) -> str:
+    """Steps/s to three significant digits with K or M: ``17.4 K``, ``2.83 M``."""
+    x = float(f"{v:.3g}")
+    scale, unit = (1e6, "M") if x >= 1e6 else (1e3, "K") if x >= 1e3 else (1.0, "")
+    return f"{x / scale:g} {unit}".rstrip()
+
+
+def env_table(r: dict) -> str:
+    """``--env-only``'s throughput as one table: a row per batched env size, its fast path (the default), its general
+    path, its fast path at the other thread counts measured, and the gymnasium env (one robot's row); the fastest in
+    bold."""
+    thr = r["env_steps_per_s"]
+    counts = sorted({int(k.split("_")[-1]) for k in thr if k.startswith("batched_") and "_t" not in k})
+    threads = sorted({int(k.rsplit("_t", 1)[1]) for k in thr if "_t" in k})
+    general = any(k.startswith("batched_general_") for k in thr)
+    best = max(thr.values())
+    head = ["robots", "fast path (default)"] + (["general path"] if general else [])
+    head += [f"fast path, {n} thread{'s' if n != 1 else ''}" for n in threads] + ["gymnasium env"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---:|" * len(head)]
+    for k in counts:
+        keys = [f"batched_{k}"] + ([f"batched_general_{k}"] if general else []) + [f"batched_{k}_t{n}" for n in threads]
+        cells = [_thousands(k)] + [
+            "" if key not in thr else f"**{_rate(thr[key])}**" if thr[key] == best else _rate(thr[key]) for key in keys
+        ]
+        cells.append(_rate(thr["gymnasium"]) if k == counts[0] else "")
+        lines.append("|" + "|".join(f" {c} " if c else " " for c in cells) + "|")
+    return "\n".join(lines) + "\n"
+
+
+def _budget(steps: int) -> str:
+    return f"{steps / 1e6:g} M" if steps >= 1e6 else f"{steps / 1e3:g} K"
+
+
+def _pair(row: dict | None) -> str:
+    return "" if row is None else f"{row['success_rate']:.3f} / {row['spl']:.3f}"
+
+
+def sb3_table(r: dict) -> str:
+    """Ours against SB3 at the same budget: a row per preset trained (``tuned``, and the default preset with its
+    updates), its wall time, SB3's for the budget, the ratio, and each one's success / SPL on the blueprint and the
+    dynamic twin; SB3's own row last."""
+    sb3, name = r["sb3"], r["dataset"]["name"]
+    scene = name.split("/")[0]
+
+    def ours(label: str, twin: str) -> dict | None:
+        return next((e for e in r["eval"] if e["case"] == f"ours ({label}): {name} -> {scene}/{twin}"), None)
+
+    cap = (
+        f" (capped at {r['config']['sb3_max_seconds']:.0f} s: {_thousands(sb3['env_steps'])} steps, extrapolated)"
+        if sb3["capped"]
+        else ""
+    )
+    lines = [
+        f"| {_budget(r['config']['budget'])} env steps | wall time | SB3 DQN{cap} | ratio | success / SPL blueprint | "
+        "success / SPL dynamic |",
+        "|---|---:|---:|---:|---|---|",
+    ]
+    runs = [("tuned", "`tuned`", r["train"])]
+    dft = r.get("train_default")
+    if dft:
+        preset = dft["config"]["preset"]
+        runs.append((f"default, {preset}", f"`{preset}` ({_thousands(dft['updates'])} updates)", dft))
+    for label, shown, t in runs:
+        lines.append(
+            f"| {shown} | {t['wall_s']:.1f} s | {sb3['wall_s_for_budget']:.0f} s | "
+            f"**{sb3['wall_s_for_budget'] / t['wall_s']:.1f}×** | {_pair(ours(label, 'blueprint'))} | "
+            f"{_pair(ours(label, 'dynamic'))} |"
+        )
+    lines.append(f"| SB3 DQN | | | | {_pair(sb3.get('blueprint'))} | {_pair(sb3.get('dynamic'))} |")
+    return "\n".join(lines) + "\n"

@@ -149,7 +149,7 @@ def run_eval(cfg: EvalConfig) -> str:
         print(line)
     if getattr(policy.config, "fixed_pair", False):
         return _eval_pair(cfg, policy, ckpt, out)
-    rows = []
+    rows, free = [], {}  # free: each static twin's free cells (a results table names the twin's size)
     learnt = dqn_checkpoint(cfg.scene)
     others = []
     if cfg.privileged and ckpt.suffix == ".json" and learnt.exists():
@@ -169,6 +169,8 @@ def run_eval(cfg: EvalConfig) -> str:
         noise=cfg.noise,
     ):
         rows.append(row)
+        if not ds.is_moving:
+            free[ds.name] = int((~ds.blocked).sum())
         k = min(cfg.plot_paths, len(roll.paths))
         out.mkdir(parents=True, exist_ok=True)
         noisy = "" if cfg.noise == EvalConfig.noise else f"_noise-{cfg.noise}"  # the default level: no suffix
@@ -202,6 +204,7 @@ def run_eval(cfg: EvalConfig) -> str:
         "train": policy.config.to_dict(),
         "train_stats": policy.meta.get("stats", {}),
         "sensing": {row["case"]: row["sensing"] for row in rows},
+        "free_cells": free,
     }
     evaluated = {row["dataset"] for row in rows}
     missing = [f"{cfg.scene}/{v}" for v in cfg.variants if f"{cfg.scene}/{v}" not in evaluated]
