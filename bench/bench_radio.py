@@ -254,9 +254,9 @@ def page(report: dict, path: Path, images: list[Path], source: Path) -> None:
         "",
         f"```bash\n{report['command']}\n```",
         "",
-        f"Run on {report['machine_line']}, {report['date']}; {report['pairs']} seeded start/target pairs per twin and "
-        "seed (2024 unless the table says more), SPL from the true start on the twin navigated; each row is the "
-        "default agent (the radio filter) observing with that sensing. What each sensing observes: "
+        f"Run on {report['machine_line']}, recorded {report['date']}; {report['pairs']} seeded start/target pairs per "
+        "twin and seed (2024 unless the table says more), SPL from the true start on the twin navigated; each row is "
+        "the default agent (the radio filter) observing with that sensing. What each sensing observes: "
         "[Sensing](../sensing.md).",
         "",
         f"<!-- results: bench-radio {source} -->",
@@ -274,13 +274,14 @@ def page(report: dict, path: Path, images: list[Path], source: Path) -> None:
 def merge(args) -> int:
     """One report (JSON, Markdown, PNG and page) from the reports of several runs, in the order given."""
     parts = [json.loads(Path(p).read_text()) for p in args.merge]
+    dates = [d for p in parts for d in p["date"].split(" to ")]  # runs of several days: their range
     report = {
         "rows": [r for p in parts for r in p["rows"]],
         "localisation": [t for p in parts for t in p["localisation"]],
         "command": "\n".join(p["command"] for p in parts),
         "machine": parts[0]["machine"],
         "machine_line": parts[0]["machine_line"],
-        "date": max(p["date"] for p in parts),
+        "date": " to ".join(sorted({min(dates), max(dates)})),
         "pairs": parts[0]["pairs"],
         "wall_s": sum(p["wall_s"] for p in parts),
     }
