@@ -39,9 +39,11 @@ NOT_PARSED = {
     "python -c": "a one-line Python program (another library's API)",
     "export": "sets a shell variable",
     "bash": "a shell script for another machine (bench/gpu.sh); it must exist",
+    "cp": "copies a file of this checkout; the file must exist",
 }
-FENCE = re.compile(r"^```(?:bash|sh|shell)\n(.*?)^```", re.M | re.S)
-PY_FENCE = re.compile(r"^```python\n(.*?)^```", re.M | re.S)
+#: A fenced block, at the start of a line or indented inside a list item (how-to steps are numbered lists).
+FENCE = re.compile(r"^[ \t]*```(?:bash|sh|shell)\n(.*?)^[ \t]*```", re.M | re.S)
+PY_FENCE = re.compile(r"^[ \t]*```python\n(.*?)^[ \t]*```", re.M | re.S)
 
 
 def shell_commands(page: Path) -> list[list[str]]:
@@ -128,7 +130,7 @@ def test_every_command_of_the_tutorials_and_how_tos_parses(page, words, tmp_path
     else:
         kind = " ".join(words[:2]) if words[:2] == ["python", "-c"] else words[0]
         assert kind in NOT_PARSED, f"{page}: {shlex.join(words)} is neither make nor a dtradar CLI (add it or run it)"
-        if kind == "bash":
+        if kind in ("bash", "cp"):
             assert (ROOT / words[1]).is_file(), f"{page}: {words[1]} does not exist"
 
 
