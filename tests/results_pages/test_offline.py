@@ -3,7 +3,6 @@ block back from JSONs in the shape their commands write (the offline benchmark's
 runs' ``results.json``, ``bench/bench_relabel.py``'s ``bench.json``) holding the page's numbers, and a re-run's number
 lands in it."""
 
-import json
 import re
 
 from dtradar_rl.experiments.offline_bench_config import NAMES
@@ -22,35 +21,7 @@ def value(cell: str) -> float:
 def runs_render(
     pages, tmp_path, capsys, marker: str, datas: list[dict] | dict, change: tuple[int, str, str], page: str = PAGE
 ) -> None:
-    """The block (alone on a copy of the page: other blocks may read the same JSONs) rendered from its JSONs (the
-    marker's paths, in order, hold ``datas``; one JSON: ``datas`` is it) is the page's, byte for byte; a re-run's new
-    number (``change``: which JSON, its old text, the new) lands in it and nowhere else."""
-    rp = pages.results_pages
-    text, block = pages.block_of(page, marker)
-    piece = text[text.rfind("\n", 0, block.start - 1) + 1 : block.end] + rp.END + "\n"
-    (block,) = rp.blocks(piece, page)
-    copy = tmp_path / page
-    copy.write_text(piece, encoding="utf-8")
-    paths = rp.paths(block)
-    datas = datas if isinstance(datas, list) else [datas]
-    assert len(paths) == len(datas)
-    for p, d in zip(paths, datas, strict=True):
-        (tmp_path / p).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / p).write_text(json.dumps(d), encoding="utf-8")
-    was = piece[block.start : block.end]
-    assert rp.render(block, tmp_path) == was
-    label = f"{page}:{block.line} {block.renderer} {block.json}"
-    assert rp.main(["--check", "--root", str(tmp_path), str(copy)]) == 0
-    assert f"{label}: unchanged" in capsys.readouterr().out
-    i, old, new = change
-    assert old in json.dumps(datas[i])
-    (tmp_path / paths[i]).write_text(json.dumps(datas[i]).replace(old, new, 1), encoding="utf-8")
-    assert rp.main(["--root", str(tmp_path), str(copy)]) == 0
-    assert f"{label}: updated" in capsys.readouterr().out
-    after = copy.read_text(encoding="utf-8")
-    now = after[block.start : after.index("\n" + rp.END, block.start) + 1]
-    assert after[: block.start] == piece[: block.start] and after.endswith(rp.END + "\n")
-    assert now.split("\n")[1:3] == was.split("\n")[1:3] and new in now and new not in was
+    pages.renders_runs(tmp_path, capsys, page, marker, datas, change)
 
 
 def one_render(pages, tmp_path, capsys, marker: str, data: dict, change: tuple[str, str], page: str = PAGE) -> None:

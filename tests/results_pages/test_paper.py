@@ -2,37 +2,13 @@
 ``make paper``'s report.json (runs summarised by its own ``summarize``), ``eval``'s results.json and ``cross``'s
 cross.json holding the page's numbers, and a re-run's number lands in it."""
 
-import json
-
 from dtradar_rl.experiments.paper_seeds import summarize
 
 PAGE = "paper.md"
 
 
 def renders_several(pages, tmp_path, capsys, marker: str, datas: list, change: tuple[int, str, str]) -> None:
-    """``datas`` at the block's JSON paths, in the marker's order, give the page's block unchanged; a re-run's new
-    number in the ``change[0]``-th JSON lands in it."""
-    rp = pages.results_pages
-    text, block = pages.block_of(PAGE, marker)
-    paths = rp.paths(block)
-    assert len(paths) == len(datas)
-    copy = tmp_path / PAGE
-    copy.write_text(text, encoding="utf-8")
-    for path, data in zip(paths, datas, strict=True):
-        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / path).write_text(json.dumps(data), encoding="utf-8")
-    label = f"{PAGE}:{block.line} {block.renderer} {block.json}"
-    rp.main(["--check", "--root", str(tmp_path), str(copy)])
-    assert f"{label}: unchanged" in capsys.readouterr().out
-    i, old, new = change
-    (tmp_path / paths[i]).write_text(json.dumps(datas[i]).replace(old, new, 1), encoding="utf-8")
-    assert rp.main(["--root", str(tmp_path), str(copy)]) == 0
-    assert f"{label}: updated" in capsys.readouterr().out
-    after = copy.read_text(encoding="utf-8")  # another block may read one of the JSONs too (and change)
-    (moved,) = [b for b in rp.blocks(after) if (b.renderer, b.json) == (block.renderer, block.json)]
-    was, now = text[block.start : block.end], after[moved.start : moved.end]
-    assert now.split("\n")[1:3] == was.split("\n")[1:3]
-    assert new in now and new not in was
+    pages.renders_runs(tmp_path, capsys, PAGE, marker, datas, change)
 
 
 def greedy(reached: bool, collisions: int = 0, closest: int = 0) -> dict:

@@ -2,36 +2,11 @@
 shape of their writers (bench_rt.py, bench_differential.py, bench_moving.py, bench_radiomap.py, the dataset cards)
 holding the page's numbers, and a re-run's number lands in it."""
 
-import json
-
 PAGE = "ray-tracing.md"
 
 
 def renders_from_runs(pages, tmp_path, capsys, marker: str, runs: list[dict], change: tuple) -> str:
-    """``runs`` at the block's JSON paths (in the marker's order) give the page's block unchanged; a re-run's new
-    number in run ``change[0]`` (``(run, old, new[, as the page shows it])``) lands in it. Returns the new block."""
-    text, block = pages.block_of(PAGE, marker)
-    paths = pages.results_pages.paths(block)
-    assert len(paths) == len(runs)
-    copy = tmp_path / PAGE
-    copy.write_text(text, encoding="utf-8")
-    for path, data in zip(paths, runs, strict=True):
-        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / path).write_text(json.dumps(data), encoding="utf-8")
-    label = f"{PAGE}:{block.line} {block.renderer} {block.json}"
-    pages.results_pages.main(["--check", "--root", str(tmp_path), str(copy)])
-    assert f"{label}: unchanged" in capsys.readouterr().out
-    i, old, new, shown = (*change, change[-1])[:4]
-    assert old in json.dumps(runs[i])
-    (tmp_path / paths[i]).write_text(json.dumps(runs[i]).replace(old, new, 1), encoding="utf-8")
-    assert pages.results_pages.main(["--root", str(tmp_path), str(copy)]) == 0
-    assert f"{label}: updated" in capsys.readouterr().out
-    after = copy.read_text(encoding="utf-8")
-    was = text[block.start : block.end]
-    now = after[block.start : after.index("\n" + pages.results_pages.END, block.start) + 1]
-    assert now.split("\n")[1:3] == was.split("\n")[1:3] and after[: block.start] == text[: block.start]
-    assert shown in now and shown not in was
-    return now
+    return pages.renders_runs(tmp_path, capsys, PAGE, marker, runs, change)
 
 
 def bench_rt_run(rows: list[dict], default: int, city: bool, buffer: int = 1_000_000) -> dict:
