@@ -316,15 +316,7 @@ def markdown(result) -> str:
     for (scene, agent, noise), rs in _groups(result["rows"]):
         bp = [r for r in rs if r["twin"] == "blueprint"]
         dy = [r for r in rs if r["twin"] == "dynamic"]
-        bp_cell = f"{_pm(r['success'] for r in bp)} / {_pm(r['spl'] for r in bp)}" if bp else "-"
-        dy_cell = (
-            (
-                f"{_pm(r['success'] for r in dy)} / {_pm(r['spl'] for r in dy)} / "
-                f"{_pm((r['collisions'] for r in dy), '{:.2f}')}"
-            )
-            if dy
-            else "-"
-        )
+        bp_cell, dy_cell = _twin_cells(rs)
         lat = f"{_pm(r['p50_ms'] for r in rs)} / {_pm(r['p99_ms'] for r in rs)}"
         train_rows = bp or dy
         lines.append(
@@ -335,6 +327,21 @@ def markdown(result) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _twin_cells(rs: list[dict]) -> tuple[str, str]:
+    """One group's blueprint "success / SPL" and dynamic "success / SPL / collisions" cells (mean ± spread over
+    seeds; "-" where the group has no row of that twin)."""
+    bp = [r for r in rs if r["twin"] == "blueprint"]
+    dy = [r for r in rs if r["twin"] == "dynamic"]
+    bp_cell = f"{_pm(r['success'] for r in bp)} / {_pm(r['spl'] for r in bp)}" if bp else "-"
+    dy_cell = (
+        f"{_pm(r['success'] for r in dy)} / {_pm(r['spl'] for r in dy)} / "
+        f"{_pm((r['collisions'] for r in dy), '{:.2f}')}"
+        if dy
+        else "-"
+    )
+    return bp_cell, dy_cell
+
+
 def agent_table(result, agent: str = SB3, noise: str = "none") -> str:
     """One agent's rows under one noise level: a row per twin, its blueprint success / SPL and dynamic success / SPL
     / collisions (mean ± spread over seeds)."""
@@ -342,15 +349,7 @@ def agent_table(result, agent: str = SB3, noise: str = "none") -> str:
     for (scene, name, level), rs in _groups(result["rows"]):
         if (name, level) != (agent, noise):
             continue
-        bp = [r for r in rs if r["twin"] == "blueprint"]
-        dy = [r for r in rs if r["twin"] == "dynamic"]
-        bp_cell = f"{_pm(r['success'] for r in bp)} / {_pm(r['spl'] for r in bp)}" if bp else "-"
-        dy_cell = (
-            f"{_pm(r['success'] for r in dy)} / {_pm(r['spl'] for r in dy)} / "
-            f"{_pm((r['collisions'] for r in dy), '{:.2f}')}"
-            if dy
-            else "-"
-        )
+        bp_cell, dy_cell = _twin_cells(rs)
         lines.append(f"| {scene} | {bp_cell} | {dy_cell} |")
     return "\n".join(lines) + "\n"
 
