@@ -361,14 +361,15 @@ def _checkpoint_and_log(run: RunState, schedule: _Schedule, eps: float, t_start:
 
 
 def _rate_and_left(run: RunState, schedule: _Schedule, elapsed: float) -> str:
-    """``"2 345 steps/s, ~3.1 min left"``: this loop's rate so far and the time left to the step budget at it (an
-    episode budget, the paper's protocol, may end sooner)."""
+    """``"2 345 steps/s, ~3.1 min left"`` (``~40 s left`` under a minute and a half): this loop's rate so far and the
+    time left to the step budget at it (an episode budget, the paper's protocol, may end sooner)."""
     done = run.env_steps - schedule.start_steps
     if elapsed <= 0 or done <= 0:
         return "rate unknown yet"
     rate = done / elapsed
     left = max(0, run.cfg.total_env_steps - run.env_steps) / rate
-    return f"{rate:,.0f}".replace(",", " ") + f" steps/s, ~{left / 60:.1f} min left"
+    left_text = f"~{left:.0f} s left" if left < 90 else f"~{left / 60:.1f} min left"  # a short run: seconds
+    return f"{rate:,.0f}".replace(",", " ") + f" steps/s, {left_text}"
 
 
 # -- the end ---------------------------------------------------------------------------------------------------------
