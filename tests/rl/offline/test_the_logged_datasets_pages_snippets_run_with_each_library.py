@@ -23,7 +23,7 @@ def logged(root, tmp_path, monkeypatch):
     return log_dataset(cfg, load_dataset("synthetic-10x8/blueprint"))
 
 
-def test_the_pages_load_minari_and_d3rlpy_blocks_run_on_a_logged_dataset(logged):
+def test_the_pages_load_minari_and_d3rlpy_blocks_run_on_a_logged_dataset(logged, tmp_path):
     snippets = [b for b in BLOCKS if "cubicle/blueprint/mixture" in b or "cubicle-blueprint-mixture-v0" in b]
     assert len(snippets) == 3, "the page's dtradar_data, Minari and d3rlpy blocks"
     name = logged.name  # synthetic-10x8/blueprint/noisy-shortest
@@ -34,7 +34,7 @@ def test_the_pages_load_minari_and_d3rlpy_blocks_run_on_a_logged_dataset(logged)
         )
         code = code.replace("n_steps=4000, n_steps_per_epoch=1000", "n_steps=20, n_steps_per_epoch=10")
         namespace: dict = {}
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.chdir(tmp_path):  # d3rlpy logs into the cwd
             exec(compile(code, str(PAGE), "exec"), namespace)
         if "to_mdp_dataset" in code:
             assert namespace["dataset"].transition_count == len(logged)
